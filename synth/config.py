@@ -1,0 +1,97 @@
+"""Synthesis configuration: the paper's four constants and the choice of strategy, oracle and solver."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Mapping
+
+STRATEGIES = (
+    "auto",
+    "bfs",
+    "bfs-cpa",
+    "dfs",
+    "dfs-bnb",
+    "dfs-cpa",
+    "dfs-bnb-cpa",
+    "astar",
+    "astar-cpa",
+    "monolithic",
+)
+ORACLES = ("hybrid", "smt", "closed-form")
+SOLVERS = ("z3", "dreal")
+
+
+class ConfigError(ValueError):
+    """A configuration value is out of range or unknown. One line, fit for a user."""
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    # Angular tolerance of ahead / behind / left / right (degrees, each side of the axis).
+    delta1: float = 10.0
+    # Angular tolerance of facing toward / away from (degrees).
+    delta2: float = 5.0
+    # Width of every distance / coordinate Range (metres) and of every heading Range (degrees).
+    c_dist: float = 5.0
+    c_head: float = 5.0
+    strategy: str = "auto"
+    oracle: str = "hybrid"
+    solver: str = "z3"
+    # Seconds of search before the anytime answer is returned; None = no limit.
+    time_limit: float | None = None
+    # Resident memory (MB) at which the search stops with status memout; None = no limit.
+    memory_limit: float | None = None
+    # dReal's delta (only used with solver = dreal).
+    dreal_delta: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name in ("delta1", "delta2"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0.0 < v < 45.0):
+                raise ConfigError(f"{name} must be a number in (0, 45) degrees, got {v!r}")
+        # Ranges print with 2 decimals; a width under 0.02 could not stay centred on the observed value.
+        for name in ("c_dist", "c_head"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0.02 <= v <= 1000.0):
+                raise ConfigError(f"{name} must be a number in [0.02, 1000], got {v!r}")
+        if not (isinstance(self.dreal_delta, (int, float)) and 0.0 < self.dreal_delta < 1.0):
+            raise ConfigError(f"dreal_delta must be a number in (0, 1), got {self.dreal_delta!r}")
+        for name in ("time_limit", "memory_limit"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ConfigError(f"{name} must be a positive number of {'seconds' if 'time' in name else 'MB'}")
+        _one_of("strategy", self.strategy, STRATEGIES)
+        _one_of("oracle", self.oracle, ORACLES)
+        _one_of("solver", self.solver, SOLVERS)
+
+    def with_(self, **changes: Any) -> "SynthConfig":
+        """A copy with the given fields changed; None values leave a field as it is."""
+        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def semantic_hash(self) -> str:
+        """Hash of what decides the program: constants, strategy, oracle, solver, limits.
+
+        Two runs with the same hash on the same frame produce the same row, so the pipeline may skip one.
+        """
+        blob = json.dumps(asdict(self), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _one_of(name: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ConfigError(f"unknown {name} {value!r} (choose from {', '.join(allowed)})")
+
+
+def config_from_mapping(raw: Mapping[str, Any], base: SynthConfig | None = None) -> SynthConfig:
+    """A config from a decoded TOML table ([synth] section or flat); unknown keys are refused."""
+    table = raw.get("synth", raw)
+    if not isinstance(table, Mapping):
+        raise ConfigError("the [synth] section must be a table")
+    known = {f.name for f in fields(SynthConfig)}
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise ConfigError(f"unknown config key(s): {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+    return replace(base or SynthConfig(), **dict(table))

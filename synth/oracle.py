@@ -1,0 +1,107 @@
+"""Relation oracles: who witnesses whom. `closed-form`, `hybrid` (default) and `smt` (the paper's way).
+
+An oracle answers, for a target e and a reference r (ego or another entity), which direction relation
+(ahead / left / behind / right) and which facing relation (toward / away) hold, if any. Sectors are 2 delta1
+wide and 90 degrees apart, so at most one of each holds. Answers are cached per (relation, target, reference),
+the paper's M_smt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from synth.config import SynthConfig
+from synth.relations import (
+    DIRECTION_NAMES,
+    FACING_NAMES,
+    NONE,
+    UNDECIDED,
+    RelationTable,
+    closed_form_table,
+    settle_exactly,
+)
+from synth.scene import Entity, Scene
+from synth.smt import make_backend
+
+
+@dataclass
+class RelationOracle:
+    """Answers position / heading questions about one scene, lazily where it asks a solver."""
+
+    scene: Scene
+    config: SynthConfig
+    ids: tuple[str, ...] = ()
+    table: RelationTable | None = None
+    backend: object | None = None
+    # (kind, ref index, target index) -> code (NONE or an index into the names): the query cache.
+    cache: dict[tuple[str, int, int], int] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        """True when every pair is already known (no question will reach a solver)."""
+        return self.table is not None
+
+    def entities(self) -> tuple[Entity, ...]:
+        by = self.scene.by_id()
+        return tuple(by[i] for i in self.ids)
+
+    def position(self, r: int, e: int) -> int:
+        """Direction code of e relative to r (index into DIRECTION_NAMES), or NONE."""
+        if self.table is not None:
+            return int(self.table.position[r, e])
+        return self._ask("position", r, e)
+
+    def heading(self, r: int, e: int) -> int:
+        if self.table is not None:
+            return int(self.table.heading[r, e])
+        return self._ask("heading", r, e)
+
+    def _ask(self, kind: str, r: int, e: int) -> int:
+        key = (kind, r, e)
+        if key not in self.cache:
+            self.cache[key] = NONE if r == e else self._solve(kind, r, e)
+        return self.cache[key]
+
+    def _solve(self, kind: str, r: int, e: int) -> int:
+        ents = self.entities()
+        ref, tgt = ents[r], ents[e]
+        if kind == "position":
+            names, ask = DIRECTION_NAMES, self.backend.position_relation
+        else:
+            names, ask = FACING_NAMES, self.backend.heading_relation
+        for code, name in enumerate(names):
+            if ask(name, ref, tgt):
+                return code
+        return NONE
+
+    def full_table(self) -> RelationTable:
+        """Every pair answered (the smt oracle asks the solver for each one it has not asked yet)."""
+        if self.table is not None:
+            return self.table
+        n = len(self.ids)
+        pos = np.array([[self.position(r, e) for e in range(n)] for r in range(n)], dtype=np.int8)
+        head = np.array([[self.heading(r, e) for e in range(n)] for r in range(n)], dtype=np.int8)
+        self.table = RelationTable(self.ids, pos, head)
+        return self.table
+
+
+def make_oracle(scene: Scene, config: SynthConfig) -> RelationOracle:
+    """The oracle the config names. Index 0 is ego, then the scene's other entities in scene order."""
+    ids = (scene.ego.id,) + tuple(e.id for e in scene.others)
+    if config.oracle == "closed-form":
+        table = settle_exactly(closed_form_table(scene, config), scene, config)
+        return RelationOracle(scene, config, ids, table)
+    backend = make_backend(config)
+    if config.oracle == "smt":
+        return RelationOracle(scene, config, ids, None, backend)
+    # hybrid: floats settle the clear pairs; the solver settles the ones inside the guard band.
+    table = closed_form_table(scene, config)
+    oracle = RelationOracle(scene, config, ids, None, backend)
+    pos, head = table.position.copy(), table.heading.copy()
+    for kind, r, e in table.undecided():
+        (pos if kind == "position" else head)[r, e] = oracle._ask(kind, r, e)
+    assert not (pos == UNDECIDED).any() and not (head == UNDECIDED).any()
+    oracle.table = RelationTable(ids, pos, head)
+    return oracle

@@ -1,0 +1,229 @@
+"""The entity model: a scene is ego plus typed, placed, oriented entities, validated on construction.
+
+Validation is the gate every input passes (scene JSON, frames from extractors, sampled variants): ids come
+from a closed pattern that can never carry code into generated Scenic or DSL text, types from a closed set,
+numbers are finite.
+"""
+
+from __future__ import annotations
+
+import builtins
+import json
+import keyword
+import math
+import re
+from dataclasses import dataclass
+from typing import Any, Iterable, Mapping
+
+# Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
+ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
+    "Car": (4.6, 1.9),
+    "Truck": (7.0, 2.5),
+    "Bus": (11.0, 2.9),
+    "Trailer": (10.0, 2.8),
+    "ConstructionVehicle": (6.5, 2.8),
+    "EmergencyVehicle": (5.5, 2.2),
+    "Motorcycle": (2.1, 0.8),
+    "Bicycle": (1.7, 0.6),
+    "Pedestrian": (0.7, 0.7),
+    "Animal": (1.0, 0.5),
+    "Barrier": (0.5, 2.5),
+    "TrafficCone": (0.4, 0.4),
+    "PushableObject": (0.8, 0.6),
+    "Debris": (0.8, 0.8),
+    "BicycleRack": (2.0, 1.0),
+    "Object": (1.0, 1.0),
+}
+
+EGO_ID = "ego"
+MAX_ID_LENGTH = 64
+DEFAULT_MAX_ENTITIES = 1000
+
+_ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+
+# Words that an id must not be: Python's and Scenic's keywords (scenic 3.1.1 grammar), Python builtins, and
+# the names generated Scenic text itself binds. An id is printed verbatim into programs, so anything that
+# could change what the program means is refused.
+_SCENIC_WORDS = frozenset(
+    """abort above additive after ahead along altitude always angle apparent apparently attribute away back
+    behavior behind below beyond bottom by can case choose compose contained deg directly distance do dynamic
+    ego eval eventually every facing final follow following from front heading implies initial interrupt
+    intersects invariant kind left model monitor mutate new next of offset on override param past position
+    precondition print record relative require right scenario seconds see setup shuffle simulation simulator
+    steps take terminate to top toward until visible wait when with workspace Range Vector Point OrientedPoint
+    Object Uniform Normal Discrete Options TruncatedNormal globalParameters localPath verbosePrint math
+    simulation resample hypot""".split()
+)
+RESERVED_IDS = frozenset(keyword.kwlist) | frozenset(keyword.softkwlist) | _SCENIC_WORDS | frozenset(
+    dir(builtins)
+) | frozenset(ENTITY_TYPES)
+
+
+class SceneError(ValueError):
+    """The input is not a valid scene. The message is one line, fit for a user."""
+
+
+def check_identifier(name: Any, what: str = "id") -> str:
+    """Return name if it may be printed into generated code as an entity id, else raise SceneError."""
+    if not isinstance(name, str):
+        raise SceneError(f"{what} must be a string, got {type(name).__name__}")
+    if len(name) > MAX_ID_LENGTH:
+        raise SceneError(f"{what} {name[:20]!r}... is longer than {MAX_ID_LENGTH} characters")
+    if not _ID_PATTERN.match(name) or "__" in name:
+        raise SceneError(f"{what} {name!r} is not an identifier (letters, digits, single underscores)")
+    if name in RESERVED_IDS and name != EGO_ID:
+        raise SceneError(f"{what} {name!r} is a reserved word in Python or Scenic")
+    return name
+
+
+def _finite(value: Any, what: str) -> float:
+    # bool is an int subclass; true/false in JSON is never a coordinate.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{what} must be a number, got {type(value).__name__}")
+    f = float(value)
+    if not math.isfinite(f):
+        raise SceneError(f"{what} must be finite, got {value!r}")
+    return f
+
+
+@dataclass(frozen=True)
+class Entity:
+    id: str
+    type: str
+    x: float
+    y: float
+    heading: float
+    length: float | None = None
+    width: float | None = None
+
+    @property
+    def is_ego(self) -> bool:
+        return self.id == EGO_ID
+
+    def dimensions(self) -> tuple[float, float]:
+        """(length, width): the recorded box where known, else the type's typical size."""
+        typical = ENTITY_TYPES[self.type]
+        return (self.length or typical[0], self.width or typical[1])
+
+
+@dataclass(frozen=True)
+class Scene:
+    frame_id: str
+    entities: tuple[Entity, ...]
+
+    def __post_init__(self) -> None:
+        ids = [e.id for e in self.entities]
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            raise SceneError(f"duplicate entity id {dup!r}")
+        if ids.count(EGO_ID) != 1:
+            raise SceneError("a scene needs exactly one entity with id 'ego'")
+
+    @property
+    def ego(self) -> Entity:
+        return next(e for e in self.entities if e.is_ego)
+
+    @property
+    def others(self) -> tuple[Entity, ...]:
+        """The entities to declare, in scene order (ego is given, never declared)."""
+        return tuple(e for e in self.entities if not e.is_ego)
+
+    def by_id(self) -> dict[str, Entity]:
+        return {e.id: e for e in self.entities}
+
+    def to_dict(self) -> dict[str, Any]:
+        out = []
+        for e in self.entities:
+            d: dict[str, Any] = {"id": e.id, "type": e.type, "x": e.x, "y": e.y, "heading": e.heading}
+            if e.length is not None:
+                d["length"] = e.length
+            if e.width is not None:
+                d["width"] = e.width
+            out.append(d)
+        return {"frame_id": self.frame_id, "entities": out}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1) + "\n"
+
+
+def entity_from_mapping(raw: Any, index: int) -> Entity:
+    if not isinstance(raw, Mapping):
+        raise SceneError(f"entity {index} must be an object")
+    missing = [k for k in ("id", "type", "x", "y", "heading") if k not in raw]
+    if missing:
+        raise SceneError(f"entity {index} lacks {', '.join(missing)}")
+    eid = check_identifier(raw["id"], f"entity {index} id")
+    etype = raw["type"]
+    if not isinstance(etype, str) or etype not in ENTITY_TYPES:
+        raise SceneError(
+            f"entity {eid!r} has unknown type {etype!r} (known: {', '.join(sorted(ENTITY_TYPES))})"
+        )
+    dims = []
+    for key in ("length", "width"):
+        v = raw.get(key)
+        if v is None:
+            dims.append(None)
+            continue
+        f = _finite(v, f"entity {eid!r} {key}")
+        if f <= 0.0:
+            raise SceneError(f"entity {eid!r} {key} must be positive, got {v!r}")
+        dims.append(f)
+    return Entity(
+        id=eid,
+        type=etype,
+        x=_finite(raw["x"], f"entity {eid!r} x"),
+        y=_finite(raw["y"], f"entity {eid!r} y"),
+        heading=_finite(raw["heading"], f"entity {eid!r} heading"),
+        length=dims[0],
+        width=dims[1],
+    )
+
+
+def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene:
+    """Validate a decoded scene JSON document. Headings are normalised into [0, 360)."""
+    if not isinstance(raw, Mapping):
+        raise SceneError("a scene must be a JSON object with 'frame_id' and 'entities'")
+    frame_id = raw.get("frame_id", "scene")
+    if not isinstance(frame_id, str) or not frame_id or len(frame_id) > 256 or not frame_id.isprintable():
+        raise SceneError("frame_id must be a printable string of 1 to 256 characters")
+    ents = raw.get("entities")
+    if not isinstance(ents, list):
+        raise SceneError("'entities' must be a list")
+    if len(ents) > max_entities:
+        raise SceneError(f"scene has {len(ents)} entities, more than the cap of {max_entities}")
+    return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)))
+
+
+def make_scene(frame_id: str, entities: Iterable[Entity]) -> Scene:
+    """A scene from entities, with headings normalised so equal directions print equal."""
+    from synth.geometry import normalize
+
+    return Scene(
+        frame_id=frame_id,
+        entities=tuple(
+            Entity(e.id, e.type, e.x, e.y, normalize(e.heading), e.length, e.width) for e in entities
+        ),
+    )
+
+
+def scene_from_json(text: str | bytes, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene:
+    """Parse and validate scene JSON text; every failure is a one-line SceneError."""
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise SceneError(f"scene is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    if not text.strip():
+        raise SceneError("scene is empty")
+    try:
+        # NaN and Infinity are not JSON; refuse them at the parser rather than as numbers later.
+        raw = json.loads(text, parse_constant=_refuse_constant)
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"scene is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    except RecursionError:
+        raise SceneError("scene JSON is nested too deeply") from None
+    return scene_from_dict(raw, max_entities=max_entities)
+
+
+def _refuse_constant(name: str) -> float:
+    raise SceneError(f"scene contains {name}, which is not a finite number")

@@ -1,0 +1,41 @@
+"""Depth-first search over declaration orders (the paper's Alg. 3) with optional Branch-and-Bound and CPA.
+
+B&B drops a partial program whose cost already reaches the best complete one; CPA keeps a global table of the
+least cost seen per declared set and drops any prefix that does not improve on it.
+"""
+
+from __future__ import annotations
+
+from synth.search.budget import Budget, BudgetExhausted
+from synth.search.common import SearchResult, finish, floor_bound, greedy_completion
+from synth.search.costs import CostModel, bits
+
+
+def dfs(cm: CostModel, budget: Budget, bnb: bool, cpa: bool) -> SearchResult:
+    best_cost, best_order = float("inf"), None
+    seen: dict[int, int] = {}
+    stack: list[tuple[int, int, tuple[int, ...]]] = [(0, 0, ())]
+    try:
+        while stack:
+            cost, declared, order = stack.pop()
+            budget.tick()
+            if cpa:
+                if declared in seen and cost >= seen[declared]:
+                    continue
+                seen[declared] = cost
+            if bnb and cost >= best_cost:
+                continue
+            if declared == cm.all:
+                if cost < best_cost:
+                    best_cost, best_order = cost, order
+                continue
+            # Pushed in reverse so that the lowest index is explored first.
+            for e in sorted(bits(cm.all & ~declared), reverse=True):
+                stack.append((cost + cm.delta(e, declared), declared | (1 << e), order + (e,)))
+        return finish(cm, best_order, best_cost, budget.nodes, None)
+    except BudgetExhausted as stop:
+        lb = floor_bound(cm, cm.all)
+        if best_order is None:
+            cost, declared, order = stack[-1] if stack else (0, 0, ())
+            best_order = greedy_completion(cm, order, declared)
+        return finish(cm, best_order, lb, budget.nodes, stop.reason)

@@ -1,0 +1,343 @@
+"""SMT backends: relation queries, exact Range values, and certification of whole programs.
+
+Encoding (no atan2, no trigonometry in the formula): with v the offset between the two entities and u the
+unit vector of the axis the relation names, "v within delta of u" is
+    v.u > 0  and  (v.u)^2 >= cos^2(delta) |v|^2
+over the exact rationals of the scene's floats. u and cos(delta) are the rationals of their correctly
+rounded floats, the same constants the closed form uses (synth.geometry), so the two oracles answer the
+same question. A distance Range [a, b] is encoded with d >= 0, d^2 = |v|^2, a <= d <= b: nonlinear real
+arithmetic, exact in z3 (nlsat). dReal (optional) gets the same formula over doubles, delta-complete.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+from synth.config import SynthConfig
+from synth.dsl import (
+    DIRECTIONS,
+    AbsoluteHeading,
+    AbsoluteXYPos,
+    DirectionPos,
+    FacingRelation,
+    LocalXYPos,
+    Program,
+    RelativeHeading,
+    Statement,
+    fmt_number,
+)
+from synth.geometry import exact_cos_squared, exact_heading_vector
+from synth.scene import Entity, Scene
+
+
+class SolverUnavailable(RuntimeError):
+    """The chosen solver cannot be loaded here. One line, fit for a user."""
+
+
+@dataclass
+class SolverStats:
+    queries: int = 0
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Exact values the Ranges of one statement are centred on (None where the statement has no such part)."""
+
+    distance: Fraction | None = None
+    lateral: Fraction | None = None
+    forward: Fraction | None = None
+    angle: Fraction | None = None  # heading offset in (-180, 180]
+
+
+@dataclass(frozen=True)
+class MeasureRequest:
+    """What to measure for one statement: target, position reference and kind, heading reference and kind."""
+
+    target: Entity
+    position_ref: Entity | None
+    position_kind: str  # direction | local | absolute
+    heading_ref: Entity | None
+    heading_kind: str  # facing | relative | absolute
+
+
+def _frac(v: float | str | Fraction) -> Fraction:
+    return v if isinstance(v, Fraction) else Fraction(v)
+
+
+def _printed(v: float) -> Fraction:
+    """The exact value a Range bound has once printed: certification is about the text users get."""
+    return Fraction(fmt_number(v))
+
+
+def make_backend(config: SynthConfig) -> "Z3Backend | DrealBackend":
+    if config.solver == "dreal":
+        return DrealBackend(config)
+    return Z3Backend(config)
+
+
+@dataclass
+class Z3Backend:
+    config: SynthConfig
+    stats: SolverStats = field(default_factory=SolverStats)
+
+    def __post_init__(self) -> None:
+        try:
+            import z3
+        except ImportError as exc:  # pragma: no cover - z3 is a core dependency
+            raise SolverUnavailable(f"z3 is not installed ({exc}); pip install z3-solver") from None
+        self.z3 = z3
+        self._solver = z3.SolverFor("QF_NRA")
+        self._fresh = 0
+
+    # --------------------------------------------------------------------------------- building blocks
+    def q(self, v: float | str | Fraction) -> Any:
+        f = _frac(v)
+        return self.z3.Q(f.numerator, f.denominator)
+
+    def _var(self, stem: str) -> Any:
+        self._fresh += 1
+        return self.z3.Real(f"{stem}{self._fresh}")
+
+    def _offset(self, ref: Entity, e: Entity) -> tuple[Any, Any]:
+        return self.q(_frac(e.x) - _frac(ref.x)), self.q(_frac(e.y) - _frac(ref.y))
+
+    def _cone(self, vx: Any, vy: Any, axis_heading: float, delta: float) -> Any:
+        z3 = self.z3
+        ux, uy = (self.q(c) for c in exact_heading_vector(axis_heading))
+        dot = vx * ux + vy * uy
+        return z3.And(dot > 0, dot * dot >= self.q(exact_cos_squared(delta)) * (vx * vx + vy * vy))
+
+    def _distance_in(self, vx: Any, vy: Any, lo: Any, hi: Any) -> Any:
+        d = self._var("d")
+        return self.z3.And(d >= 0, d * d == vx * vx + vy * vy, lo <= d, d <= hi)
+
+    def _angle_in(self, heading: float, base: float, lo: Any, hi: Any) -> Any:
+        # heading = N(base + alpha), alpha in [lo, hi]: some whole number of turns k closes the gap.
+        alpha = self._var("alpha")
+        k = self.z3.Int(f"k{self._fresh}")
+        return self.z3.And(
+            lo <= alpha, alpha <= hi, self.q(heading) == self.q(base) + alpha + 360 * self.z3.ToReal(k)
+        )
+
+    def _check(self, *constraints: Any) -> bool:
+        t = time.perf_counter()
+        s = self._solver
+        s.push()
+        s.add(*constraints)
+        result = s.check()
+        s.pop()
+        self.stats.queries += 1
+        self.stats.seconds += time.perf_counter() - t
+        if result == self.z3.unknown:
+            raise RuntimeError(f"z3 returned unknown: {s.reason_unknown()}")
+        return result == self.z3.sat
+
+    # ------------------------------------------------------------------------------------ relation queries
+    def position_relation(self, direction: str, ref: Entity, e: Entity) -> bool:
+        """Is there a Range(a, a + C_dist), a >= 0, such that `e = ... direction ref by Range(a, ...)` holds?"""
+        vx, vy = self._offset(ref, e)
+        a = self._var("a")
+        return self._check(
+            a >= 0,
+            self._distance_in(vx, vy, a, a + self.q(self.config.c_dist)),
+            self._cone(vx, vy, ref.heading + DIRECTIONS[direction][1], self.config.delta1),
+        )
+
+    def heading_relation(self, mode: str, ref: Entity, e: Entity) -> bool:
+        vx, vy = self._offset(ref, e)
+        if mode == "toward":
+            vx, vy = -vx, -vy
+        return self._check(self._cone(vx, vy, e.heading, self.config.delta2))
+
+    # ------------------------------------------------------------------------------------ range values
+    def measure(self, requests: list[MeasureRequest]) -> list[Measurement]:
+        """Exact distances, local coordinates and heading offsets for many statements, from one model."""
+        z3 = self.z3
+        if not requests:
+            return []
+        cons, wanted = [], []
+        for req in requests:
+            slots: dict[str, Any] = {}
+            if req.position_kind == "direction":
+                vx, vy = self._offset(req.position_ref, req.target)
+                d = self._var("d")
+                cons += [d >= 0, d * d == vx * vx + vy * vy]
+                slots["distance"] = d
+            elif req.position_kind == "local":
+                vx, vy = self._offset(req.position_ref, req.target)
+                ux, uy = (self.q(c) for c in exact_heading_vector(req.position_ref.heading))
+                # cos t = uy, sin t = -ux for the heading vector (-sin t, cos t).
+                lx, ly = self._var("lx"), self._var("ly")
+                cons += [lx == vx * uy - vy * ux, ly == vy * uy + vx * ux]
+                slots["lateral"], slots["forward"] = lx, ly
+            if req.heading_kind in ("relative", "absolute"):
+                base = req.heading_ref.heading if req.heading_kind == "relative" else 0.0
+                alpha = self._var("alpha")
+                k = z3.Int(f"k{self._fresh}")
+                cons += [alpha > -180, alpha <= 180, self.q(req.target.heading) == self.q(base) + alpha + 360 * z3.ToReal(k)]
+                slots["angle"] = alpha
+            wanted.append(slots)
+        t = time.perf_counter()
+        s = z3.SolverFor("QF_NIRA")
+        s.add(*cons)
+        result = s.check()
+        self.stats.queries += len(requests)
+        if result != z3.sat:
+            self.stats.seconds += time.perf_counter() - t
+            raise RuntimeError(f"z3 found no values for the program's Ranges ({result})")
+        m = s.model()
+        out = [Measurement(**{k: self._value(m, v) for k, v in slots.items()}) for slots in wanted]
+        self.stats.seconds += time.perf_counter() - t
+        return out
+
+    def _value(self, model: Any, var: Any) -> Fraction:
+        v = model.eval(var, model_completion=True)
+        if self.z3.is_algebraic_value(v):
+            # An irrational distance: 12 decimals are far below the 0.01 printing resolution.
+            v = v.approx(12)
+        return v.as_fraction()
+
+    # ------------------------------------------------------------------------------------ certification
+    def statement_formula(self, st: Statement, by_id: dict[str, Entity]) -> Any:
+        """The statement's semantics on the scene, as printed (Range bounds at their printed values)."""
+        z3 = self.z3
+        e = by_id[st.id]
+        pos, head = st.position, st.heading
+        if isinstance(pos, AbsoluteXYPos):
+            p = z3.And(*(self.q(_printed(b.lo)) <= self.q(v) for b, v in ((pos.x, e.x), (pos.y, e.y))),
+                       *(self.q(v) <= self.q(_printed(b.hi)) for b, v in ((pos.x, e.x), (pos.y, e.y))))
+        else:
+            ref = by_id[pos.ref]
+            vx, vy = self._offset(ref, e)
+            if isinstance(pos, DirectionPos):
+                p = z3.And(
+                    self._distance_in(vx, vy, self.q(_printed(pos.distance.lo)), self.q(_printed(pos.distance.hi))),
+                    self._cone(vx, vy, ref.heading + DIRECTIONS[pos.direction][1], self.config.delta1),
+                )
+            else:
+                ux, uy = (self.q(c) for c in exact_heading_vector(ref.heading))
+                lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+                p = z3.And(
+                    self.q(_printed(pos.lateral.lo)) <= lx, lx <= self.q(_printed(pos.lateral.hi)),
+                    self.q(_printed(pos.forward.lo)) <= ly, ly <= self.q(_printed(pos.forward.hi)),
+                )
+        if isinstance(head, AbsoluteHeading):
+            h = self._angle_in(e.heading, 0.0, self.q(_printed(head.angle.lo)), self.q(_printed(head.angle.hi)))
+        else:
+            ref = by_id[head.ref]
+            if isinstance(head, RelativeHeading):
+                h = self._angle_in(
+                    e.heading, ref.heading, self.q(_printed(head.angle.lo)), self.q(_printed(head.angle.hi))
+                )
+            else:
+                vx, vy = self._offset(ref, e)
+                if head.mode == "toward":
+                    vx, vy = -vx, -vy
+                h = self._cone(vx, vy, e.heading, self.config.delta2)
+        return z3.And(p, h)
+
+    def certify(self, program: Program, scene: Scene) -> list[str]:
+        """Ids of the statements the solver cannot show to hold on the scene (empty: certified).
+
+        One check for the whole program; only when it fails is each statement asked alone, to name it.
+        """
+        by_id = scene.by_id()
+        formulas = [self.statement_formula(st, by_id) for st in program.statements]
+        t = time.perf_counter()
+        s = self.z3.SolverFor("QF_NIRA")
+        s.add(*formulas)
+        ok = s.check() == self.z3.sat
+        self.stats.queries += len(formulas)
+        self.stats.seconds += time.perf_counter() - t
+        if ok:
+            return []
+        return [st.id for st, f in zip(program.statements, formulas) if not self._check(f)]
+
+
+@dataclass
+class DrealBackend:
+    """dReal 4 (delta-complete, the paper's solver): the same encoding over doubles.
+
+    The PyPI wheel needs the system library libibex; where it is missing this raises SolverUnavailable.
+    """
+
+    config: SynthConfig
+    stats: SolverStats = field(default_factory=SolverStats)
+
+    def __post_init__(self) -> None:
+        try:
+            import dreal  # noqa: F401
+        except ImportError as exc:
+            raise SolverUnavailable(
+                f"dReal cannot be imported here ({exc}); it needs the system library libibex. Use --solver z3"
+            ) from None
+        self.dreal = dreal
+        self._fresh = 0
+
+    def _var(self, stem: str) -> Any:
+        self._fresh += 1
+        return self.dreal.Variable(f"{stem}{self._fresh}")
+
+    def _cone(self, vx: float, vy: float, axis_heading: float, delta: float) -> Any:
+        ux, uy = (float(c) for c in exact_heading_vector(axis_heading))
+        dot = vx * ux + vy * uy
+        cos_sq = float(exact_cos_squared(delta))
+        # Constants only: dReal still decides the (ground) formula, as the paper has it do.
+        z = self._var("z")
+        return self.dreal.And(z == dot, z > 0, z * z >= cos_sq * (vx * vx + vy * vy))
+
+    def _sat(self, formula: Any) -> Any:
+        t = time.perf_counter()
+        box = self.dreal.CheckSatisfiability(formula, self.config.dreal_delta)
+        self.stats.queries += 1
+        self.stats.seconds += time.perf_counter() - t
+        return box
+
+    def position_relation(self, direction: str, ref: Entity, e: Entity) -> bool:
+        vx, vy = e.x - ref.x, e.y - ref.y
+        d, a = self._var("d"), self._var("a")
+        f = self.dreal.And(
+            a >= 0, d >= 0, d * d == vx * vx + vy * vy, a <= d, d <= a + self.config.c_dist,
+            self._cone(vx, vy, ref.heading + DIRECTIONS[direction][1], self.config.delta1),
+        )
+        return self._sat(f) is not None
+
+    def heading_relation(self, mode: str, ref: Entity, e: Entity) -> bool:
+        vx, vy = e.x - ref.x, e.y - ref.y
+        if mode == "toward":
+            vx, vy = -vx, -vy
+        return self._sat(self._cone(vx, vy, e.heading, self.config.delta2)) is not None
+
+    def measure(self, requests: list[MeasureRequest]) -> list[Measurement]:
+        out = []
+        for req in requests:
+            vals: dict[str, Fraction] = {}
+            if req.position_kind == "direction":
+                vx, vy = req.target.x - req.position_ref.x, req.target.y - req.position_ref.y
+                d = self._var("d")
+                box = self._sat(self.dreal.And(d >= 0, d * d == vx * vx + vy * vy))
+                if box is None:
+                    raise RuntimeError("dReal found no distance")
+                vals["distance"] = Fraction(box[d].mid())
+            elif req.position_kind == "local":
+                from synth.geometry import to_local
+
+                lx, ly = to_local(req.target.x - req.position_ref.x, req.target.y - req.position_ref.y,
+                                  req.position_ref.heading)
+                vals["lateral"], vals["forward"] = Fraction(lx), Fraction(ly)
+            if req.heading_kind in ("relative", "absolute"):
+                from synth.geometry import signed
+
+                base = req.heading_ref.heading if req.heading_kind == "relative" else 0.0
+                vals["angle"] = Fraction(signed(req.target.heading - base))
+            out.append(Measurement(**vals))
+        return out
+
+    def certify(self, program: Program, scene: Scene) -> list[str]:
+        # dReal is delta-complete: it can confirm the delta-weakening of a formula, not refute it exactly.
+        # Certification therefore rests on z3 where it is present, the solver of record for exactness.
+        return Z3Backend(self.config).certify(program, scene)

@@ -1,0 +1,112 @@
+"""ConstraintSolvingBasedSynthesizer (the paper's Alg. 1): one scene in, a minimum-cost program out."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from synth import __version__
+from synth.config import SynthConfig
+from synth.dsl import Program
+from synth.emit_scenic import render_scenic
+from synth.oracle import make_oracle
+from synth.scene import Scene
+from synth.search import Budget, CostModel, search
+from synth.search.budget import peak_rss_mb
+from synth.statement import build_program
+
+
+@dataclass(frozen=True)
+class SynthStats:
+    runtime_s: float
+    search_s: float
+    smt_s: float
+    smt_queries: int
+    nodes_expanded: int
+    peak_rss_mb: float
+
+
+@dataclass(frozen=True)
+class SynthResult:
+    frame_id: str
+    status: str  # optimal | feasible | timeout | memout
+    cost: int
+    lower_bound: int
+    n_entities: int  # entities declared (ego excluded)
+    program: Program
+    scenic: str
+    certified: bool
+    stats: SynthStats
+    config: SynthConfig
+
+    def to_json_dict(self) -> dict:
+        """The `r2s synth --format json` document (ARCHITECTURE.md)."""
+        return {
+            "frame_id": self.frame_id,
+            "status": self.status,
+            "cost": self.cost,
+            "lower_bound": self.lower_bound,
+            "n_entities": self.n_entities,
+            "program": str(self.program),
+            "scenic": self.scenic,
+            "certified": self.certified,
+            "stats": {
+                "runtime_s": self.stats.runtime_s,
+                "search_s": self.stats.search_s,
+                "smt_s": self.stats.smt_s,
+                "smt_queries": self.stats.smt_queries,
+                "nodes_expanded": self.stats.nodes_expanded,
+                "peak_rss_mb": self.stats.peak_rss_mb,
+            },
+        }
+
+
+class CertificationError(RuntimeError):
+    """The solver could not confirm a statement of the synthesized program: an internal error, never silent."""
+
+
+def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
+    config = config or SynthConfig()
+    started = time.perf_counter()
+    budget = Budget(config.time_limit, config.memory_limit)
+    oracle = make_oracle(scene, config)
+    if config.strategy == "auto":
+        oracle.full_table()
+    cm = CostModel(oracle)
+    t = time.perf_counter()
+    found = search(config.strategy, cm, budget)
+    search_s = time.perf_counter() - t
+    # Search indices are oracle indices minus one (oracle index 0 is ego).
+    program = build_program(oracle, tuple(i + 1 for i in found.order), config)
+    if program.cost != found.cost:
+        raise AssertionError(f"program cost {program.cost} differs from the search's {found.cost}")
+    certified = False
+    if oracle.backend is not None:
+        failed = oracle.backend.certify(program, scene)
+        if failed:
+            raise CertificationError(f"the solver refutes the statements of {', '.join(failed)}")
+        certified = True
+    scenic = render_scenic(
+        program, scene, config,
+        header=f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}",
+    )
+    stats = oracle.backend.stats if oracle.backend is not None else None
+    return SynthResult(
+        frame_id=scene.frame_id,
+        status=found.status,
+        cost=found.cost,
+        lower_bound=found.lower_bound,
+        n_entities=len(scene.others),
+        program=program,
+        scenic=scenic,
+        certified=certified,
+        stats=SynthStats(
+            runtime_s=time.perf_counter() - started,
+            search_s=search_s,
+            smt_s=stats.seconds if stats else 0.0,
+            smt_queries=stats.queries if stats else 0,
+            nodes_expanded=found.nodes_expanded,
+            peak_rss_mb=peak_rss_mb(),
+        ),
+        config=config,
+    )
