@@ -23,7 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.inputs import load_config, read_scene
-    from pipeline.atomic import write_text_atomic
+    from extractors.atomic import write_text_atomic
     from synth.synthesize import synthesize
 
     config = load_config(args.config).with_(

@@ -14,4 +14,6 @@ def user_error_types() -> tuple[type[BaseException], ...]:
     from synth.scene import SceneError
     from synth.smt import SolverUnavailable
 
-    return (UserError, SceneError, DslError, ConfigError, SolverUnavailable)
+    from extractors.frames import FramesError
+
+    return (UserError, SceneError, DslError, ConfigError, SolverUnavailable, FramesError)

@@ -1,4 +1,5 @@
-"""Atomic writes: a temporary file beside the target, then rename, so no reader ever sees half a file."""
+"""Atomic writes for every output (frames, programs, reports): a temporary file beside the target, then
+rename, so a crash or kill never leaves half a file where a reader looks (ScenarioNet's writer discipline)."""
 
 from __future__ import annotations
 

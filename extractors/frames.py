@@ -1,0 +1,203 @@
+"""The one frames schema every extractor writes and the pipeline reads (ARCHITECTURE.md, frames.parquet).
+
+One row per entity per frame, ego included, in the ego-centric frame (+x right, +y forward, heading degrees
+counter-clockwise from +y). Writing is atomic; reading validates, so a corrupt or foreign file is refused
+with one clear line instead of failing deep inside a worker.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Iterable, Iterator, Mapping
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from synth.scene import EGO_ID, ENTITY_TYPES, Scene, SceneError, make_scene
+
+FRAMES_SCHEMA = pa.schema(
+    [
+        ("frame_id", pa.string()),
+        ("source", pa.string()),
+        ("scene", pa.string()),
+        ("frame_index", pa.int32()),
+        ("timestamp_us", pa.int64()),
+        ("entity_id", pa.string()),
+        ("track_id", pa.string()),
+        ("type", pa.string()),
+        ("category", pa.string()),
+        ("x", pa.float64()),
+        ("y", pa.float64()),
+        ("heading", pa.float64()),
+        ("length", pa.float32()),
+        ("width", pa.float32()),
+        ("is_ego", pa.bool_()),
+    ]
+)
+FRAMES_COLUMNS = tuple(FRAMES_SCHEMA.names)
+# Optional per-entity measurement uncertainty (robust synthesis); absent in most files.
+OPTIONAL_COLUMNS = {"pos_sigma": pa.float64(), "heading_sigma": pa.float64()}
+
+
+class FramesError(ValueError):
+    """A frames file or table that is not what the schema says. One line, fit for a user."""
+
+
+def entity_ids(types: Iterable[str], distances: Iterable[float]) -> list[str]:
+    """Deterministic ids by distance to ego: the nearest is <type>1, the next <type>2, ... (rank over all types).
+
+    Ties in distance keep the input order (stable sort), so callers pass entities in a stable order.
+    """
+    types, distances = list(types), list(distances)
+    rank = sorted(range(len(types)), key=lambda i: distances[i])
+    out = [""] * len(types)
+    for r, i in enumerate(rank, start=1):
+        out[i] = f"{types[i].lower()}{r}"
+    return out
+
+
+def frame_rows(
+    source: str,
+    scene_name: str,
+    frame_index: int,
+    timestamp_us: int | None,
+    ego: Mapping[str, Any],
+    others: list[Mapping[str, Any]],
+    frame_id: str | None = None,
+) -> list[dict[str, Any]]:
+    """Rows of one frame. ego / others are dicts with track_id, type, category, x, y, heading, length, width
+    already in the ego frame; ids are assigned here, by distance to ego."""
+    fid = frame_id or f"{scene_name}/{frame_index}"
+    ids = entity_ids([o["type"] for o in others], [math.hypot(o["x"], o["y"]) for o in others])
+    rows = []
+    for eid, o, is_ego in [(EGO_ID, ego, True)] + [(i, o, False) for i, o in zip(ids, others)]:
+        rows.append(
+            {
+                "frame_id": fid, "source": source, "scene": scene_name, "frame_index": frame_index,
+                "timestamp_us": timestamp_us, "entity_id": eid, "track_id": str(o.get("track_id", eid)),
+                "type": o["type"], "category": str(o.get("category", o["type"])),
+                "x": float(o["x"]), "y": float(o["y"]), "heading": float(o["heading"]) % 360.0,
+                "length": o.get("length"), "width": o.get("width"), "is_ego": is_ego,
+            }
+        )
+    # Rows in id order of distance: ego first, then by rank.
+    rows[1:] = sorted(rows[1:], key=lambda r: int("".join(ch for ch in r["entity_id"] if ch.isdigit())))
+    return rows
+
+
+def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
+    """Rows as a table of exactly FRAMES_SCHEMA (plus optional columns present), validated."""
+    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows, columns=list(FRAMES_COLUMNS))
+    validate_frames(df)
+    extra = [c for c in OPTIONAL_COLUMNS if c in df.columns]
+    schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in extra])
+    return pa.Table.from_pandas(df[list(FRAMES_COLUMNS) + extra], schema=schema, preserve_index=False)
+
+
+def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str | os.PathLike) -> int:
+    """Write frames.parquet atomically (temp file, then rename). Returns the number of rows."""
+    from extractors.atomic import atomic_path
+
+    table = rows if isinstance(rows, pa.Table) else to_table(rows)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return table.num_rows
+
+
+def read_frames(path: str | os.PathLike) -> pd.DataFrame:
+    """Read and validate a frames file; any problem is a FramesError naming the file."""
+    if not os.path.exists(path):
+        raise FramesError(f"{path} does not exist")
+    if os.path.isdir(path):
+        raise FramesError(f"{path} is a directory, not a frames Parquet file")
+    try:
+        pf = pq.ParquetFile(path)
+        names = set(pf.schema_arrow.names)
+        missing = [c for c in FRAMES_COLUMNS if c not in names]
+        if missing:
+            raise FramesError(f"{path} is not a frames file: it lacks column(s) {', '.join(missing)}")
+        cols = list(FRAMES_COLUMNS) + [c for c in OPTIONAL_COLUMNS if c in names]
+        df = pf.read(columns=cols).to_pandas()
+    except FramesError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    try:
+        validate_frames(df)
+    except FramesError as exc:
+        raise FramesError(f"{path}: {exc}") from None
+    return df
+
+
+def validate_frames(df: pd.DataFrame) -> None:
+    missing = [c for c in FRAMES_COLUMNS if c not in df.columns]
+    if missing:
+        raise FramesError(f"lacks column(s) {', '.join(missing)}")
+    if df.empty:
+        return
+    for c in ("x", "y", "heading"):
+        v = pd.to_numeric(df[c], errors="coerce")
+        if not np.isfinite(v.to_numpy(dtype=float)).all():
+            bad = df.loc[~np.isfinite(v.to_numpy(dtype=float)), "frame_id"].iloc[0]
+            raise FramesError(f"column {c} has a missing or non-finite value (frame {bad})")
+    unknown = sorted(set(df["type"].astype(str)) - set(ENTITY_TYPES))
+    if unknown:
+        raise FramesError(f"unknown entity type(s) {', '.join(map(repr, unknown[:5]))}")
+    egos = df.groupby("frame_id", sort=False)["is_ego"].sum()
+    if (egos != 1).any():
+        raise FramesError(f"frame {egos.index[(egos != 1).to_numpy()][0]!r} does not have exactly one ego row")
+
+
+def _dim(v: Any) -> float | None:
+    if v is None:
+        return None
+    f = float(v)
+    return f if math.isfinite(f) and f > 0 else None
+
+
+def frame_to_scene(rows: pd.DataFrame) -> Scene:
+    """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone)."""
+    from synth.scene import scene_from_dict
+
+    fid = str(rows["frame_id"].iloc[0])
+    entities = []
+    for r in rows.itertuples(index=False):
+        d = {"id": r.entity_id, "type": r.type, "x": float(r.x), "y": float(r.y), "heading": float(r.heading)}
+        for key in ("length", "width"):
+            if (v := _dim(getattr(r, key))) is not None:
+                d[key] = v
+        entities.append(d)
+    try:
+        return scene_from_dict({"frame_id": fid, "entities": entities})
+    except SceneError as exc:
+        raise FramesError(f"frame {fid!r}: {exc}") from None
+
+
+def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
+    """Every frame of a frames table as a Scene, in order of first appearance."""
+    for _, rows in df.groupby("frame_id", sort=False):
+        yield frame_to_scene(rows)
+
+
+def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
+    """A Scene back as frames rows (ids kept as they are)."""
+    rows = []
+    for e in scene.entities:
+        rows.append(
+            {
+                "frame_id": scene.frame_id, "source": source, "scene": scene_name or scene.frame_id.split("/")[0],
+                "frame_index": frame_index, "timestamp_us": None, "entity_id": e.id, "track_id": e.id,
+                "type": e.type, "category": e.type, "x": e.x, "y": e.y, "heading": e.heading,
+                "length": e.length, "width": e.width, "is_ego": e.is_ego,
+            }
+        )
+    return rows
+
+
+__all__ = [
+    "FRAMES_SCHEMA", "FRAMES_COLUMNS", "FramesError", "entity_ids", "frame_rows", "to_table", "write_frames",
+    "read_frames", "validate_frames", "frame_to_scene", "iter_scenes", "scene_to_rows", "make_scene",
+]
