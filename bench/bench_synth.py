@@ -17,12 +17,12 @@ from collections import defaultdict
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
 
-from common import machine, write_results  # noqa: E402
-from realdata import available, keyframe_scenes  # noqa: E402
+from common import machine, write_results
+from realdata import available, keyframe_scenes
 
-from synth.config import SynthConfig  # noqa: E402
-from synth.search.budget import peak_rss_mb  # noqa: E402
-from synth.synthesize import synthesize  # noqa: E402
+from synth.config import SynthConfig
+from synth.search.budget import peak_rss_mb
+from synth.synthesize import synthesize
 
 
 def pct(values, q):

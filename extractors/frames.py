@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -198,6 +199,17 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
 
 
 __all__ = [
-    "FRAMES_SCHEMA", "FRAMES_COLUMNS", "FramesError", "entity_ids", "frame_rows", "to_table", "write_frames",
-    "read_frames", "validate_frames", "frame_to_scene", "iter_scenes", "scene_to_rows", "make_scene",
+    "FRAMES_COLUMNS",
+    "FRAMES_SCHEMA",
+    "FramesError",
+    "entity_ids",
+    "frame_rows",
+    "frame_to_scene",
+    "iter_scenes",
+    "make_scene",
+    "read_frames",
+    "scene_to_rows",
+    "to_table",
+    "validate_frames",
+    "write_frames",
 ]

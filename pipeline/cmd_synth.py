@@ -22,8 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.inputs import load_config, read_scene
     from extractors.atomic import write_text_atomic
+    from pipeline.inputs import load_config, read_scene
     from synth.synthesize import synthesize
 
     config = load_config(args.config).with_(

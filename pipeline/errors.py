@@ -9,11 +9,10 @@ class UserError(Exception):
 
 def user_error_types() -> tuple[type[BaseException], ...]:
     """Every exception class that means 'bad input' rather than 'bug' (all carry one-line messages)."""
+    from extractors.frames import FramesError
     from synth.config import ConfigError
     from synth.dsl import DslError
     from synth.scene import SceneError
     from synth.smt import SolverUnavailable
-
-    from extractors.frames import FramesError
 
     return (UserError, SceneError, DslError, ConfigError, SolverUnavailable, FramesError)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Mapping
+from typing import Any
 
 STRATEGIES = (
     "auto",
@@ -67,7 +68,7 @@ class SynthConfig:
         _one_of("oracle", self.oracle, ORACLES)
         _one_of("solver", self.solver, SOLVERS)
 
-    def with_(self, **changes: Any) -> "SynthConfig":
+    def with_(self, **changes: Any) -> SynthConfig:
         """A copy with the given fields changed; None values leave a field as it is."""
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 

@@ -12,8 +12,9 @@ import json
 import keyword
 import math
 import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
 ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
@@ -45,14 +46,7 @@ _ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 # the names generated Scenic text itself binds. An id is printed verbatim into programs, so anything that
 # could change what the program means is refused.
 _SCENIC_WORDS = frozenset(
-    """abort above additive after ahead along altitude always angle apparent apparently attribute away back
-    behavior behind below beyond bottom by can case choose compose contained deg directly distance do dynamic
-    ego eval eventually every facing final follow following from front heading implies initial interrupt
-    intersects invariant kind left model monitor mutate new next of offset on override param past position
-    precondition print record relative require right scenario seconds see setup shuffle simulation simulator
-    steps take terminate to top toward until visible wait when with workspace Range Vector Point OrientedPoint
-    Object Uniform Normal Discrete Options TruncatedNormal globalParameters localPath verbosePrint math
-    simulation resample hypot""".split()
+    ["abort", "above", "additive", "after", "ahead", "along", "altitude", "always", "angle", "apparent", "apparently", "attribute", "away", "back", "behavior", "behind", "below", "beyond", "bottom", "by", "can", "case", "choose", "compose", "contained", "deg", "directly", "distance", "do", "dynamic", "ego", "eval", "eventually", "every", "facing", "final", "follow", "following", "from", "front", "heading", "implies", "initial", "interrupt", "intersects", "invariant", "kind", "left", "model", "monitor", "mutate", "new", "next", "of", "offset", "on", "override", "param", "past", "position", "precondition", "print", "record", "relative", "require", "right", "scenario", "seconds", "see", "setup", "shuffle", "simulation", "simulator", "steps", "take", "terminate", "to", "top", "toward", "until", "visible", "wait", "when", "with", "workspace", "Range", "Vector", "Point", "OrientedPoint", "Object", "Uniform", "Normal", "Discrete", "Options", "TruncatedNormal", "globalParameters", "localPath", "verbosePrint", "math", "simulation", "resample", "hypot"]
 )
 RESERVED_IDS = frozenset(keyword.kwlist) | frozenset(keyword.softkwlist) | _SCENIC_WORDS | frozenset(
     dir(builtins)

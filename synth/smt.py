@@ -22,8 +22,6 @@ from synth.dsl import (
     AbsoluteHeading,
     AbsoluteXYPos,
     DirectionPos,
-    FacingRelation,
-    LocalXYPos,
     Program,
     RelativeHeading,
     Statement,
@@ -73,7 +71,7 @@ def _printed(v: float) -> Fraction:
     return Fraction(fmt_number(v))
 
 
-def make_backend(config: SynthConfig) -> "Z3Backend | DrealBackend":
+def make_backend(config: SynthConfig) -> Z3Backend | DrealBackend:
     if config.solver == "dreal":
         return DrealBackend(config)
     return Z3Backend(config)
@@ -276,7 +274,7 @@ class DrealBackend:
 
     def __post_init__(self) -> None:
         try:
-            import dreal  # noqa: F401
+            import dreal
         except ImportError as exc:
             raise SolverUnavailable(
                 f"dReal cannot be imported here ({exc}); it needs the system library libibex. Use --solver z3"

@@ -17,7 +17,7 @@ from synth.geometry import signed, to_local
 from synth.oracle import RelationOracle
 from synth.ranges import centred
 from synth.relations import DIRECTION_NAMES, FACING_NAMES, NONE
-from synth.smt import MeasureRequest, Measurement
+from synth.smt import Measurement, MeasureRequest
 
 
 def choose_references(oracle: RelationOracle, order: tuple[int, ...]) -> list[tuple[int, int, int, int]]:

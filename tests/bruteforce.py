@@ -66,4 +66,4 @@ def random_scene_dict(rng, n: int) -> dict:
     return {"frame_id": f"random/{n}", "entities": ents}
 
 
-__all__ = ["witnesses", "optimal_cost", "floor_sum", "random_scene_dict", "math"]
+__all__ = ["floor_sum", "math", "optimal_cost", "random_scene_dict", "witnesses"]

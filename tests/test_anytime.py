@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-
 from bruteforce import optimal_cost
+
 from synth.config import STRATEGIES, SynthConfig
 from synth.semantics import check
 from synth.synthesize import synthesize

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from conftest import assert_one_line_error, run_r2s
 
 FIG2 = {"frame_id": "fig2", "entities": [

@@ -5,8 +5,8 @@ from __future__ import annotations
 import tomllib
 
 import pytest
-
 from conftest import ROOT
+
 from synth.config import ConfigError, SynthConfig, config_from_mapping
 
 

@@ -19,6 +19,7 @@ needs_dreal = pytest.mark.skipif(DREAL_ERROR is not None, reason=f"dreal cannot 
 @needs_dreal
 def test_dreal_backend_finds_the_same_optimum(real_frames):
     from bruteforce import optimal_cost
+
     from synth.synthesize import synthesize
 
     for scene in [s for s in real_frames if len(s.others) <= 8][:3]:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import random
 
 import pytest
+from bruteforce import floor_sum, optimal_cost, random_scene_dict
+from conftest import shipped_frames
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bruteforce import floor_sum, optimal_cost, random_scene_dict
-from conftest import shipped_frames
 from synth.config import STRATEGIES, SynthConfig
 from synth.dsl import parse_program
 from synth.scene import scene_from_dict

@@ -73,7 +73,7 @@ def test_heading_ranges_wrap_around_360():
 
 def test_scope_missing_extra_and_type():
     s = scene(("car1", "Car", 0, 10, 0), ("ped1", "Pedestrian", 3, 3, 0))
-    from synth.dsl import Program, Statement, DirectionPos, FacingRelation, Range
+    from synth.dsl import DirectionPos, FacingRelation, Program, Range, Statement
     # Built by hand to bypass the parser's scoping: the checker must catch it too.
     early = Statement("car1", "Car", DirectionPos("ahead", "ped1", Range(0, 20)), FacingRelation("away", "ego"))
     r = check(Program((early,)), s)
