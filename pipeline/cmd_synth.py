@@ -19,6 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="F", help="TOML config (configs/default.toml, configs/paper.toml)")
     p.add_argument("--format", choices=("dsl", "scenic", "json"), default="dsl", help="output (default: dsl)")
     p.add_argument("--out", metavar="F", help="write to this file (atomically) instead of stdout")
+    p.add_argument("--max-entities", type=int, default=1000, metavar="N",
+                   help="refuse scenes with more entities than this (default 1000)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,
         time_limit=args.time_limit, memory_limit=args.memory_limit,
     )
-    scene = read_scene(args.scene)
+    scene = read_scene(args.scene, max_entities=args.max_entities)
     result = synthesize(scene, config)
     if args.format == "json":
         text = json.dumps(result.to_json_dict(), indent=1) + "\n"

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from pipeline.errors import UserError
 from synth.config import ConfigError, SynthConfig, config_from_mapping
-from synth.scene import Scene, scene_from_json
+from synth.scene import DEFAULT_MAX_ENTITIES, Scene, scene_from_json
 
 MAX_TEXT_BYTES = 64 * 1024 * 1024
 
@@ -33,7 +33,7 @@ def read_text_file(path: str, what: str) -> str:
 def read_scene(path: str, max_entities: int | None = None) -> Scene:
     text = read_text_file(path, "scene")
     try:
-        return scene_from_json(text, **({"max_entities": max_entities} if max_entities else {}))
+        return scene_from_json(text, max_entities=max_entities or DEFAULT_MAX_ENTITIES)
     except ValueError as exc:
         raise UserError(f"{path}: {exc}") from None
 

@@ -135,3 +135,12 @@ def test_bad_program_for_check(fig2, tmp_path):
     prog = tmp_path / "p.dsl"
     prog.write_text("car1 = new Car ahead of car9 by Range(0, 5), facing away from ego\n")
     assert_one_line_error(run_r2s("check", str(fig2), str(prog)), 2, "car9")
+
+
+def test_entity_cap_on_the_command_line(tmp_path):
+    doc = {"frame_id": "many", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0}] +
+           [{"id": f"car{i}", "type": "Car", "x": 3.0 * i, "y": 0, "heading": 0} for i in range(1, 6)]}
+    p = tmp_path / "s.json"
+    p.write_text(json.dumps(doc))
+    assert_one_line_error(run_r2s("synth", str(p), "--max-entities", "3"), 2, "cap of 3")
+    assert run_r2s("synth", str(p), "--max-entities", "10").returncode == 0
