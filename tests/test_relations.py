@@ -104,3 +104,20 @@ def test_relations_by_hand():
         got_dir = DIRECTION_NAMES[t.position[0, 1]] if t.position[0, 1] != NONE else None
         got_face = FACING_NAMES[t.heading[0, 1]] if t.heading[0, 1] != NONE else None
         assert (got_dir, got_face) == (direction, facing), (x, y, h)
+
+
+def test_hybrid_sends_only_the_edge_pairs_to_the_solver():
+    from synth.oracle import make_oracle
+
+    config = SynthConfig()
+    ego = Entity("ego", "Car", 0.0, 0.0, 0.0)
+    ux, uy = heading_vector(10.0)  # exactly on the edge of ego's ahead sector
+    on_edge = Entity("car1", "Car", 20 * ux, 20 * uy, 45.0)
+    clear = Entity("car2", "Car", 0.0, -30.0, 45.0)
+    scene = make_scene("edge", [ego, on_edge, clear])
+    oracle = make_oracle(scene, config)
+    assert oracle.backend.stats.queries >= 1
+    asked = {(target, ref) for (_, target, ref) in oracle.cache}
+    assert asked == {(1, 0)}  # only (car1 relative to ego) was near a boundary
+    exact = settle_exactly(closed_form_table(scene, config), scene, config)
+    assert (oracle.table.position == exact.position).all() and (oracle.table.heading == exact.heading).all()
