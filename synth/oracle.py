@@ -35,8 +35,8 @@ class RelationOracle:
     ids: tuple[str, ...] = ()
     table: RelationTable | None = None
     backend: object | None = None
-    # (kind, ref index, target index) -> code (NONE or an index into the names): the query cache.
-    cache: dict[tuple[str, int, int], int] = field(default_factory=dict)
+    # The paper's M_smt: (relation, target index, reference index) -> does the relation hold.
+    cache: dict[tuple[str, int, int], bool] = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -44,8 +44,11 @@ class RelationOracle:
         return self.table is not None
 
     def entities(self) -> tuple[Entity, ...]:
-        by = self.scene.by_id()
-        return tuple(by[i] for i in self.ids)
+        """The entities in index order (0 = ego); computed once, asked often."""
+        if getattr(self, "_entities", None) is None:
+            by = self.scene.by_id()
+            self._entities = tuple(by[i] for i in self.ids)
+        return self._entities
 
     def position(self, r: int, e: int) -> int:
         """Direction code of e relative to r (index into DIRECTION_NAMES), or NONE."""
@@ -59,20 +62,19 @@ class RelationOracle:
         return self._ask("heading", r, e)
 
     def _ask(self, kind: str, r: int, e: int) -> int:
-        key = (kind, r, e)
-        if key not in self.cache:
-            self.cache[key] = NONE if r == e else self._solve(kind, r, e)
-        return self.cache[key]
-
-    def _solve(self, kind: str, r: int, e: int) -> int:
+        """Ask relation by relation, as Alg. 4 does, through the cache; the first that holds is the answer."""
+        if r == e:
+            return NONE
         ents = self.entities()
-        ref, tgt = ents[r], ents[e]
         if kind == "position":
-            names, ask = DIRECTION_NAMES, self.backend.position_relation
+            names, solve = DIRECTION_NAMES, self.backend.position_relation
         else:
-            names, ask = FACING_NAMES, self.backend.heading_relation
+            names, solve = FACING_NAMES, self.backend.heading_relation
         for code, name in enumerate(names):
-            if ask(name, ref, tgt):
+            key = (name, e, r)
+            if key not in self.cache:
+                self.cache[key] = solve(name, ents[r], ents[e])
+            if self.cache[key]:
                 return code
         return NONE
 

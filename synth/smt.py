@@ -95,8 +95,9 @@ class Z3Backend:
 
     # --------------------------------------------------------------------------------- building blocks
     def q(self, v: float | str | Fraction) -> Any:
+        # RealVal from a "p/q" string is a single numeral; z3.Q builds a division and simplifies it (7x slower).
         f = _frac(v)
-        return self.z3.Q(f.numerator, f.denominator)
+        return self.z3.RealVal(f"{f.numerator}/{f.denominator}")
 
     def _var(self, stem: str) -> Any:
         self._fresh += 1
@@ -115,13 +116,16 @@ class Z3Backend:
         d = self._var("d")
         return self.z3.And(d >= 0, d * d == vx * vx + vy * vy, lo <= d, d <= hi)
 
-    def _angle_in(self, heading: float, base: float, lo: Any, hi: Any) -> Any:
-        # heading = N(base + alpha), alpha in [lo, hi]: some whole number of turns k closes the gap.
-        alpha = self._var("alpha")
-        k = self.z3.Int(f"k{self._fresh}")
-        return self.z3.And(
-            lo <= alpha, alpha <= hi, self.q(heading) == self.q(base) + alpha + 360 * self.z3.ToReal(k)
-        )
+    def _angle_in(self, heading: float, base: float, lo: Fraction, hi: Fraction) -> Any:
+        """heading = N(base + alpha) for some alpha in [lo, hi].
+
+        The whole number of turns k is the certificate: with hi - lo < 360 at most one k can work, the one that
+        puts heading - base - 360 k just above lo, so it is computed here and the solver decides the rest.
+        """
+        gap = _frac(heading) - _frac(base)
+        k = (gap - lo) // 360
+        alpha = gap - 360 * k
+        return self.z3.And(self.q(lo) <= self.q(alpha), self.q(alpha) <= self.q(hi))
 
     def _check(self, *constraints: Any) -> bool:
         t = time.perf_counter()
@@ -159,6 +163,7 @@ class Z3Backend:
         z3 = self.z3
         if not requests:
             return []
+        t = time.perf_counter()
         cons, wanted = [], []
         for req in requests:
             slots: dict[str, Any] = {}
@@ -176,13 +181,14 @@ class Z3Backend:
                 slots["lateral"], slots["forward"] = lx, ly
             if req.heading_kind in ("relative", "absolute"):
                 base = req.heading_ref.heading if req.heading_kind == "relative" else 0.0
+                # The offset in (-180, 180]: headings are in [0, 360), so one of three turns fits.
+                gap = _frac(req.target.heading) - _frac(base)
                 alpha = self._var("alpha")
-                k = z3.Int(f"k{self._fresh}")
-                cons += [alpha > -180, alpha <= 180, self.q(req.target.heading) == self.q(base) + alpha + 360 * z3.ToReal(k)]
+                cons += [alpha > -180, alpha <= 180,
+                         z3.Or(*(alpha == self.q(gap - 360 * k) for k in (-1, 0, 1)))]
                 slots["angle"] = alpha
             wanted.append(slots)
-        t = time.perf_counter()
-        s = z3.SolverFor("QF_NIRA")
+        s = z3.SolverFor("QF_NRA")
         s.add(*cons)
         result = s.check()
         self.stats.queries += len(requests)
@@ -214,8 +220,10 @@ class Z3Backend:
             ref = by_id[pos.ref]
             vx, vy = self._offset(ref, e)
             if isinstance(pos, DirectionPos):
+                lo, hi = _printed(pos.distance.lo), _printed(pos.distance.hi)
+                # lo <= |v| <= hi with 0 <= lo, squared: no square root, a ground formula.
                 p = z3.And(
-                    self._distance_in(vx, vy, self.q(_printed(pos.distance.lo)), self.q(_printed(pos.distance.hi))),
+                    self.q(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= self.q(hi * hi),
                     self._cone(vx, vy, ref.heading + DIRECTIONS[pos.direction][1], self.config.delta1),
                 )
             else:
@@ -226,13 +234,11 @@ class Z3Backend:
                     self.q(_printed(pos.forward.lo)) <= ly, ly <= self.q(_printed(pos.forward.hi)),
                 )
         if isinstance(head, AbsoluteHeading):
-            h = self._angle_in(e.heading, 0.0, self.q(_printed(head.angle.lo)), self.q(_printed(head.angle.hi)))
+            h = self._angle_in(e.heading, 0.0, _printed(head.angle.lo), _printed(head.angle.hi))
         else:
             ref = by_id[head.ref]
             if isinstance(head, RelativeHeading):
-                h = self._angle_in(
-                    e.heading, ref.heading, self.q(_printed(head.angle.lo)), self.q(_printed(head.angle.hi))
-                )
+                h = self._angle_in(e.heading, ref.heading, _printed(head.angle.lo), _printed(head.angle.hi))
             else:
                 vx, vy = self._offset(ref, e)
                 if head.mode == "toward":
@@ -245,10 +251,10 @@ class Z3Backend:
 
         One check for the whole program; only when it fails is each statement asked alone, to name it.
         """
+        t = time.perf_counter()  # building the formulas is solver work too: it is counted
         by_id = scene.by_id()
         formulas = [self.statement_formula(st, by_id) for st in program.statements]
-        t = time.perf_counter()
-        s = self.z3.SolverFor("QF_NIRA")
+        s = self.z3.SolverFor("QF_NRA")
         s.add(*formulas)
         ok = s.check() == self.z3.sat
         self.stats.queries += len(formulas)

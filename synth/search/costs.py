@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from synth.oracle import RelationOracle
 from synth.relations import NONE
 
@@ -24,15 +26,11 @@ class CostModel:
         n = self.n
         if oracle.complete:
             t = oracle.table
-            self._ego = [[bool(t.position[0, e + 1] != NONE) for e in range(n)],
-                         [bool(t.heading[0, e + 1] != NONE) for e in range(n)]]
-            self._mask = [[0] * n, [0] * n]
-            for e in range(n):
-                for r in range(n):
-                    if t.position[r + 1, e + 1] != NONE:
-                        self._mask[POSITION][e] |= 1 << r
-                    if t.heading[r + 1, e + 1] != NONE:
-                        self._mask[HEADING][e] |= 1 << r
+            self._ego = [list(t.position[0, 1:] != NONE), list(t.heading[0, 1:] != NONE)]
+            self._mask = [
+                [sum(1 << int(r) for r in np.nonzero(m[1:, e + 1] != NONE)[0]) for e in range(n)]
+                for m in (t.position, t.heading)
+            ]
             self._known = [[self.all] * n, [self.all] * n]
         else:
             # The smt oracle: ask lazily, nearest reference first (Alg. 4's order), and remember.
