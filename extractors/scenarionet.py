@@ -115,8 +115,17 @@ def scenario_frames(path: Path, sd: Any, options: ExtractOptions) -> Iterator[li
                                 yaw[others, step])
         boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step])
                  for k, i in enumerate(others)]
-        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, length[ego_i, step], width[ego_i, step])
-        t_us = None
-        if ts is not None and len(ts) > step:
-            t_us = int(round(float(ts[step]) * 1e6))
-        yield builder.frame(scene, index, t_us, ego, boxes)
+        # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
+        # than it is long, so the ego's box is read with its sides in order.
+        ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)
+        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w)
+        yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
+
+
+def _timestamp_us(ts: Any, step: int) -> int | None:
+    """metadata.ts is seconds from the scenario start; absent or odd values leave the timestamp empty."""
+    try:
+        t = float(ts[step])
+    except (TypeError, ValueError, IndexError, KeyError):
+        return None
+    return int(round(t * 1e6)) if np.isfinite(t) else None
