@@ -10,18 +10,14 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from conftest import assert_one_line_error, run_r2s
+from _extract_util import EXCERPT, assert_refused, r2s
+from _extract_util import frames_of as _frames
 from extractors.base import ExtractOptions
 from extractors.categories import ALL
 from extractors.nuscenes import extract as extract_nuscenes
 from extractors.scenarionet import extract as extract_scenarionet
 
-EXCERPT = Path(__file__).resolve().parents[1] / "data" / "nuscenes-mini-excerpt"
 COMPARED = ["frame_id", "scene", "frame_index", "entity_id", "track_id", "type", "is_ego"]
-
-
-def _frames(extract, path, **kw) -> pd.DataFrame:
-    return pd.DataFrame([r for f in extract(str(path), ExtractOptions(**kw)) for r in f])
 
 
 def test_excerpt_is_a_table_set_nuscenes_devkit_loads():
@@ -81,7 +77,7 @@ def test_scene_selection(tmp_path):
 
 
 @pytest.mark.parametrize("case", ["missing", "version", "corrupt", "scene"])
-def test_bad_input_exits_2_and_writes_nothing(tmp_path, case):
+def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, case):
     out = tmp_path / "out" / "frames.parquet"
     args = ["extract", "nuscenes", str(EXCERPT), "--out", str(out)]
     if case == "missing":
@@ -94,7 +90,5 @@ def test_bad_input_exits_2_and_writes_nothing(tmp_path, case):
         args[2] = str(root)
     else:
         args += ["--scenes", "scene-9999"]
-    proc = run_r2s(*args)
-    assert_one_line_error(proc, contains={"missing": "does not exist", "version": "v1.0-trainval",
-                                          "corrupt": "not a loadable", "scene": "scene-9999"}[case])
-    assert not out.parent.exists() or list(out.parent.iterdir()) == []
+    assert_refused(r2s(capsys, *args), out, {"missing": "does not exist", "version": "v1.0-trainval",
+                                             "corrupt": "not a loadable", "scene": "scene-9999"}[case])
