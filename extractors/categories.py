@@ -10,6 +10,7 @@ Taxonomies:
 - "scenarionet": ScenarioNet / MetaDrive object types, the common denominator its converters write for
   Waymo, nuPlan, Lyft, Argoverse and nuScenes (VEHICLE, PEDESTRIAN, CYCLIST, ...), plus the raw nuPlan and Lyft
   type names that appear in converted `metadata.type`.
+- "logs": MCAP / ROS bag annotations: any of the above, or a Scenic class name itself.
 
 Choices that are judgement calls, so they are written down: every `human.*` is a Pedestrian (strollers and
 wheelchairs move with people); cyclists and motorcyclists are Bicycle / Motorcycle (the rider and the vehicle
@@ -118,10 +119,15 @@ SCENARIONET: Mapping[str, str] = {
     "animal": "Animal",
 }
 
+# Robotics logs (MCAP, ROS bags) carry whatever category strings their writer chose: nuScenes names (the
+# nuScenes-to-MCAP converters), Argoverse / ScenarioNet names, or the Scenic class itself.
+LOGS: Mapping[str, str] = {**SCENARIONET, **ARGOVERSE2, **NUSCENES, **{c: c for c in ENTITY_TYPES}}
+
 TAXONOMIES: Mapping[str, Mapping[str, str]] = {
     "nuscenes": NUSCENES,
     "argoverse2": ARGOVERSE2,
     "scenarionet": SCENARIONET,
+    "logs": LOGS,
 }
 
 # Every map must land in the synthesizer's closed set of classes.
