@@ -9,42 +9,35 @@ module names). Anything else is refused before it is imported.
 
 from __future__ import annotations
 
+import codecs
+import collections
 import io
 import os
 import pickle
 from typing import Any
 
 import numpy as np
+from numpy.core import multiarray as _multiarray
+from numpy.core import numeric as _numeric
 
 from extractors.base import ExtractError
-
-_NUMPY_CORE = {
-    "multiarray._reconstruct": ("numpy.core.multiarray", "_reconstruct"),
-    "multiarray.scalar": ("numpy.core.multiarray", "scalar"),
-    "numeric._frombuffer": ("numpy.core.numeric", "_frombuffer"),
-}
 
 ALLOWED_GLOBALS: dict[tuple[str, str], Any] = {
     ("numpy", "ndarray"): np.ndarray,
     ("numpy", "dtype"): np.dtype,
-    ("builtins", "set"): set,
-    ("builtins", "frozenset"): frozenset,
-    ("builtins", "complex"): complex,
-    ("builtins", "bytearray"): bytearray,
-    ("collections", "OrderedDict"): __import__("collections").OrderedDict,
+    ("collections", "OrderedDict"): collections.OrderedDict,
     # protocol 2 writes bytes as _codecs.encode(text, "latin1")
-    ("_codecs", "encode"): __import__("codecs").encode,
+    ("_codecs", "encode"): codecs.encode,
 }
-for _short, (_mod, _name) in _NUMPY_CORE.items():
-    _obj = getattr(__import__(_mod, fromlist=[_name]), _name)
-    _sub, _attr = _short.split(".")
-    ALLOWED_GLOBALS[(f"numpy.core.{_sub}", _attr)] = _obj
-    ALLOWED_GLOBALS[(f"numpy._core.{_sub}", _attr)] = _obj  # as numpy 2 names them
-
-# numpy dtypes may be pickled by class (numpy.dtypes.Float64DType) under numpy 2.
-for _cls in ("Float64DType", "Float32DType", "Int64DType", "Int32DType", "BoolDType", "StrDType", "ObjectDType"):
-    if hasattr(np, "dtypes") and hasattr(np.dtypes, _cls):
-        ALLOWED_GLOBALS[("numpy.dtypes", _cls)] = getattr(np.dtypes, _cls)
+# numpy 1 and numpy 2 module names of the array / scalar reconstructors
+for _core in ("numpy.core", "numpy._core"):
+    ALLOWED_GLOBALS[(f"{_core}.multiarray", "_reconstruct")] = _multiarray._reconstruct
+    ALLOWED_GLOBALS[(f"{_core}.multiarray", "scalar")] = _multiarray.scalar
+    ALLOWED_GLOBALS[(f"{_core}.numeric", "_frombuffer")] = _numeric._frombuffer
+# builtin containers, under Python 3 and (protocol < 3) Python 2 module names
+for _mod in ("builtins", "__builtin__"):
+    for _t in (set, frozenset, complex, bytearray):
+        ALLOWED_GLOBALS[(_mod, _t.__name__)] = _t
 
 MAX_PICKLE_BYTES = 2 * 2**30
 

@@ -8,18 +8,14 @@ from __future__ import annotations
 
 import cmath
 import math
-from pathlib import Path
 
 import pandas as pd
-import pytest
-
-from conftest import assert_one_line_error, run_r2s
+from _extract_util import EXCERPT, assert_refused, r2s
+from conftest import run_r2s
 from extractors.base import ExtractOptions
 from extractors.categories import ALL, CategorySelection
 from extractors.frames import read_frames
 from extractors.scenarionet import extract
-
-EXCERPT = Path(__file__).resolve().parents[1] / "data" / "nuscenes-mini-excerpt"
 
 
 def _frames(path, **kw) -> pd.DataFrame:
@@ -46,7 +42,6 @@ def _angle_gap(a, b):
     return pd.Series([min(v, 360.0 - v) for v in d])
 
 
-@pytest.mark.slow
 def test_reproduces_every_keyframe_box_of_the_six_scenes(shared_dir):
     data = shared_dir / "data" / "nuscenes-mini"
     keyframes = pd.read_csv(data / "keyframes.csv")
@@ -75,7 +70,6 @@ def test_reproduces_every_keyframe_box_of_the_six_scenes(shared_dir):
     assert (egos.length > egos.width).all()
 
 
-@pytest.mark.slow
 def test_radius_and_vehicle_selection_match_the_csv_counts(shared_dir):
     data = shared_dir / "data" / "nuscenes-mini"
     exp = _expected(pd.read_csv(data / "keyframes.csv"))
@@ -125,9 +119,8 @@ def test_cli_on_the_shipped_excerpt_yields_demo_frames(tmp_path):
     assert '"id": "ego"' in proc.stdout
 
 
-def test_cap_on_entities_refuses_the_frame(tmp_path):
-    out = tmp_path / "frames.parquet"
-    proc = run_r2s("extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(out), "--categories", "all",
-                   "--max-entities", "10")
-    assert_one_line_error(proc, contains="more than the cap of 10")
-    assert not out.exists() and list(tmp_path.iterdir()) == []
+def test_cap_on_entities_refuses_the_frame(tmp_path, capsys):
+    out = tmp_path / "out" / "frames.parquet"
+    res = r2s(capsys, "extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(out), "--categories",
+              "all", "--max-entities", "10")
+    assert_refused(res, out, "more than the cap of 10")
