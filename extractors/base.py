@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
 from extractors.categories import VEHICLES, CategorySelection
-from extractors.frames import FramesError, frame_rows
+from extractors.frames import FramesError, _dim, frame_rows
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 
@@ -94,21 +94,13 @@ def quaternion_yaw(w: Any, x: Any, y: Any, z: Any) -> np.ndarray:
     return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def _dim(v: Any) -> float | None:
-    if v is None:
-        return None
-    f = float(v)
-    return f if math.isfinite(f) and f > 0 else None
-
-
-@dataclass
+@dataclass(frozen=True)
 class FrameBuilder:
     """Turns one frame's boxes into frames rows: category selection, radius, cap, deterministic ids."""
 
     source: str
     taxonomy: str
     options: ExtractOptions
-    unknown: dict[str, int] = field(default_factory=dict)
 
     def frame(
         self,

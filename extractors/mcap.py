@@ -65,7 +65,9 @@ def check_mcap(path: Path, limit: int) -> dict[str, str]:
     except ExtractError:
         raise
     except RecordLengthLimitExceeded as exc:
-        raise ExtractError(f"{path}: a record is larger than the limit of {limit} bytes (--max-chunk-mb): {exc}") from None
+        raise ExtractError(
+            f"{path}: a record is larger than the limit of {limit} bytes (--max-chunk-mb): {exc}"
+        ) from None
     except OSError as exc:
         raise ExtractError(f"cannot read {path}: {exc.strerror or exc}") from None
     except Exception as exc:  # the mcap reader signals corrupt input with many exception types

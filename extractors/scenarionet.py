@@ -128,4 +128,4 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
         t = float(ts[step])
     except (TypeError, ValueError, IndexError, KeyError):
         return None
-    return int(round(t * 1e6)) if np.isfinite(t) else None
+    return round(t * 1e6) if np.isfinite(t) else None

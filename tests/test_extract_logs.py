@@ -5,7 +5,6 @@ keyframes). Bad files (truncated, foreign, decompression bombs, unknown topics) 
 from __future__ import annotations
 
 import struct
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
