@@ -16,6 +16,8 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "synth": ("pipeline.cmd_synth", "synthesize a minimum-cost program for one scene JSON"),
     "check": ("pipeline.cmd_check", "does a DSL program contain a scene? (the semantics checker)"),
+    "extract": ("pipeline.cmd_extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
+    "scene": ("pipeline.cmd_scene", "print one frame of a frames.parquet as scene JSON"),
 }
 
 

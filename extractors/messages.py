@@ -1,0 +1,244 @@
+"""Annotation and pose messages of robotics logs, decoded by any reader, as boxes and ego poses.
+
+Shared by the mcap and rosbag sources. A decoded message may be a protobuf object, a ROS message object
+(mcap-ros2-support, rosbags) or a JSON dict; fields are read by name from any of them. Supported layouts:
+
+annotations   foxglove.SceneUpdate (protobuf, JSON, ROS 2 foxglove_msgs): one box per entity, from its first
+              cube (pose, size x = length, y = width); category = the entity's metadata "category" (as the
+              nuScenes-to-MCAP converter writes it), track = entity id.
+              vision_msgs/Detection3DArray (ROS 2; ROS 1 noetic): category = results[0].hypothesis.class_id
+              (ROS 1: results[0].id), track = detection id, box = bbox.center / bbox.size.
+              visualization_msgs/MarkerArray: CUBE markers being added; category = ns, track = ns/id.
+ego pose      tf2_msgs/TFMessage and foxglove.FrameTransform(s): the fixed frame -> ego frame transform;
+              or a pose topic: geometry_msgs/PoseStamped, PoseWithCovarianceStamped, nav_msgs/Odometry,
+              foxglove.PoseInFrame.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+from typing import Any, Iterable, Iterator
+
+from extractors.base import (Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, quaternion_yaw,
+                             vehicle_to_ego)
+
+SCENE_UPDATE = ("foxglove.SceneUpdate", "foxglove_msgs/msg/SceneUpdate", "foxglove_msgs/SceneUpdate")
+DETECTIONS = ("vision_msgs/msg/Detection3DArray", "vision_msgs/Detection3DArray")
+MARKERS = ("visualization_msgs/msg/MarkerArray", "visualization_msgs/MarkerArray")
+ANNOTATION_TYPES = SCENE_UPDATE + DETECTIONS + MARKERS
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf2_msgs/TFMessage", "foxglove.FrameTransform", "foxglove.FrameTransforms",
+            "foxglove_msgs/msg/FrameTransform", "foxglove_msgs/msg/FrameTransforms")
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/PoseStamped",
+              "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/PoseWithCovarianceStamped",
+              "nav_msgs/msg/Odometry", "nav_msgs/Odometry", "foxglove.PoseInFrame", "foxglove_msgs/msg/PoseInFrame")
+DEFAULT_ANNOTATION_TOPIC = "/markers/annotations"
+POSE_TOLERANCE_NS = 100_000_000  # an ego pose further than 0.1 s from the annotations does not place them
+MARKER_CUBE, MARKER_ADD = 1, 0
+
+
+def g(obj: Any, *names: str, default: Any = None) -> Any:
+    """The first present field of obj among names (dict key or attribute)."""
+    for n in names:
+        v = obj.get(n) if isinstance(obj, dict) else getattr(obj, n, None)
+        if v is not None:
+            return v
+    return default
+
+
+def stamp_ns(t: Any) -> int | None:
+    """A ROS 1 / ROS 2 / foxglove / protobuf timestamp in nanoseconds; None if absent or zero."""
+    if t is None:
+        return None
+    sec = g(t, "sec", "secs", "seconds", default=0)
+    nsec = g(t, "nsec", "nanosec", "nsecs", "nanos", default=0)
+    ns = int(sec) * 1_000_000_000 + int(nsec)
+    return ns or None
+
+
+def _f(v: Any) -> float:
+    return float(v) if v is not None else 0.0
+
+
+def _pose(p: Any) -> tuple[float, float, float]:
+    """(x, y, yaw) of a geometry pose (position + orientation quaternion)."""
+    pos, q = g(p, "position", "translation", default={}), g(p, "orientation", "rotation", default={})
+    yaw = quaternion_yaw(_f(g(q, "w", default=1.0)), _f(g(q, "x")), _f(g(q, "y")), _f(g(q, "z")))
+    return _f(g(pos, "x")), _f(g(pos, "y")), float(yaw)
+
+
+@dataclass(frozen=True)
+class RawBox:
+    """A box in the frame its message names (not yet in our ego frame): yaw radians CCW from +x."""
+
+    frame: str
+    track_id: str
+    category: str
+    x: float
+    y: float
+    yaw: float
+    length: float | None
+    width: float | None
+
+
+def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
+    """(header stamp ns or None, boxes) of one annotation message of a type in ANNOTATION_TYPES."""
+    boxes: list[RawBox] = []
+    stamp = None
+    if schema in SCENE_UPDATE:
+        for ent in g(msg, "entities", default=[]):
+            cubes = list(g(ent, "cubes", default=[]))
+            if not cubes:
+                continue
+            meta = {g(kv, "key"): g(kv, "value") for kv in g(ent, "metadata", default=[])}
+            x, y, yaw = _pose(g(cubes[0], "pose", default={}))
+            size = g(cubes[0], "size", default={})
+            eid = str(g(ent, "id", default=""))
+            boxes.append(RawBox(str(g(ent, "frame_id", default="")), eid, str(meta.get("category") or eid), x, y,
+                                yaw, g(size, "x"), g(size, "y")))
+            stamp = stamp or stamp_ns(g(ent, "timestamp"))
+    elif schema in DETECTIONS:
+        header = g(msg, "header", default={})
+        stamp = stamp_ns(g(header, "stamp"))
+        for i, det in enumerate(g(msg, "detections", default=[])):
+            results = list(g(det, "results", default=[]))
+            if results:
+                hyp = g(results[0], "hypothesis")
+                cat = str(g(hyp, "class_id") if hyp is not None else g(results[0], "id", default=""))
+            else:
+                cat = ""
+            bbox = g(det, "bbox", default={})
+            x, y, yaw = _pose(g(bbox, "center", default={}))
+            size = g(bbox, "size", default={})
+            frame = g(g(det, "header", default={}), "frame_id") or g(header, "frame_id", default="")
+            boxes.append(RawBox(str(frame), str(g(det, "id") or i), cat, x, y, yaw, g(size, "x"), g(size, "y")))
+    elif schema in MARKERS:
+        for m in g(msg, "markers", default=[]):
+            if int(g(m, "type", default=-1)) != MARKER_CUBE or int(g(m, "action", default=0)) != MARKER_ADD:
+                continue
+            header = g(m, "header", default={})
+            stamp = stamp or stamp_ns(g(header, "stamp"))
+            x, y, yaw = _pose(g(m, "pose", default={}))
+            scale = g(m, "scale", default={})
+            ns = str(g(m, "ns", default=""))
+            boxes.append(RawBox(str(g(header, "frame_id", default="")), f"{ns}/{g(m, 'id', default=0)}", ns, x, y, yaw,
+                                g(scale, "x"), g(scale, "y")))
+    else:  # pragma: no cover - callers pass only ANNOTATION_TYPES
+        raise ValueError(schema)
+    return stamp, boxes
+
+
+def pose_samples(msg: Any, schema: str, options: ExtractOptions, log_ns: int) -> list[tuple[int, float, float, float]]:
+    """(t ns, x, y, yaw) ego poses in the fixed frame carried by one tf or pose message."""
+    out = []
+    if schema in TF_TYPES:
+        transforms = g(msg, "transforms")
+        for tf in (transforms if transforms is not None else [msg]):
+            header = g(tf, "header")
+            parent = g(header, "frame_id") if header is not None else g(tf, "parent_frame_id")
+            if parent != options.fixed_frame or g(tf, "child_frame_id") != options.ego_frame:
+                continue
+            t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(tf, "timestamp"))
+            body = g(tf, "transform", default=tf)
+            out.append((t or log_ns, *_pose(body)))
+    else:
+        header = g(msg, "header")
+        t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(msg, "timestamp"))
+        pose = g(msg, "pose", default={})
+        pose = g(pose, "pose", default=pose)  # Odometry / PoseWithCovariance wrap the pose once more
+        out.append((t or log_ns, *_pose(pose)))
+    return out
+
+
+class PoseTrack:
+    """Ego poses by time; lookups take the nearest pose within POSE_TOLERANCE_NS."""
+
+    def __init__(self, samples: Iterable[tuple[int, float, float, float]]) -> None:
+        s = sorted(samples)
+        self.times = [t for t, *_ in s]
+        self.poses = [p for _, *p in s]
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def at(self, t: int) -> tuple[float, float, float] | None:
+        i = bisect.bisect_left(self.times, t)
+        best = min((j for j in (i - 1, i) if 0 <= j < len(self.times)), key=lambda j: abs(self.times[j] - t),
+                   default=None)
+        if best is None or abs(self.times[best] - t) > POSE_TOLERANCE_NS:
+            return None
+        return tuple(self.poses[best])  # type: ignore[return-value]
+
+
+def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions, where: str) -> list[Box]:
+    """Boxes in the ego frame: from the vehicle frame directly, from the fixed frame through the ego pose."""
+    out: list[Box] = []
+    in_ego = [b for b in raw if b.frame == options.ego_frame]
+    in_fixed = [b for b in raw if b.frame == options.fixed_frame]
+    other = {b.frame for b in raw} - {options.ego_frame, options.fixed_frame}
+    if other:
+        raise ExtractError(
+            f"{where}: boxes in frame {sorted(other)[0]!r}, neither the fixed frame {options.fixed_frame!r} nor the "
+            "ego frame {!r} (set --fixed-frame / --ego-frame)".format(options.ego_frame)
+        )
+    if in_ego:
+        x, y, h = vehicle_to_ego([b.x for b in in_ego], [b.y for b in in_ego], [b.yaw for b in in_ego])
+        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width)
+                for i, b in enumerate(in_ego)]
+    if in_fixed:
+        pose = poses.at(t)
+        if pose is None:
+            raise ExtractError(
+                f"{where}: no ego pose ({options.fixed_frame} -> {options.ego_frame}) within "
+                f"{POSE_TOLERANCE_NS / 1e9:g} s of the annotations at t={t / 1e9:.3f} s (see --pose-topic)"
+            )
+        x, y, h = global_to_ego(*pose, [b.x for b in in_fixed], [b.y for b in in_fixed], [b.yaw for b in in_fixed])
+        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width)
+                for i, b in enumerate(in_fixed)]
+    return out
+
+
+def choose_annotation_topics(available: dict[str, str], options: ExtractOptions, where: str) -> list[str]:
+    """The annotation topics to read: --topics (checked), else the one annotation topic, else the converter's."""
+    if options.topics:
+        for t in options.topics:
+            if t not in available:
+                raise ExtractError(f"{where} has no topic {t!r} (topics: {', '.join(sorted(available)) or 'none'})")
+            if available[t] not in ANNOTATION_TYPES:
+                raise ExtractError(f"{where}: topic {t} carries {available[t]}, not an annotation type "
+                                   f"({', '.join(sorted(set(ANNOTATION_TYPES)))})")
+        return list(options.topics)
+    found = sorted(t for t, s in available.items() if s in ANNOTATION_TYPES)
+    if len(found) == 1:
+        return found
+    if DEFAULT_ANNOTATION_TOPIC in found:
+        return [DEFAULT_ANNOTATION_TOPIC]
+    if not found:
+        raise ExtractError(f"{where} has no annotation topic (SceneUpdate, Detection3DArray or MarkerArray)")
+    raise ExtractError(f"{where} has several annotation topics ({', '.join(found)}): choose with --topics")
+
+
+def choose_pose_topics(available: dict[str, str], options: ExtractOptions, where: str) -> list[str]:
+    if options.pose_topic:
+        t = options.pose_topic
+        if t not in available:
+            raise ExtractError(f"{where} has no topic {t!r} (topics: {', '.join(sorted(available)) or 'none'})")
+        if available[t] not in TF_TYPES + POSE_TYPES:
+            raise ExtractError(f"{where}: pose topic {t} carries {available[t]}, not a pose or tf message")
+        return [t]
+    return [t for t, s in available.items() if s in TF_TYPES]
+
+
+def message_frames(
+    source: str, scene: str, messages: Iterable[tuple[str, int, Any]], poses: PoseTrack, options: ExtractOptions,
+    where: str,
+) -> Iterator[list[dict[str, Any]]]:
+    """One frame per annotation message (schema, log time ns, decoded message), frame_id `<scene>/<index>`."""
+    builder = FrameBuilder(source, "logs", options)
+    for index, (schema, log_ns, msg) in enumerate(messages):
+        if index % options.every:
+            continue
+        stamp, raw = annotation_boxes(msg, schema)
+        t = stamp or log_ns
+        boxes = to_ego_boxes(raw, t, poses, options, f"{where} message {index}")
+        yield builder.frame(scene, index, t // 1000, Box("ego", "ego", 0.0, 0.0, 0.0), boxes)

@@ -1,0 +1,109 @@
+"""nuScenes annotations (the 13 JSON tables, through nuscenes-devkit) as frames.
+
+One frame per sample (2 Hz keyframe), frame_id `<scene name>/<0-based sample index>`. The ego pose is the
+LIDAR_TOP sample_data's ego_pose (the pose the annotations were made against); each sample_annotation's
+translation and rotation yaw go into the ego frame. Optional filters: visibility level and lidar points.
+Only the JSON tables are read: no sensor files, and map masks named in map.json may be missing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+from typing import Any, Iterator
+
+from extractors.base import Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, quaternion_yaw, require_path
+
+DESCRIPTION = "nuScenes dataroot (JSON tables of --version) through nuscenes-devkit"
+EGO_CATEGORY = "vehicle.ego"
+
+
+class _AbsentMapMask:
+    """Stands in for nuscenes-devkit's MapMask, which asserts that the mask PNG exists; frames never use it."""
+
+    def __init__(self, img_file: str, resolution: float = 0.1) -> None:
+        self.img_file = img_file
+        self.resolution = resolution
+
+
+def load(dataroot: Path, version: str) -> Any:
+    """nuscenes-devkit's NuScenes on the tables alone; every failure is one ExtractError."""
+    if not dataroot.is_dir():
+        raise ExtractError(f"nuScenes dataroot {dataroot} is not a directory")
+    if not (dataroot / version).is_dir():
+        found = sorted(p.name for p in dataroot.iterdir() if p.is_dir() and (p / "sample.json").is_file())
+        raise ExtractError(
+            f"{dataroot} has no nuScenes tables for version {version!r}"
+            + (f" (versions here: {', '.join(found)})" if found else " (no version folder with sample.json)")
+        )
+    try:
+        import nuscenes.nuscenes as devkit
+    except ImportError:
+        raise ExtractError("the nuscenes source needs nuscenes-devkit (pip install 'r2sgen[nuscenes]')") from None
+    original = devkit.MapMask
+    devkit.MapMask = _AbsentMapMask
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # the devkit prints while it loads
+            return devkit.NuScenes(version=version, dataroot=str(dataroot), verbose=False)
+    except Exception as exc:  # missing / corrupt / inconsistent tables surface as many exception types
+        raise ExtractError(
+            f"{dataroot}/{version}: not a loadable nuScenes table set ({type(exc).__name__}: {str(exc)[:120]})"
+        ) from None
+    finally:
+        devkit.MapMask = original
+
+
+def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+    nusc = load(require_path(input_path, "nuScenes dataroot"), options.version)
+    scenes = list(nusc.scene)
+    if options.scenes:
+        names = {s["name"] for s in scenes}
+        unknown = [s for s in options.scenes if s not in names]
+        if unknown:
+            raise ExtractError(f"{input_path} {options.version} has no scene {unknown[0]!r}")
+        scenes = [s for s in scenes if s["name"] in options.scenes]
+    builder = FrameBuilder("nuscenes", "nuscenes", options)
+    for scene in scenes:
+        try:
+            yield from _scene_frames(nusc, scene, builder, options)
+        except KeyError as exc:
+            raise ExtractError(f"{input_path} {options.version}: scene {scene['name']} refers to a missing "
+                               f"record {exc}") from None
+        except (TypeError, ValueError, IndexError) as exc:
+            raise ExtractError(f"{input_path} {options.version}: scene {scene['name']} has a malformed record "
+                               f"({type(exc).__name__}: {str(exc)[:100]})") from None
+
+
+def _scene_frames(nusc: Any, scene: dict, builder: FrameBuilder, options: ExtractOptions) -> Iterator[list[dict]]:
+    token, index, seen = scene["first_sample_token"], 0, set()
+    while token and token not in seen:
+        seen.add(token)
+        sample = nusc.get("sample", token)
+        if index % options.every == 0:
+            yield _sample_frame(nusc, scene["name"], index, sample, builder, options)
+        token, index = sample["next"], index + 1
+
+
+def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: FrameBuilder,
+                  options: ExtractOptions) -> list[dict]:
+    if "LIDAR_TOP" not in sample["data"]:
+        raise ExtractError(f"sample {index} of {scene} has no LIDAR_TOP sample_data (needed for the ego pose)")
+    pose = nusc.get("ego_pose", nusc.get("sample_data", sample["data"]["LIDAR_TOP"])["ego_pose_token"])
+    ego_yaw = float(quaternion_yaw(*pose["rotation"]))
+    anns = [nusc.get("sample_annotation", t) for t in sample["anns"]]
+    anns = [
+        a for a in anns
+        if int(a.get("num_lidar_pts", 0)) >= options.min_lidar_pts
+        and (options.min_visibility <= 0 or int(a.get("visibility_token") or 0) >= options.min_visibility)
+    ]
+    x, y, h = global_to_ego(
+        pose["translation"][0], pose["translation"][1], ego_yaw,
+        [a["translation"][0] for a in anns], [a["translation"][1] for a in anns],
+        [float(quaternion_yaw(*a["rotation"])) for a in anns],
+    )
+    # nuScenes sizes are [width, length, height]
+    boxes = [Box(a["instance_token"], a["category_name"], float(x[i]), float(y[i]), float(h[i]),
+                 a["size"][1], a["size"][0]) for i, a in enumerate(anns)]
+    ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0)
+    return builder.frame(scene, index, int(sample["timestamp"]), ego, boxes)

@@ -1,0 +1,134 @@
+"""ROS 1 .bag files and ROS 2 bags (sqlite3 or mcap storage), through rosbags, as frames.
+
+Input: a .bag file, a ROS 2 bag directory (metadata.yaml), or a directory holding .bag files. The message
+layouts and topic choice are those of extractors.messages (Detection3DArray, MarkerArray, foxglove
+SceneUpdate; ego pose from /tf or --pose-topic). Types come from the definitions stored in the bag; bags
+without them fall back to the ROS 2 Humble types plus vision_msgs, which rosbags does not ship.
+Resource bounds: the .mcap files of a ROS 2 bag get the mcap source's full check; ROS 1 chunks are
+decompressed with a cap of --max-chunk-mb.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from extractors.base import ExtractError, ExtractOptions, require_path
+from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples
+
+DESCRIPTION = "ROS 1 .bag or ROS 2 bag directory (sqlite3 / mcap storage) through rosbags"
+
+# vision_msgs (ROS 2 Humble), which the rosbags typestores do not carry.
+VISION_MSGS = {
+    "vision_msgs/msg/ObjectHypothesis": "string class_id\nfloat64 score\n",
+    "vision_msgs/msg/ObjectHypothesisWithPose": (
+        "vision_msgs/ObjectHypothesis hypothesis\ngeometry_msgs/PoseWithCovariance pose\n"),
+    "vision_msgs/msg/BoundingBox3D": "geometry_msgs/Pose center\ngeometry_msgs/Vector3 size\n",
+    "vision_msgs/msg/Detection3D": (
+        "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\n"
+        "vision_msgs/BoundingBox3D bbox\nstring id\n"),
+    "vision_msgs/msg/Detection3DArray": "std_msgs/Header header\nvision_msgs/Detection3D[] detections\n",
+}
+
+
+def typestore(ros1: bool = False) -> Any:
+    """The rosbags typestore (ROS 1 Noetic or ROS 2 Humble) with vision_msgs registered."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    types: dict = {}
+    for name, text in VISION_MSGS.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store
+
+
+def bag_paths(path: Path) -> list[tuple[Path, bool]]:
+    """(bag, is ROS 1) for a .bag file, a ROS 2 bag directory, or a directory of .bag files."""
+    if path.is_file():
+        if path.suffix != ".bag":
+            raise ExtractError(f"{path} is not a ROS 1 .bag file nor a ROS 2 bag directory")
+        return [(path, True)]
+    if (path / "metadata.yaml").is_file():
+        return [(path, False)]
+    bags = sorted(path.rglob("*.bag"))
+    if not bags:
+        raise ExtractError(f"{path} is neither a ROS 2 bag (no metadata.yaml) nor holds ROS 1 .bag files")
+    return [(b, True) for b in bags]
+
+
+def _bounded(decompress: Callable[[bytes], bytes], limit: int, where: Path) -> Callable[[bytes], bytes]:
+    import bz2
+
+    import lz4.frame
+
+    def run(data: bytes) -> bytes:
+        if decompress is bz2.decompress:
+            out = bz2.BZ2Decompressor().decompress(data, max_length=limit + 1)
+        elif decompress is lz4.frame.decompress:
+            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit + 1)
+        else:
+            out = decompress(data)
+        if len(out) > limit:
+            raise ExtractError(f"{where}: a chunk decompresses to more than {limit // 2**20} MB (--max-chunk-mb)")
+        return out
+
+    return run
+
+
+def _cap_ros1_chunks(reader: Any, limit: int, where: Path) -> None:
+    """rosbags decompresses a ROS 1 chunk whole; give each chunk a decompressor that stops past the limit."""
+    for sub in getattr(reader, "readers", []):
+        chunks = getattr(sub, "chunks", None)
+        if not isinstance(chunks, dict):
+            continue
+        for pos, chunk in list(chunks.items()):
+            if hasattr(chunk, "decompressor"):
+                chunks[pos] = chunk._replace(decompressor=_bounded(chunk.decompressor, limit, where))
+
+
+def _open(bag: Path, ros1: bool, options: ExtractOptions) -> Any:
+    from rosbags.highlevel import AnyReader
+
+    if not ros1:
+        from extractors.mcap import check_mcap
+
+        for f in sorted(bag.glob("*.mcap")):
+            check_mcap(f, options.max_chunk_bytes)
+    reader = AnyReader([bag], default_typestore=typestore(ros1))
+    reader.open()
+    if ros1:
+        _cap_ros1_chunks(reader, options.max_chunk_bytes, bag)
+    return reader
+
+
+def _messages(reader: Any, bag: Path, topics: list[str]) -> Iterator[tuple[str, int, Any]]:
+    conns = [c for c in reader.connections if c.topic in topics]
+    if not conns:
+        return
+    try:
+        for conn, t, raw in reader.messages(connections=conns):
+            yield conn.msgtype, int(t), reader.deserialize(raw, conn.msgtype)
+    except ExtractError:
+        raise
+    except Exception as exc:
+        raise ExtractError(f"{bag}: cannot read its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
+
+
+def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+    for bag, ros1 in bag_paths(require_path(input_path, "bag")):
+        try:
+            reader = _open(bag, ros1, options)
+        except ExtractError:
+            raise
+        except Exception as exc:  # rosbags reports corrupt bags with its own error classes and others
+            raise ExtractError(f"{bag} is not a readable bag ({type(exc).__name__}: {str(exc)[:100]})") from None
+        try:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            wanted = choose_annotation_topics(topics, options, str(bag))
+            pose_topics = choose_pose_topics(topics, options, str(bag))
+            poses = PoseTrack(p for schema, t, msg in _messages(reader, bag, pose_topics)
+                              for p in pose_samples(msg, schema, options, t))
+            yield from message_frames("rosbag", bag.stem, _messages(reader, bag, wanted), poses, options, str(bag))
+        finally:
+            reader.close()

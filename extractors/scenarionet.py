@@ -1,0 +1,131 @@
+"""ScenarioNet scenario descriptions (.pkl, one scenario each) as frames.
+
+Input: a ScenarioNet database directory (dataset_summary.pkl + dataset_mapping.pkl, as ScenarioNet writes
+them), any directory of scenario .pkl files, or one .pkl file. Every pickle goes through the restricted
+unpickler. Ego = the track named by metadata.sdc_id. nuScenes-derived scenarios are 10 Hz interpolations of
+the 2 Hz keyframes: step 5k holds nuScenes sample k unchanged, so one frame per keyframe, frame_id
+`<scene>/<k>`. Other datasets (Waymo, nuPlan, Lyft, Argoverse) give a frame per step. `--every K` keeps every
+K-th of those frames.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from extractors.base import Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, require_path
+from extractors.safe_pickle import load_pickle
+
+DESCRIPTION = "ScenarioNet database directory or .pkl scenario files (nuScenes, Waymo, nuPlan, Lyft, Argoverse)"
+SUMMARY, MAPPING = "dataset_summary.pkl", "dataset_mapping.pkl"
+NUSCENES_KEYFRAME_STEP = 5
+
+
+def scenario_files(path: Path) -> list[Path]:
+    """The scenario pickles of a database (in its summary's order) or directory (sorted), or the file itself."""
+    if path.is_file():
+        return [path]
+    if (path / SUMMARY).is_file():
+        summary = load_pickle(path / SUMMARY)
+        mapping = load_pickle(path / MAPPING) if (path / MAPPING).is_file() else {}
+        if not isinstance(summary, dict) or not isinstance(mapping, dict):
+            raise ExtractError(f"{path}: {SUMMARY} / {MAPPING} are not ScenarioNet summaries (dicts)")
+        files = []
+        for name in summary:
+            rel = mapping.get(name, "")
+            if not isinstance(name, str) or not isinstance(rel, str) or os.path.isabs(rel) or ".." in Path(rel).parts:
+                raise ExtractError(f"{path}: {MAPPING} names a file outside the database: {rel!r}/{name!r}")
+            files.append(path / rel / name)
+        missing = [f for f in files if not f.is_file()]
+        if missing:
+            raise ExtractError(f"{path}: the summary lists {missing[0].name}, which is not in the database")
+        return files
+    found = sorted(p for p in path.rglob("*.pkl") if p.name not in (SUMMARY, MAPPING))
+    if not found:
+        raise ExtractError(f"{path} holds no ScenarioNet .pkl files")
+    return found
+
+
+def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+    for f in scenario_files(require_path(input_path, "ScenarioNet input")):
+        yield from scenario_frames(f, load_pickle(f), options)
+
+
+def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int | None = None) -> np.ndarray:
+    """A per-step state array, checked for its length (ScenarioNet stores (T,), (T, 1) or (T, k))."""
+    if key not in state:
+        raise ExtractError(f"{path}: track {tid} lacks state.{key}")
+    a = np.asarray(state[key], dtype=float)
+    if width is None:
+        a = a.reshape(-1)
+        if a.size == 1:
+            a = np.repeat(a, steps)
+    if a.shape[0] != steps or (width is not None and (a.ndim != 2 or a.shape[1] < width)):
+        raise ExtractError(f"{path}: track {tid} state.{key} has shape {a.shape}, not {steps} steps")
+    return a
+
+
+def scenario_frames(path: Path, sd: Any, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+    try:
+        meta, tracks, steps = sd["metadata"], sd["tracks"], int(sd["length"])
+        sdc = meta["sdc_id"]
+        dataset = str(meta.get("dataset", "")).lower()
+        scene = str(meta.get("scenario_id") or meta.get("id") or sd.get("id") or path.stem)
+        ts = meta.get("ts")
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {exc})") from None
+    if not isinstance(tracks, dict) or sdc not in tracks:
+        raise ExtractError(f"{path}: the ego track (metadata.sdc_id = {sdc!r}) is not among the tracks")
+    if steps < 1 or steps > 10**6:
+        raise ExtractError(f"{path}: implausible scenario length {steps}")
+
+    nuscenes = dataset == "nuscenes"
+    builder = FrameBuilder("scenarionet", "nuscenes" if nuscenes else "scenarionet", options)
+    ids, cats, pos, yaw, valid, length, width = [], [], [], [], [], [], []
+    for tid, tr in tracks.items():
+        try:
+            state, tmeta = tr["state"], tr.get("metadata") or {}
+            # nuScenes tracks keep the fine nuScenes category in metadata.type; others have the coarse type.
+            cat = str(tmeta.get("type") if nuscenes and tmeta.get("type") else tr.get("type", "UNSET"))
+        except (TypeError, AttributeError, KeyError):
+            raise ExtractError(f"{path}: track {tid!r} is not a ScenarioNet track") from None
+        ids.append(str(tid))
+        cats.append(cat)
+        pos.append(_series(state, "position", steps, path, tid, width=2)[:, :2])
+        yaw.append(_series(state, "heading", steps, path, tid))
+        valid.append(_series(state, "valid", steps, path, tid) > 0)
+        length.append(_series(state, "length", steps, path, tid) if "length" in state else np.full(steps, np.nan))
+        width.append(_series(state, "width", steps, path, tid) if "width" in state else np.full(steps, np.nan))
+    pos, yaw, valid = np.stack(pos), np.stack(yaw), np.stack(valid)
+    length, width = np.stack(length), np.stack(width)
+    ego_i = ids.index(str(sdc))
+
+    stride = NUSCENES_KEYFRAME_STEP if nuscenes else 1
+    for step in range(0, steps, stride):
+        index = step // stride
+        if index % options.every or not valid[ego_i, step]:
+            continue
+        ex, ey = pos[ego_i, step]
+        ego_yaw = float(yaw[ego_i, step])
+        others = [i for i in np.flatnonzero(valid[:, step]) if i != ego_i]
+        x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
+                                yaw[others, step])
+        boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step])
+                 for k, i in enumerate(others)]
+        # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
+        # than it is long, so the ego's box is read with its sides in order.
+        ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)
+        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w)
+        yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
+
+
+def _timestamp_us(ts: Any, step: int) -> int | None:
+    """metadata.ts is seconds from the scenario start; absent or odd values leave the timestamp empty."""
+    try:
+        t = float(ts[step])
+    except (TypeError, ValueError, IndexError, KeyError):
+        return None
+    return round(t * 1e6) if np.isfinite(t) else None

@@ -1,0 +1,71 @@
+"""`r2s extract SOURCE INPUT --out frames.parquet`: recorded data in, the one frames schema out."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from extractors.registry import SOURCES
+
+
+def _topics(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("source", choices=tuple(SOURCES), help="what INPUT is")
+    p.add_argument("input", help="dataroot (nuscenes), database dir or .pkl (scenarionet), log dir (argoverse2), "
+                                 ".mcap file or dir (mcap), .bag file or ROS 2 bag dir (rosbag)")
+    p.add_argument("--out", required=True, metavar="F", help="frames Parquet file to write (atomically)")
+    p.add_argument("--radius", type=float, default=50.0, metavar="M", help="keep objects within M metres of ego (50)")
+    p.add_argument("--categories", default="vehicles", metavar="C",
+                   help="vehicles (default), all, or a comma list of Scenic classes / raw categories "
+                        "(Car,Pedestrian or human.pedestrian,vehicle.car)")
+    p.add_argument("--every", type=int, default=1, metavar="K", help="keep every K-th frame (1)")
+    p.add_argument("--max-entities", type=int, default=1000, metavar="N",
+                   help="refuse a frame with more than N entities (1000)")
+    g = p.add_argument_group("nuscenes")
+    g.add_argument("--version", default="v1.0-mini", help="nuScenes version folder (v1.0-mini, v1.0-trainval, ...)")
+    g.add_argument("--scenes", type=_topics, default=(), metavar="S,...", help="only these scene names")
+    g.add_argument("--min-visibility", type=int, default=0, metavar="V",
+                   help="keep annotations with visibility level >= V (1-4; 0 keeps all)")
+    g.add_argument("--min-lidar-pts", type=int, default=0, metavar="N", help="keep annotations with >= N lidar points")
+    g = p.add_argument_group("mcap / rosbag")
+    g.add_argument("--topics", type=_topics, default=(), metavar="T,...",
+                   help="annotation topics (default: every SceneUpdate / Detection3DArray / MarkerArray topic)")
+    g.add_argument("--pose-topic", metavar="T", help="ego pose topic (PoseStamped, Odometry, PoseInFrame); default /tf")
+    g.add_argument("--fixed-frame", default="map", metavar="F", help="global frame of the ego pose (map)")
+    g.add_argument("--ego-frame", default="base_link", metavar="F", help="the vehicle's frame (base_link)")
+    g.add_argument("--max-chunk-mb", type=float, default=256, metavar="MB",
+                   help="refuse compressed chunks that claim to decompress to more than this (256)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from extractors.base import ExtractOptions
+    from extractors.categories import CategorySelection
+    from extractors.registry import source_module
+    from extractors.writer import frames_writer
+    from pipeline.errors import UserError
+
+    try:
+        options = ExtractOptions(
+            radius=args.radius, categories=CategorySelection.parse(args.categories), every=args.every,
+            max_entities=args.max_entities, version=args.version, scenes=args.scenes,
+            min_visibility=args.min_visibility, min_lidar_pts=args.min_lidar_pts, topics=args.topics,
+            pose_topic=args.pose_topic, fixed_frame=args.fixed_frame, ego_frame=args.ego_frame,
+            max_chunk_bytes=int(args.max_chunk_mb * 2**20),
+        )
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    module = source_module(args.source)
+    with frames_writer(args.out) as out:
+        bar = tqdm(module.extract(args.input, options), desc=f"extract {args.source}", unit=" frames",
+                   file=sys.stderr, disable=None, leave=False)
+        for rows in bar:
+            out.write_frame(rows)
+        if out.frames == 0:
+            raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
+    sys.stderr.write(f"r2s extract: {out.frames} frames, {out.rows} rows -> {args.out}\n")
+    return 0
