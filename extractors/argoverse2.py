@@ -10,14 +10,22 @@ gives the ego's box.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from extractors.base import (Box, ExtractError, ExtractOptions, FrameBuilder, quaternion_yaw, require_path,
-                             vehicle_to_ego)
+from extractors.base import (
+    Box,
+    ExtractError,
+    ExtractOptions,
+    FrameBuilder,
+    quaternion_yaw,
+    require_path,
+    vehicle_to_ego,
+)
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
 NAMES = ("annotations.feather", "annotations_with_ego.feather")

@@ -19,8 +19,8 @@ are one box); bollards and construction barrels are Barriers; signs and unspecif
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 from synth.scene import ENTITY_TYPES
 
@@ -154,7 +154,7 @@ class CategorySelection:
     raw: tuple[str, ...] = ()
 
     @staticmethod
-    def parse(text: str) -> "CategorySelection":
+    def parse(text: str) -> CategorySelection:
         text = (text or "").strip()
         if text.lower() in ("vehicles", "all"):
             return CategorySelection(text.lower())

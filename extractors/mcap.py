@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from extractors.base import ExtractError, ExtractOptions, files_with_suffix, require_path
 from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples

@@ -17,11 +17,19 @@ ego pose      tf2_msgs/TFMessage and foxglove.FrameTransform(s): the fixed frame
 from __future__ import annotations
 
 import bisect
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any, Iterable, Iterator
+from typing import Any
 
-from extractors.base import (Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, quaternion_yaw,
-                             vehicle_to_ego)
+from extractors.base import (
+    Box,
+    ExtractError,
+    ExtractOptions,
+    FrameBuilder,
+    global_to_ego,
+    quaternion_yaw,
+    vehicle_to_ego,
+)
 
 SCENE_UPDATE = ("foxglove.SceneUpdate", "foxglove_msgs/msg/SceneUpdate", "foxglove_msgs/SceneUpdate")
 DETECTIONS = ("vision_msgs/msg/Detection3DArray", "vision_msgs/Detection3DArray")

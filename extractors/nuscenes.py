@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from extractors.base import Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, quaternion_yaw, require_path
 

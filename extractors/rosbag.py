@@ -10,8 +10,9 @@ decompressed with a cap of --max-chunk-mb.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from extractors.base import ExtractError, ExtractOptions, require_path
 from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples

@@ -4,8 +4,9 @@ renamed over the target only when the whole extraction succeeded (a failure leav
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any
 
 import pyarrow.parquet as pq
 

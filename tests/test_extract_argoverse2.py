@@ -11,8 +11,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.ipc as ipc
 import pytest
-
 from _extract_util import assert_refused, frames_of, r2s
+
 from extractors.argoverse2 import extract
 from extractors.categories import ALL, CategorySelection
 

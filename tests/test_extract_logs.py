@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import struct
 
+import _log_fixtures as fx
 import numpy as np
 import pandas as pd
 import pytest
-
-import _log_fixtures as fx
 from _extract_util import EXCERPT, assert_refused, frames_of, r2s
+
 from extractors.base import ExtractError, ExtractOptions
 from extractors.categories import ALL
 from extractors.mcap import extract as extract_mcap

@@ -8,9 +8,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-
 from _extract_util import EXCERPT, assert_refused, r2s
 from _extract_util import frames_of as _frames
+
 from extractors.base import ExtractOptions
 from extractors.categories import ALL
 from extractors.nuscenes import extract as extract_nuscenes

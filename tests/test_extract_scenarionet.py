@@ -12,6 +12,7 @@ import math
 import pandas as pd
 from _extract_util import EXCERPT, assert_refused, r2s
 from conftest import run_r2s
+
 from extractors.base import ExtractOptions
 from extractors.categories import ALL, CategorySelection
 from extractors.frames import read_frames

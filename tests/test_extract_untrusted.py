@@ -9,10 +9,10 @@ import shutil
 
 import numpy as np
 import pytest
+from _extract_util import EXCERPT, assert_refused, r2s
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from _extract_util import EXCERPT, assert_refused, r2s
 from extractors.frames import FramesError, read_frames
 from extractors.safe_pickle import load_pickle
 
