@@ -18,6 +18,11 @@ VERBS: dict[str, tuple[str, str]] = {
     "check": ("pipeline.cmd_check", "does a DSL program contain a scene? (the semantics checker)"),
     "extract": ("pipeline.cmd_extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
     "scene": ("pipeline.cmd_scene", "print one frame of a frames.parquet as scene JSON"),
+    "run": ("pipeline.cmd_run", "one program per frame of a frames.parquet, in parallel, with limits and resume"),
+    "report": ("pipeline.cmd_report", "report.md / report.html with plots from a programs.parquet"),
+    "render": ("pipeline.cmd_render", "bird's-eye view of a scene, its program's references and sampled variants"),
+    "sample": ("pipeline.cmd_sample", "sample scenes from a generated Scenic program with the Scenic compiler"),
+    "eval-frontend": ("pipeline.cmd_eval_frontend", "detection metrics of predicted frames against ground truth"),
 }
 
 

@@ -10,9 +10,10 @@ class UserError(Exception):
 def user_error_types() -> tuple[type[BaseException], ...]:
     """Every exception class that means 'bad input' rather than 'bug' (all carry one-line messages)."""
     from extractors.frames import FramesError
+    from pipeline.programs import ProgramsError
     from synth.config import ConfigError
     from synth.dsl import DslError
     from synth.scene import SceneError
     from synth.smt import SolverUnavailable
 
-    return (UserError, SceneError, DslError, ConfigError, SolverUnavailable, FramesError)
+    return (UserError, SceneError, DslError, ConfigError, SolverUnavailable, FramesError, ProgramsError)

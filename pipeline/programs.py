@@ -1,0 +1,99 @@
+"""The programs schema (ARCHITECTURE.md, programs.parquet): one row per frame, written by `r2s run`, read by
+`r2s report`, the benchmarks and users' pandas. Keep it stable: other tools read these columns."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import pyarrow as pa
+
+PROGRAMS_SCHEMA = pa.schema(
+    [
+        ("frame_id", pa.string()),
+        ("status", pa.string()),  # optimal | feasible | timeout | memout | error
+        ("cost", pa.int32()),  # null when status is error (or memout before any program)
+        ("lower_bound", pa.int32()),
+        ("n_entities", pa.int32()),
+        ("program", pa.string()),  # DSL text
+        ("scenic", pa.string()),  # Scenic 3 text
+        ("certified", pa.bool_()),
+        ("strategy", pa.string()),
+        ("oracle", pa.string()),
+        ("solver", pa.string()),
+        ("runtime_s", pa.float64()),
+        ("search_s", pa.float64()),
+        ("smt_s", pa.float64()),
+        ("smt_queries", pa.int64()),
+        ("nodes_expanded", pa.int64()),
+        ("peak_rss_mb", pa.float64()),
+        ("error", pa.string()),
+        ("config_hash", pa.string()),
+        ("version", pa.string()),
+    ]
+)
+PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
+STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
+
+
+class ProgramsError(ValueError):
+    """A programs file that is not what the schema says. One line, fit for a user."""
+
+
+def result_row(result: Any, config_hash: str) -> dict[str, Any]:
+    """A programs row from a synth.synthesize.SynthResult."""
+    from synth import __version__
+
+    s, c = result.stats, result.config
+    return {
+        "frame_id": result.frame_id, "status": result.status, "cost": result.cost,
+        "lower_bound": result.lower_bound, "n_entities": result.n_entities, "program": str(result.program),
+        "scenic": result.scenic, "certified": result.certified, "strategy": c.strategy, "oracle": c.oracle,
+        "solver": c.solver, "runtime_s": s.runtime_s, "search_s": s.search_s, "smt_s": s.smt_s,
+        "smt_queries": s.smt_queries, "nodes_expanded": s.nodes_expanded, "peak_rss_mb": s.peak_rss_mb,
+        "error": None, "config_hash": config_hash, "version": __version__,
+    }
+
+
+def failure_row(frame_id: str, status: str, message: str, n_entities: int, config: Any, config_hash: str,
+                runtime_s: float = 0.0, peak_rss_mb: float = 0.0) -> dict[str, Any]:
+    """A row for a frame that produced no program (error, or a worker killed at its memory limit)."""
+    from synth import __version__
+
+    if status not in STATUSES:
+        raise ValueError(f"unknown status {status!r}")
+    return {
+        "frame_id": frame_id, "status": status, "cost": None, "lower_bound": None, "n_entities": n_entities,
+        "program": None, "scenic": None, "certified": False, "strategy": config.strategy, "oracle": config.oracle,
+        "solver": config.solver, "runtime_s": runtime_s, "search_s": None, "smt_s": None, "smt_queries": None,
+        "nodes_expanded": None, "peak_rss_mb": peak_rss_mb, "error": message, "config_hash": config_hash,
+        "version": __version__,
+    }
+
+
+def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
+    return pa.Table.from_pylist([{c: r.get(c) for c in PROGRAMS_COLUMNS} for r in rows], schema=PROGRAMS_SCHEMA)
+
+
+def read_programs(path: str | os.PathLike):
+    """Read and validate a programs file as a DataFrame; any problem is a ProgramsError naming the file."""
+    import pyarrow.parquet as pq
+
+    if not os.path.exists(path):
+        raise ProgramsError(f"{path} does not exist")
+    if os.path.isdir(path):
+        raise ProgramsError(f"{path} is a directory, not a programs Parquet file")
+    try:
+        pf = pq.ParquetFile(path)
+        missing = [c for c in PROGRAMS_COLUMNS if c not in pf.schema_arrow.names]
+        if missing:
+            raise ProgramsError(f"{path} is not a programs file: it lacks column(s) {', '.join(missing)}")
+        df = pf.read(columns=list(PROGRAMS_COLUMNS)).to_pandas()
+    except ProgramsError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise ProgramsError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    bad = sorted(set(df["status"].astype(str)) - set(STATUSES))
+    if bad:
+        raise ProgramsError(f"{path}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
+    return df
