@@ -149,3 +149,17 @@ def test_unknown_frame_id_suggests_close_ones(tmp_path, capsys):
     assert res.returncode == 2 and "did you mean" in res.stderr and "scene-0103/" in res.stderr
     ok = r2s(capsys, "scene", str(out), "scene-0103/3")
     assert ok.returncode == 0 and '"frame_id": "scene-0103/3"' in ok.stdout
+
+
+def test_outputs_get_the_permissions_of_a_plain_file(tmp_path):
+    import os
+
+    from extractors.atomic import write_text_atomic
+
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "out.txt", "x")
+        (tmp_path / "plain.txt").write_text("x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "out.txt").stat().st_mode & 0o777 == (tmp_path / "plain.txt").stat().st_mode & 0o777 == 0o644
