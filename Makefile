@@ -4,6 +4,17 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 R2S    := $(VENV)/bin/r2s
 STAMP  := $(VENV)/.installed
+JOBS   ?= 2
+
+# make corpus SOURCE=scenarionet INPUT=/data/nuscenes/scenarionet OUT=out/nuscenes [CATEGORIES=all] [TIME_LIMIT=60]
+SOURCE     ?=
+INPUT      ?=
+OUT        ?= out/corpus
+CATEGORIES ?= all
+TIME_LIMIT ?= 60
+MEMORY_LIMIT ?= 4096
+
+DEMO := demo-out
 
 .PHONY: setup demo test bench corpus clean lint
 
@@ -17,11 +28,43 @@ $(STAMP): requirements.lock pyproject.toml
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps -e .
 	touch $(STAMP)
 
+# The whole pipeline on data shipped in the repo: extract (a ScenarioNet excerpt) -> run -> report on the 242
+# shipped nuScenes-mini keyframes, then one scene end to end: program, Scenic, sampled variants, picture.
+DEMO_FRAMES := data/nuscenes-mini-keyframes/frames.parquet
+DEMO_FRAME  := scene-0103/0
+
+demo: setup
+	@mkdir -p $(DEMO)
+	$(R2S) extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out $(DEMO)/excerpt-frames.parquet
+	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs.parquet --jobs $(JOBS)
+	$(R2S) report $(DEMO)/programs.parquet --out $(DEMO)/report
+	$(R2S) scene $(DEMO_FRAMES) $(DEMO_FRAME) --out $(DEMO)/scene.json
+	$(R2S) synth $(DEMO)/scene.json --out $(DEMO)/scene.dsl
+	$(R2S) synth $(DEMO)/scene.json --format scenic --out $(DEMO)/scene.scenic
+	$(R2S) sample $(DEMO)/scene.scenic --n 5 --seed 0 --out $(DEMO)/samples
+	$(R2S) render $(DEMO)/scene.json --program $(DEMO)/scene.dsl --samples 5 --seed 0 --out $(DEMO)/scene.png
+	@echo
+	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
+	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
+
 test: setup
 	$(PY) -m pytest
+
+# Benchmarks (not tests): results in bench/results/*.json and *.md. Needs ../shared/data for the real-data parts.
+bench: setup
+	$(PY) bench/run_all.py
+
+# A whole dataset: frames, programs (resumable: rerun the same command after a stop) and a report.
+corpus: setup
+	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB]"; exit 2; }
+	@mkdir -p $(OUT)
+	test -f $(OUT)/frames.parquet || $(R2S) extract $(SOURCE) $(INPUT) --categories $(CATEGORIES) --out $(OUT)/frames.parquet
+	$(R2S) run $(OUT)/frames.parquet --out $(OUT)/programs.parquet --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT)
+	$(R2S) report $(OUT)/programs.parquet --out $(OUT)/report
+	@echo "corpus done: $(OUT)/programs.parquet, report at $(OUT)/report/report.html"
 
 lint: setup
 	$(VENV)/bin/ruff check synth extractors pipeline bench tests
 
 clean:
-	rm -rf demo-out .pytest_cache .hypothesis
+	rm -rf $(DEMO) .pytest_cache .hypothesis
