@@ -1,0 +1,338 @@
+"""report.md and report.html from a programs DataFrame: one document model, two renderers.
+
+The statistics come from pipeline.report_stats and the pictures from pipeline.report_plots; this module only
+arranges them into sections and tables, then prints that one document as Markdown and as self-contained HTML
+(inline CSS, plots embedded as base64), so the two files can never disagree.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.programs import STATUSES
+from pipeline.report_plots import Plot, all_plots
+from pipeline.report_stats import (
+    ABSOLUTE_COST_PER_ENTITY,
+    RELATION_KINDS,
+    FailureGroup,
+    GroupStats,
+    Prepared,
+    RelationUsage,
+    SideBySide,
+    by_bucket,
+    by_config,
+    failures,
+    prepare,
+    relation_usage,
+    side_by_side,
+)
+
+MD_NAME, HTML_NAME = "report.md", "report.html"
+SIDE_BY_SIDE_TITLE = "Strategies side by side (Table 3 layout)"
+# Table-3 cells for frames that produced no time worth comparing, in the paper's words where it has them.
+STOPPED = {"timeout": "TO", "memout": "OOM", "error": "ERR"}
+MISSING = "—"
+
+
+# ------------------------------------------------------------------------------------------------ model
+
+@dataclass(frozen=True)
+class Table:
+    headers: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    align: str  # one letter a column: l (text) or r (numbers)
+    groups: tuple[tuple[str, int], ...] = ()  # optional header row above: (label, columns spanned)
+    marks: tuple[tuple[int, int, str], ...] = ()  # (row, column, "best" | "stopped")
+
+
+@dataclass(frozen=True)
+class Section:
+    title: str
+    blocks: tuple[str | Table | Plot, ...]  # a str is one plain-text paragraph
+
+
+@dataclass(frozen=True)
+class Document:
+    title: str
+    intro: tuple[str, ...]
+    sections: tuple[Section, ...]
+
+
+# ------------------------------------------------------------------------------------------------ numbers
+
+def fmt_seconds(v: float | None) -> str:
+    if v is None or pd.isna(v):
+        return MISSING
+    return f"{v:.3f}" if v < 10 else (f"{v:.1f}" if v < 1000 else f"{v:.0f}")
+
+
+def fmt_float(v: float | None, digits: int = 2) -> str:
+    return MISSING if v is None or pd.isna(v) else f"{v:.{digits}f}"
+
+
+def fmt_pct(v: float | None) -> str:
+    return MISSING if v is None or pd.isna(v) else f"{v:.1f}%"
+
+
+# ------------------------------------------------------------------------------------------------ sections
+
+STAT_HEADERS = (
+    "Frames", *STATUSES, "Optimal %", "Mean cost", "Cost / entity", "Runtime median (s)", "p95 (s)", "max (s)",
+    "Peak RSS (MB)", "SMT queries",
+)
+
+
+def _stat_cells(s: GroupStats) -> tuple[str, ...]:
+    return (
+        str(s.frames), *(str(s.count(st)) for st in STATUSES), fmt_pct(s.optimal_pct), fmt_float(s.mean_cost),
+        fmt_float(s.cost_per_entity),
+        fmt_seconds(s.runtime_median), fmt_seconds(s.runtime_p95), fmt_seconds(s.runtime_max),
+        fmt_float(s.peak_rss_mb, 1), str(s.smt_queries),
+    )
+
+
+def config_section(stats: list[GroupStats]) -> Section:
+    table = Table(("Strategy", *STAT_HEADERS), tuple((s.config, *_stat_cells(s)) for s in stats),
+                  "l" + "r" * len(STAT_HEADERS))
+    return Section("By strategy", (
+        "One line per strategy over all its frames. Mean cost and cost per entity (mean of cost / N) count frames "
+        f"with a program; the absolute-coordinate program costs {ABSOLUTE_COST_PER_ENTITY} per entity. Runtimes "
+        "count frames that ran (errors excluded); peak RSS is the largest in the group.",
+        table,
+    ))
+
+
+def bucket_section(stats: list[GroupStats]) -> Section:
+    table = Table(("N", "Strategy", *STAT_HEADERS), tuple((s.bucket, s.config, *_stat_cells(s)) for s in stats),
+                  "ll" + "r" * len(STAT_HEADERS))
+    return Section("By entity count", ("N is the number of entities in the frame, ego excluded.", table))
+
+
+def side_by_side_section(t: SideBySide) -> Section:
+    configs = tuple(t.status.columns)
+    rows, marks = [], []
+    for r, (frame_id, n) in enumerate(t.frames[["frame_id", "n_entities"]].itertuples(index=False)):
+        cells, times = [str(frame_id), str(n)], {}
+        for config in configs:
+            status, secs, mem = t.status.at[frame_id, config], t.runtime_s.at[frame_id, config], \
+                t.peak_rss_mb.at[frame_id, config]
+            col = len(cells)
+            if pd.isna(status):
+                cells += [MISSING, MISSING]
+                continue
+            if status in STOPPED:
+                cells.append(STOPPED[status])
+                marks.append((r, col, "stopped"))
+            else:
+                cells.append(fmt_seconds(secs))
+                times[col] = secs
+            if status == "memout":
+                cells.append("OOM")
+                marks.append((r, col + 1, "stopped"))
+            else:  # failure rows record 0 MB when nothing was measured
+                cells.append(fmt_float(mem, 1) if mem and mem > 0 else MISSING)
+        if len(times) > 1:  # bold the fastest, as the paper does, when there is a race to win
+            best = min(times.values())
+            marks += [(r, c, "best") for c, v in times.items() if v == best]
+        rows.append(tuple(cells))
+    table = Table(("Frame", "N", *(h for _ in configs for h in ("Time (s)", "Mem (MB)"))), tuple(rows),
+                  "lr" + "rr" * len(configs), groups=(("", 2), *((c, 2) for c in configs)), marks=tuple(marks))
+    shown = (f"{len(rows)} of {t.total_frames} frames, spread evenly over N."
+             if len(rows) < t.total_frames else f"All {t.total_frames} frames.")
+    return Section(SIDE_BY_SIDE_TITLE, (
+        f"Rows are frames in ascending N, columns are strategies, as in the paper's Table 3. {shown} "
+        f"TO = stopped at the time limit, OOM = stopped at the memory limit, ERR = error, {MISSING} = not run; "
+        "the fastest time in a row is in bold. Mem is the worker's peak resident memory.",
+        table,
+    ))
+
+
+def relation_section(usage: RelationUsage, configs: tuple[str, ...], plot: Plot) -> Section:
+    rows = tuple((kind, *(str(int(usage.counts.loc[kind, c])) for c in configs),
+                  str(int(usage.counts.loc[kind].sum()))) for kind in RELATION_KINDS)
+    blocks: list[str | Table | Plot] = [
+        "Counts of each relation in the programs, parsed with the DSL's own parser. "
+        "ahead / behind / left / right and toward / away are the cost-0 relations; relative position and "
+        "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2.",
+        Table(("Relation", *configs, "Total"), rows, "l" + "r" * (len(configs) + 1)),
+        plot,
+    ]
+    if usage.unparsable:
+        blocks.append(f"{len(usage.unparsable)} program(s) are not in the DSL and are not counted, e.g. "
+                      + "; ".join(f"{c} {f}: {m}" for c, f, m in usage.unparsable[:3]) + ".")
+    return Section("Relation usage", tuple(blocks))
+
+
+def failure_section(groups: list[FailureGroup], limit: int = 20) -> Section:
+    if not groups:
+        return Section("Failures", ("No frame failed.",))
+    rows = tuple((g.config, g.status, str(g.frames), g.message, ", ".join(g.examples)) for g in groups[:limit])
+    blocks: list[str | Table | Plot] = [
+        "Frames that carry an error message, grouped by strategy, status and message (first line).",
+        Table(("Strategy", "Status", "Frames", "Message", "Examples"), rows, "llrll"),
+    ]
+    if len(groups) > limit:
+        blocks.append(f"… and {len(groups) - limit} more group(s).")
+    return Section("Failures", tuple(blocks))
+
+
+def build_document(p: Prepared, source: str, plots: list[Plot], config_stats: list[GroupStats],
+                   bucket_stats: list[GroupStats], usage: RelationUsage, side: SideBySide | None,
+                   failure_groups: list[FailureGroup]) -> Document:
+    f = p.frame
+    intro = [
+        f"Programs file: {source}. {len(f)} row(s): {f['frame_id'].nunique()} distinct frame(s) under "
+        f"{len(p.configs)} strategy configuration(s) ({', '.join(p.configs)}).",
+        f"Oracles: {', '.join(sorted(f['oracle'].dropna().unique())) or MISSING}; solvers: "
+        f"{', '.join(sorted(f['solver'].dropna().unique())) or MISSING}; r2sgen version(s): "
+        f"{', '.join(sorted(f['version'].dropna().unique())) or MISSING}.",
+    ]
+    if p.duplicates_dropped:
+        intro.append(f"{p.duplicates_dropped} repeated (frame, strategy) row(s) were dropped; the last one counts.")
+    sections = [config_section(config_stats), bucket_section(bucket_stats)]
+    if side is not None:
+        sections.append(side_by_side_section(side))
+    *general, relations = plots
+    sections.append(Section("Plots", tuple(general)))
+    sections.append(relation_section(usage, p.configs, relations))
+    sections.append(failure_section(failure_groups))
+    return Document("r2s report", tuple(intro), tuple(sections))
+
+
+# ------------------------------------------------------------------------------------------------ markdown
+
+def _md_cell(text: str, mark: str | None) -> str:
+    text = text.replace("|", "\\|").replace("\n", " ")
+    return f"**{text}**" if mark == "best" and text else text
+
+
+def _md_table(t: Table) -> str:
+    headers = list(t.headers)
+    if t.groups:  # Markdown has no spanning headers: carry the group's name into each of its columns
+        names = [g for g, span in t.groups for _ in range(span)]
+        headers = [f"{g}: {h}" if g else h for g, h in zip(names, headers)]
+    marks = {(r, c): m for r, c, m in t.marks}
+    lines = ["| " + " | ".join(_md_cell(h, None) for h in headers) + " |",
+             "|" + "|".join(":---" if a == "l" else "---:" for a in t.align) + "|"]
+    lines += ["| " + " | ".join(_md_cell(v, marks.get((r, c))) for c, v in enumerate(row)) + " |"
+              for r, row in enumerate(t.rows)]
+    return "\n".join(lines)
+
+
+def render_markdown(doc: Document) -> str:
+    out = [f"# {doc.title}", *doc.intro]
+    for s in doc.sections:
+        out.append(f"## {s.title}")
+        for b in s.blocks:
+            if isinstance(b, Table):
+                out.append(_md_table(b))
+            elif isinstance(b, Plot):
+                out.append(f"![{b.title}]({b.filename})\n\n*{b.caption}*")
+            else:
+                out.append(b)
+    return "\n\n".join(out) + "\n"
+
+
+# ------------------------------------------------------------------------------------------------ html
+
+CSS = """
+:root { --ink: #1d2733; --muted: #5b6675; --rule: #d9dee5; --band: #f4f6f9; --accent: #0072B2; }
+* { box-sizing: border-box; }
+body { margin: 0; font: 15px/1.5 system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
+       color: var(--ink); background: #fff; }
+main { max-width: 1180px; margin: 0 auto; padding: 28px 28px 64px; }
+h1 { font-size: 28px; margin: 0 0 8px; }
+h2 { font-size: 20px; margin: 40px 0 10px; padding-bottom: 4px; border-bottom: 2px solid var(--accent); }
+p { margin: 8px 0; }
+p.intro { color: var(--muted); }
+nav { margin: 14px 0 8px; display: flex; flex-wrap: wrap; gap: 6px; }
+nav a { font-size: 13px; padding: 3px 10px; border: 1px solid var(--rule); border-radius: 14px;
+        color: var(--accent); text-decoration: none; }
+nav a:hover { background: var(--band); }
+.scroll { overflow-x: auto; margin: 10px 0 16px; border: 1px solid var(--rule); border-radius: 6px; }
+table { border-collapse: collapse; font-size: 13px; width: 100%; }
+th, td { padding: 5px 10px; border-bottom: 1px solid var(--rule); white-space: nowrap; }
+th { background: var(--band); font-weight: 600; text-align: left; position: sticky; top: 0; }
+th.group { text-align: center; border-left: 1px solid var(--rule); }
+td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; }
+td.wrap { white-space: normal; min-width: 260px; }
+tbody tr:nth-child(even) { background: #fafbfc; }
+tbody tr:hover { background: #eef4fa; }
+td.best { font-weight: 700; }
+td.stopped { font-weight: 600; color: #8a3b00; background: #fbefe6; }
+figure { margin: 18px 0 26px; }
+figure img { max-width: 100%; height: auto; border: 1px solid var(--rule); border-radius: 6px; }
+figcaption { color: var(--muted); font-size: 13px; margin-top: 4px; }
+"""
+
+
+def _anchor(title: str) -> str:
+    return "".join(ch if ch.isalnum() else "-" for ch in title.lower()).strip("-")
+
+
+def _html_table(t: Table) -> str:
+    marks = {(r, c): m for r, c, m in t.marks}
+    head = ""
+    if t.groups:
+        head = "<tr>" + "".join(f'<th class="group" colspan="{span}">{html.escape(g)}</th>' for g, span in t.groups)
+        head += "</tr>"
+    head += "<tr>" + "".join(f'<th class="num">{html.escape(h)}</th>' if a == "r" else f"<th>{html.escape(h)}</th>"
+                             for a, h in zip(t.align, t.headers)) + "</tr>"
+    body = []
+    for r, row in enumerate(t.rows):
+        cells = []
+        for c, v in enumerate(row):
+            classes = ["num" if t.align[c] == "r" else ("wrap" if len(v) > 60 else "")]
+            classes.append(marks.get((r, c), ""))
+            cls = " ".join(x for x in classes if x)
+            cells.append(f'<td class="{cls}">{html.escape(v)}</td>' if cls else f"<td>{html.escape(v)}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f'<div class="scroll"><table><thead>{head}</thead><tbody>{"".join(body)}</tbody></table></div>'
+
+
+def _html_figure(plot: Plot, images: dict[str, bytes]) -> str:
+    data = base64.b64encode(images[plot.filename]).decode("ascii")
+    return (f'<figure><img src="data:image/png;base64,{data}" alt="{html.escape(plot.title)}">'
+            f"<figcaption><b>{html.escape(plot.title)}.</b> {html.escape(plot.caption)}</figcaption></figure>")
+
+
+def render_html(doc: Document, images: dict[str, bytes]) -> str:
+    """Self-contained: one file with inline CSS and the plots embedded, fit to mail or attach."""
+    parts = [f"<h1>{html.escape(doc.title)}</h1>", *(f'<p class="intro">{html.escape(p)}</p>' for p in doc.intro),
+             "<nav>" + "".join(f'<a href="#{_anchor(s.title)}">{html.escape(s.title)}</a>' for s in doc.sections)
+             + "</nav>"]
+    for s in doc.sections:
+        parts.append(f'<h2 id="{_anchor(s.title)}">{html.escape(s.title)}</h2>')
+        for b in s.blocks:
+            if isinstance(b, Table):
+                parts.append(_html_table(b))
+            elif isinstance(b, Plot):
+                parts.append(_html_figure(b, images))
+            else:
+                parts.append(f"<p>{html.escape(b)}</p>")
+    body = "\n".join(parts)
+    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+            f"<title>{html.escape(doc.title)}</title>\n<style>{CSS}</style>\n</head>\n<body>\n<main>\n{body}\n"
+            f"</main>\n</body>\n</html>\n")
+
+
+# ------------------------------------------------------------------------------------------------ writing
+
+def write_report(df: pd.DataFrame, source: str, out: Path, max_table_rows: int = 40) -> Path:
+    """Write report.md, report.html and the PNGs into the (existing, empty) directory out; returns report.html."""
+    p = prepare(df)
+    config_stats, bucket_stats = by_config(p), by_bucket(p)
+    usage = relation_usage(p)
+    plots = all_plots(p, bucket_stats, usage, out)  # the relation-usage plot last: it goes with its table
+    side = side_by_side(p, max_table_rows) if len(p.configs) > 1 else None
+    doc = build_document(p, source, plots, config_stats, bucket_stats, usage, side, failures(p))
+    (out / MD_NAME).write_text(render_markdown(doc), encoding="utf-8")
+    images = {plot.filename: (out / plot.filename).read_bytes() for plot in plots}
+    (out / HTML_NAME).write_text(render_html(doc, images), encoding="utf-8")
+    return out / HTML_NAME

@@ -1,0 +1,238 @@
+"""The PNG plots of `r2s report`. matplotlib is imported here only, and lazily, so other verbs never pay for it.
+
+Figures are built with matplotlib.figure.Figure (no pyplot: no global figure state between plots) on the Agg
+canvas, coloured with the Okabe-Ito palette (safe for the common colour-vision deficiencies) and told apart by
+marker shape as well, so they also read in greyscale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.report_stats import (
+    ABSOLUTE_COST_PER_ENTITY,
+    HEADING_KINDS,
+    POSITION_KINDS,
+    GroupStats,
+    Prepared,
+    RelationUsage,
+    bucket_order,
+)
+
+# Okabe & Ito (2008), most distinct first.
+PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000")
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+REFERENCE = "#555555"  # the absolute-coordinate baseline and other guides
+DPI = 110
+KIND_COST = {**dict.fromkeys(("ahead", "behind", "left", "right", "toward", "away"), 0),
+             "relative position": 1, "relative heading": 1, "absolute position": 2, "absolute heading": 2}
+# Every file all_plots writes, in report order; `r2s report` may replace a directory holding only these.
+PLOT_FILES = ("runtime_vs_n.png", "cost_vs_n.png", "cost_distribution.png", "cost_vs_absolute.png",
+              "relation_usage.png")
+
+
+@dataclass(frozen=True)
+class Plot:
+    filename: str
+    title: str
+    caption: str
+
+
+def _style(i: int) -> tuple[str, str]:
+    return PALETTE[i % len(PALETTE)], MARKERS[i % len(MARKERS)]
+
+
+def _figure(width: float = 7.5, height: float = 4.6, ncols: int = 1):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, ncols, squeeze=False)[0]
+    for ax in axes:
+        ax.grid(True, color="#dddddd", linewidth=0.7)
+        ax.set_axisbelow(True)
+        for side in ("top", "right"):
+            ax.spines[side].set_visible(False)
+    return fig, axes
+
+
+def _legend(fig) -> None:
+    """One legend for the figure, below the axes, so it never hides a point or a bar."""
+    handles, labels = [], []
+    for ax in fig.axes:
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            if label not in labels:
+                handles.append(h)
+                labels.append(label)
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False, fontsize=9)
+
+
+def _save(fig, path: Path) -> None:
+    # No Software/date metadata: the same programs file gives byte-identical PNGs.
+    fig.savefig(path, format="png", metadata={"Software": None})
+
+
+def _points(ax, x, y, i: int, label: str) -> None:
+    """Hollow markers of distinct shapes: where two configs give the same (N, value) both stay visible."""
+    colour, marker = _style(i)
+    ax.scatter(x, y, s=36, marker=marker, facecolors="none", edgecolors=colour, linewidths=1.3, label=label)
+
+
+def runtime_vs_n(p: Prepared, path: Path) -> Plot:
+    fig, (ax,) = _figure()
+    for i, config in enumerate(p.configs):
+        colour, _ = _style(i)
+        rows = p.frame[(p.frame["config"] == config) & (p.frame["status"] != "error") & p.frame["runtime_s"].notna()]
+        done = rows[rows["status"].isin(("optimal", "feasible"))]
+        stopped = rows[rows["status"].isin(("timeout", "memout"))]
+        # Sub-0.1 ms runtimes would sit at -inf on a log axis; they are clamped to the axis floor instead.
+        if len(done):
+            _points(ax, done["n_entities"], done["runtime_s"].clip(lower=1e-4), i, config)
+        if len(stopped):
+            ax.scatter(stopped["n_entities"], stopped["runtime_s"].clip(lower=1e-4), s=60, color=colour, marker="x",
+                       linewidths=1.8, label=f"{config}: timeout / memout")
+    ax.set_yscale("log")
+    ax.set_xlabel("entities in the frame, N (ego excluded)")
+    ax.set_ylabel("runtime per frame (s, log scale)")
+    ax.set_title("Synthesis runtime against scene size")
+    _legend(fig)
+    _save(fig, path)
+    return Plot(path.name, "Runtime against N",
+                "Wall-clock seconds per frame (log scale); crosses are frames stopped by the time or memory limit.")
+
+
+def cost_vs_n(p: Prepared, path: Path) -> Plot:
+    fig, (ax,) = _figure()
+    rows = p.frame[p.frame["cost"].notna()]
+    n_max = max(int(rows["n_entities"].max()) if len(rows) else 1, 1)
+    xs = np.array([0, n_max])
+    ax.plot(xs, ABSOLUTE_COST_PER_ENTITY * xs, color=REFERENCE, linestyle="--", linewidth=1.2,
+            label=f"absolute coordinates ({ABSOLUTE_COST_PER_ENTITY} N)")
+    for i, config in enumerate(p.configs):
+        r = rows[rows["config"] == config]
+        if len(r):
+            _points(ax, r["n_entities"], r["cost"], i, config)
+    ax.set_xlabel("entities in the frame, N (ego excluded)")
+    ax.set_ylabel("program cost")
+    ax.set_title("Program cost against scene size")
+    ax.set_xlim(0, n_max * 1.03)
+    # Scaled to the programs, not to the 4N line: relational programs cost a fraction of it and would
+    # otherwise lie flat on the axis. The line leaves through the top where it outgrows them.
+    ax.set_ylim(0, max(float(rows["cost"].max()) * 1.3 if len(rows) else 0.0, 8.0))
+    _legend(fig)
+    _save(fig, path)
+    return Plot(path.name, "Cost against N",
+                f"Cost of each synthesized program; the dashed line is the absolute-coordinate program "
+                f"({ABSOLUTE_COST_PER_ENTITY} per entity).")
+
+
+def cost_distribution(p: Prepared, path: Path) -> Plot:
+    fig, (left, right) = _figure(width=9.5, ncols=2)
+    from matplotlib.ticker import MaxNLocator
+
+    rows = p.frame[p.frame["cost"].notna()]
+    top = int(rows["cost"].max()) if len(rows) else 1
+    # Integer costs: one bin per value while that stays readable, else 30 bins of whole costs.
+    step = max(1, int(np.ceil((top + 1) / 30)))
+    cost_bins = np.arange(0, top + step + 1, step) - 0.5
+    per_entity = (rows["cost"] / rows["n_entities"]).where(rows["n_entities"] > 0)
+    ratio_top = max(float(per_entity.max()) if per_entity.notna().any() else 0.0, 0.5)
+    ratio_bins = np.linspace(0, min(ABSOLUTE_COST_PER_ENTITY, np.ceil(ratio_top * 4) / 4), 21)
+    shown = [c for c in p.configs if (rows["config"] == c).any()]
+    for ax, values, bins in ((left, rows["cost"], cost_bins), (right, per_entity, ratio_bins)):
+        width = (bins[1] - bins[0]) * 0.85 / max(len(shown), 1)
+        for j, config in enumerate(shown):
+            colour, _ = _style(p.configs.index(config))
+            v = values[rows["config"] == config].dropna().astype(float)
+            counts, edges = np.histogram(v.clip(upper=bins[-1]), bins=bins)
+            # Side by side within each bin: overlaid histograms of equal programs would hide each other.
+            left_edges = edges[:-1] + (bins[1] - bins[0]) * 0.075 + j * width
+            ax.bar(left_edges, counts, width=width, align="edge", color=colour, label=config)
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylabel("frames")
+    left.set_xlabel("program cost")
+    left.set_title("Program cost")
+    right.set_xlabel(f"cost per entity (absolute coordinates: {ABSOLUTE_COST_PER_ENTITY})")
+    right.set_title("Cost per entity")
+    fig.suptitle("Distribution of program cost")
+    _legend(fig)
+    _save(fig, path)
+    return Plot(path.name, "Cost distribution", "How many frames got each cost, in total and per entity.")
+
+
+def _grouped_barh(ax, kinds: tuple[str, ...], usage: RelationUsage, configs: tuple[str, ...],
+                  shown: list[str]) -> None:
+    k = max(len(shown), 1)
+    height = 0.8 / k
+    y = np.arange(len(kinds))
+    for i, config in enumerate(shown):
+        colour, _ = _style(configs.index(config))
+        values = [int(usage.counts.loc[kind, config]) for kind in kinds]
+        bars = ax.barh(y + (i - (k - 1) / 2) * height, values, height=height, color=colour, label=config)
+        ax.bar_label(bars, padding=2, fontsize=7)
+    ax.set_yticks(y, [f"{kind} ({KIND_COST[kind]})" for kind in kinds])
+    ax.invert_yaxis()
+    ax.set_xlabel("uses in all programs")
+    ax.margins(x=0.15)
+
+
+def relation_usage(usage: RelationUsage, configs: tuple[str, ...], path: Path) -> Plot:
+    shown = [c for c in configs if usage.counts[c].sum() > 0]  # configs without a program have nothing to show
+    height = max(3.6, 1.4 + 0.22 * len(POSITION_KINDS) * max(len(shown), 1))
+    fig, (left, right) = _figure(width=10.5, height=height, ncols=2)
+    _grouped_barh(left, POSITION_KINDS, usage, configs, shown)
+    _grouped_barh(right, HEADING_KINDS, usage, configs, shown)
+    left.set_title("Position relations (cost)")
+    right.set_title("Heading relations (cost)")
+    fig.suptitle("Relation usage in the synthesized programs")
+    _legend(fig)
+    _save(fig, path)
+    return Plot(path.name, "Relation usage",
+                "Relations the programs use: directional (ahead / behind / left / right of, facing toward / away "
+                "from) cost 0, relative fallbacks cost 1, absolute coordinates cost 2.")
+
+
+def versus_absolute(stats: list[GroupStats], configs: tuple[str, ...], path: Path) -> Plot:
+    buckets = bucket_order(s.bucket for s in stats)
+    fig, (ax,) = _figure(width=max(7.5, 1.4 * len(buckets) + 2))
+    ratios = {c: {s.bucket: s.absolute_ratio for s in stats if s.config == c and s.absolute_ratio is not None}
+              for c in configs}
+    shown = [c for c in configs if ratios[c]]
+    k = max(len(shown), 1)
+    width = 0.8 / k
+    x = np.arange(len(buckets))
+    for i, config in enumerate(shown):
+        colour, _ = _style(configs.index(config))
+        ratio = ratios[config]
+        xs = [x[j] + (i - (k - 1) / 2) * width for j, b in enumerate(buckets) if b in ratio]
+        values = [100.0 * ratio[b] for b in buckets if b in ratio]
+        bars = ax.bar(xs, values, width=width, color=colour, label=config)
+        ax.bar_label(bars, fmt="%.0f%%", padding=2, fontsize=7)
+    ax.axhline(100.0, color=REFERENCE, linestyle="--", linewidth=1.2, label="absolute coordinates")
+    ax.set_xticks(x, [f"N {b}" for b in buckets])
+    ax.set_xlabel("entities in the frame (bucket)")
+    ax.set_ylabel(f"mean cost / ({ABSOLUTE_COST_PER_ENTITY} N), %")
+    ax.set_ylim(0, 110)
+    ax.set_title("Cost relative to the absolute-coordinate program")
+    _legend(fig)
+    _save(fig, path)
+    return Plot(path.name, "Against absolute coordinates",
+                f"Mean of each program's cost divided by the absolute-coordinate program's ({ABSOLUTE_COST_PER_ENTITY} "
+                "per entity): lower is more relational; 100% would be no better than coordinates.")
+
+
+def all_plots(p: Prepared, buckets: list[GroupStats], usage: RelationUsage, out: Path) -> list[Plot]:
+    """Write every plot of PLOT_FILES into out; returns them in that order."""
+    runtime, cost, dist, absolute, relations = (out / name for name in PLOT_FILES)
+    return [
+        runtime_vs_n(p, runtime),
+        cost_vs_n(p, cost),
+        cost_distribution(p, dist),
+        versus_absolute(buckets, p.configs, absolute),
+        relation_usage(usage, p.configs, relations),
+    ]
