@@ -1,0 +1,136 @@
+"""The worker side of `r2s run`: one frame in, one programs row out, never an exception.
+
+Everything a worker needs is imported at module level on purpose: unpickling the task imports this module
+before the task runs, so the imports are paid once per worker and are not counted against a frame's hard
+memory cap.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from pipeline.programs import failure_row, result_row
+from synth.config import SynthConfig
+from synth.scene import Scene
+from synth.search.budget import current_rss_mb, peak_rss_mb
+from synth.synthesize import synthesize
+
+# Test-only fault injection: R2S_RUN_TEST_HOOK="ACTION[=ARG]@FRAME_ID" (FRAME_ID "*" = every frame). Actions:
+# kill (SIGKILL itself, as the kernel's OOM killer would), exit (os._exit(3)), alloc=MB (allocate MB under the
+# hard cap), raise, sleep=S, hang. Real runs never set it; the tests need a worker that dies on cue.
+TEST_HOOK_ENV = "R2S_RUN_TEST_HOOK"
+
+# Room left above the soft limit before the hard cap: the Budget's RSS poll (every 4096 nodes) should stop the
+# search first and return its best program; the hard cap catches what the poll cannot see (allocation outside
+# the search, inside z3, or between two polls). A worker's VmSize jumps by ~130 MB when z3 opens a new arena.
+HARD_CAP_MARGIN_MB = 256.0
+
+
+@dataclass(frozen=True)
+class FrameTask:
+    frame_id: str
+    scene: Scene
+    config: SynthConfig
+    config_hash: str
+    # Set only where the worker is a process of its own (loky): an address-space limit is per process, and a
+    # threaded dask worker shares its process with other frames (or with the run itself).
+    hard_cap: bool = False
+
+
+def run_frame(task: FrameTask) -> dict:
+    """Synthesize one frame; a frame that raises becomes an `error` row with a one-line message."""
+    started = time.perf_counter()
+    config = task.config
+    _reset_peak_rss()
+    try:
+        with _hard_memory_cap(config.memory_limit if task.hard_cap else None):
+            _test_hook(task.frame_id)
+            return result_row(synthesize(task.scene, config), task.config_hash)
+    except MemoryError:
+        status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
+    except Exception as exc:  # the run goes on: the frame is recorded as an error, with the reason
+        status, message = "error", one_line(f"{type(exc).__name__}: {exc}")
+    return failure_row(task.frame_id, status, message, len(task.scene.others), config, task.config_hash,
+                       runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb())
+
+
+def one_line(text: str, limit: int = 300) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _reset_peak_rss() -> None:
+    # A worker takes many frames and ru_maxrss is a lifetime peak: without a reset, peak_rss_mb of a frame would
+    # be the worst of every frame before it in that worker. Linux resets the high-water mark on "5".
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:  # pragma: no cover - non-Linux or not permitted: the lifetime peak stays an upper bound
+        pass
+
+
+def _vm_size_mb() -> float | None:
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[0]) * resource.getpagesize() / 2**20
+    except OSError:  # pragma: no cover - non-Linux: no hard cap, the Budget's poll still applies
+        return None
+
+
+@contextmanager
+def _hard_memory_cap(limit_mb: float | None) -> Iterator[None]:
+    """RLIMIT_AS for the duration of one frame, so an allocation past the cap raises MemoryError in this frame
+    instead of letting the kernel's OOM killer pick a victim (maybe another worker, or the run).
+
+    Why RLIMIT_AS and not a watchdog thread on RSS: the kernel enforces it at the allocation itself, with no
+    polling window, and Python turns it into a MemoryError the task can record while the worker lives on.
+    Its flaw is that it counts address space, not resident memory (a worker reserves ~300 MB it never
+    touches), so the cap is the current address space plus the allowed growth, not the limit itself. Only the
+    soft limit is lowered and restored afterwards, so the same worker can take the next frame unchanged.
+    """
+    vm = _vm_size_mb() if limit_mb is not None else None
+    if vm is None:
+        yield
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    growth = max(limit_mb - current_rss_mb(), 0.0) + max(0.5 * limit_mb, HARD_CAP_MARGIN_MB)
+    cap = int((vm + growth) * 2**20)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    if soft != resource.RLIM_INFINITY:
+        cap = min(cap, soft)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def _test_hook(frame_id: str) -> None:
+    spec = os.environ.get(TEST_HOOK_ENV)
+    if not spec:
+        return
+    action, _, target = spec.partition("@")
+    if target not in ("*", frame_id):
+        return
+    name, _, arg = action.partition("=")
+    if name == "kill":
+        os.kill(os.getpid(), signal.SIGKILL)
+    elif name == "exit":
+        os._exit(3)
+    elif name == "alloc":
+        blocks = [bytearray(2**20) for _ in range(int(arg))]  # touched pages: RSS, not only address space
+        del blocks
+    elif name == "raise":
+        raise RuntimeError(f"test hook raised in frame {frame_id}")
+    elif name == "sleep":
+        time.sleep(float(arg))
+    elif name == "hang":
+        while True:
+            time.sleep(1)
