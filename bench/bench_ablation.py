@@ -70,6 +70,7 @@ class Limits:
     time_s: float
     memory_mb: float
     grace_s: float
+    code: Path = ROOT  # the source tree whose `r2s synth` is measured
 
 
 # ------------------------------------------------------------------------------------------------ frames
@@ -159,12 +160,15 @@ def _outcome(doc: dict, limits: Limits) -> str:
     return "ok"
 
 
-def run_config(scene_path: Path, strategy: str, oracle: str, limits: Limits) -> dict:
-    """One configuration in its own `r2s synth` process; the record of what happened."""
+def run_config(scene_path: Path, strategy: str, oracle: str, limits: Limits, code: Path = ROOT) -> dict:
+    """One configuration in its own `r2s synth` process; the record of what happened.
+
+    `python -m` puts its working directory first on sys.path, so `code` decides which source tree is measured.
+    """
     cmd = [sys.executable, "-m", "pipeline.cli", "synth", str(scene_path), "--format", "json", "--strategy", strategy,
            "--oracle", oracle, "--time-limit", f"{limits.time_s:g}", "--memory-limit", f"{limits.memory_mb:g}"]
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=ROOT, text=True)
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=code, text=True)
         killed, wall, watched_mb = _watch(proc, limits)
         out.seek(0)
         err.seek(0)
@@ -211,7 +215,7 @@ def _run_or_reuse(frame: Frame, strategy: str, oracle: str, limits: Limits, done
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "scene.json"
         path.write_text(frame.scene.to_json())
-        rec = {"frame_id": frame.scene.frame_id, "n": frame.n} | run_config(path, strategy, oracle, limits)
+        rec = {"frame_id": frame.scene.frame_id, "n": frame.n} | run_config(path, strategy, oracle, limits, limits.code)
     raw.write(json.dumps(rec) + "\n")
     raw.flush()
     return rec
@@ -354,7 +358,8 @@ def markdown(payload: dict, records: list[dict], strategies) -> str:
           f"{m['note']}.", "",
           f"Frames: {payload['frames_note']}. Limits per configuration: {lim['time_s']:g} s "
           f"(hard kill at {lim['time_s'] + lim['grace_s']:g} s) and {lim['memory_mb']:g} MB resident "
-          f"(the paper: 7200 s and 8 GB). Each configuration runs alone in its own `r2s synth` process, one at a time.",
+          f"(the paper: 7200 s and 8 GB). Each configuration runs alone in its own `r2s synth` process, one at a time. "
+          f"Code measured: {payload['code']}.",
           "", "Legend: time = the synthesizer's run time inside its process (s; process start-up excluded), "
           "MB = peak resident memory. TO = did not finish within the time limit (its memory is shown); "
           "OOM = passed the memory limit (the time it took is shown). "
@@ -387,6 +392,20 @@ def _frames_note(frames: list[Frame]) -> str:
     return note + (f" ({', '.join(wide)}: no keyframe has that N within {RADII[0]:g} m)" if wide else "")
 
 
+def _limits_dict(limits: Limits) -> dict:
+    return {"time_s": limits.time_s, "memory_mb": limits.memory_mb, "grace_s": limits.grace_s}
+
+
+def _code_note(code: Path) -> str:
+    """Which code was measured: this checkout (possibly with uncommitted edits) or a snapshot of a commit."""
+    if code == ROOT:
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "synth", "pipeline"], capture_output=True,
+                               text=True, cwd=ROOT).stdout.strip()
+        return "this checkout" + (" (with uncommitted edits in synth/ or pipeline/)" if dirty else "")
+    stamp = code / "COMMIT"
+    return f"snapshot {code}" + (f" of commit {stamp.read_text().strip()}" if stamp.exists() else "")
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--time-limit", type=float, help="seconds per configuration (default 120; --quick 10)")
@@ -397,6 +416,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--strategies", default=",".join(STRATEGIES), help="comma-separated subset")
     ap.add_argument("--oracles", default=",".join(ORACLES), help="comma-separated subset (default smt,hybrid)")
     ap.add_argument("--resume", action="store_true", help="reuse the raw records of an interrupted run")
+    ap.add_argument("--code", type=Path, default=ROOT, help="source tree to measure (default: this checkout); e.g. "
+                    "`git archive HEAD | tar -x -C DIR`, so edits in a shared checkout cannot change a long run")
     args = ap.parse_args(argv)
     args.time_limit = args.time_limit or (10.0 if args.quick else 120.0)
     args.max_n = args.max_n or (QUICK_N_MAX if args.quick else N_MAX)
@@ -407,13 +428,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    limits = Limits(args.time_limit, args.memory_limit, args.grace)
+    limits = Limits(args.time_limit, args.memory_limit, args.grace, args.code.resolve())
     frames = frames_in_fresh_process(range(N_MIN, args.max_n + 1), vehicles_only=True)
     started = time.time()
     records = sweep(frames, args.strategies, args.oracles, limits, args.resume)
     rows = summarize(frames, records, args.oracles, limits)
     bad = [r for r in rows if r["agree"] == "no" or not r.get("bounds_ok", "yes").startswith("yes")]
-    payload = {"machine": machine(), "limits": vars(limits), "quick": args.quick, "oracles": args.oracles,
+    payload = {"machine": machine(), "code": _code_note(limits.code), "limits": _limits_dict(limits), "quick": args.quick, "oracles": args.oracles,
                "strategies": args.strategies, "frames_note": _frames_note(frames),
                "agree": "yes" if not bad else "NO", "rows": rows, "records": records,
                "wall_s": time.time() - started}
