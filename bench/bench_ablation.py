@@ -382,13 +382,15 @@ def markdown(payload: dict, records: list[dict], strategies) -> str:
 
 # ------------------------------------------------------------------------------------------ main
 
-def _frames_note(frames: list[Frame]) -> str:
+def frames_note(frames: list[Frame], vehicles_only: bool = True) -> str:
+    """Where the frames come from and how each N was picked, for the tables' headers."""
     if not frames:
         return "none"
     wide = [f"N={f.n} at {f.radius:g} m" for f in frames if f.radius != RADII[0]]
     src = ("nuScenes v1.0-mini keyframes (../shared/data/nuscenes-mini/keyframes.csv)" if frames[0].source == "shared"
-           else "the shipped nuScenes-mini excerpt (tests/data/nuscenes_mini_frames.json), filtered to vehicles")
-    note = f"{src}, vehicles only, the first keyframe with exactly N vehicles within {RADII[0]:g} m of ego"
+           else "the shipped nuScenes-mini excerpt (tests/data/nuscenes_mini_frames.json)")
+    what = "vehicles" if vehicles_only else "entities of any category"
+    note = f"{src}, the first keyframe with exactly N {what} within {RADII[0]:g} m of ego"
     return note + (f" ({', '.join(wide)}: no keyframe has that N within {RADII[0]:g} m)" if wide else "")
 
 
@@ -435,7 +437,7 @@ def main(argv=None) -> int:
     rows = summarize(frames, records, args.oracles, limits)
     bad = [r for r in rows if r["agree"] == "no" or not r.get("bounds_ok", "yes").startswith("yes")]
     payload = {"machine": machine(), "code": _code_note(limits.code), "limits": _limits_dict(limits), "quick": args.quick, "oracles": args.oracles,
-               "strategies": args.strategies, "frames_note": _frames_note(frames),
+               "strategies": args.strategies, "frames_note": frames_note(frames),
                "agree": "yes" if not bad else "NO", "rows": rows, "records": records,
                "wall_s": time.time() - started}
     # Development runs stay out of the committed results (raw/ is gitignored).
