@@ -3,7 +3,26 @@
 Scenic's own `ahead of X by d` means an edge-to-edge gap on X's axis and `facing toward X` is exact, so the
 paper's text read by Scenic would sample scenes the DSL does not describe. Instead a short prelude defines one
 helper per DSL relation (centre distance within the Range, a +-delta1 sector, a +-delta2 heading tolerance), and
-each entity is one line naming its relation. Compile with scenic.scenarioFromString(text, mode2D=True).
+each entity is one statement naming its relation. Compile with scenic.scenarioFromString(text, mode2D=True).
+
+What the text relies on, each point checked against scenic 3.1.1 (tests/test_scenic.py samples real programs
+and runs every sampled scene through synth.semantics.check):
+- Headings: Scenic's are radians counter-clockwise from +y, ours degrees counter-clockwise from +y; `deg` converts.
+  An object's heading is its yaw exactly (global parent orientation), so no quaternion round trip blurs it.
+- Every helper name contains '__' (as does `<id>__at`), which no entity id may contain: an entity can never
+  shadow a helper, a constant or another entity's position variable.
+- `self` is not available in a specifier, so an entity whose heading depends on its own position (facing toward /
+  away from) binds the position to `<id>__at` first.
+- Bearings are taken as `angle from (0 @ 0) to (q - p)`: scenic 3.1.1 fails to sample `angle from p to q` when
+  p is the position of a random object ("cannot iterate through a random value"); from a fixed origin it works.
+- Ranges are printed exactly as in the DSL, unshrunk. Scenic samples Range(a, b) with random.uniform, so a
+  bound itself can come out; what could then land outside the DSL's bound is float rounding in the offsets,
+  rotations and atan2 — on the order of 1e-13 m or degrees for scenes of hundreds of metres, four orders of
+  magnitude inside the checker's 1e-9 slack. A shrunk range would only hide that margin, so there is none.
+- Each object carries `name` = its entity id and its class is its type, which is how `r2s sample` writes the
+  sampled scene back as scene JSON (ids re-validated there). `param r2s_frame_id` names the recorded frame.
+- Scenic's non-intersection requirement stays on unless the global parameter r2s_allow_collisions is overridden
+  (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).
 """
 
 from __future__ import annotations
@@ -17,96 +36,119 @@ from synth.dsl import (
     FacingRelation,
     LocalXYPos,
     Program,
+    Range,
     RelativeHeading,
     fmt_number,
 )
-from synth.scene import ENTITY_TYPES, Scene
+from synth.scene import ENTITY_TYPES, Entity, Scene
+
+FRAME_PARAM = "r2s_frame_id"
+COLLISIONS_PARAM = "r2s_allow_collisions"
+POSITION_SUFFIX = "__at"
 
 PRELUDE = '''\
-# Helpers: the DSL's relations with its tolerances (Scenic's built-in specifiers mean other things).
-DELTA1 = {delta1}  # deg: half-width of the ahead / behind / left / right sectors
-DELTA2 = {delta2}  # deg: tolerance of facing toward / away from
+# The DSL's relations with its tolerances (Scenic's own `ahead of X by d` is an edge gap on X's axis and its
+# `facing toward X` is exact, so they would describe other scenes).
+dsl__DELTA1 = {delta1} deg  # half-width of the ahead / left / behind / right sectors
+dsl__DELTA2 = {delta2} deg  # tolerance of facing toward / away from
 
-def in_sector(ref, phi, distance):
-    """Centre distance in `distance`, bearing within DELTA1 of ref.heading + phi."""
-    return ref.position + Vector(0, distance).rotatedBy(ref.heading + (phi + Range(-DELTA1, DELTA1)) deg)
+def dsl__sector(ref, phi, distance):
+    """Centre distance to ref in `distance`, bearing within DELTA1 of ref.heading + phi."""
+    return ref.position + (0 @ distance).rotatedBy(ref.heading + phi + Range(-dsl__DELTA1, dsl__DELTA1))
 
-def sector_ahead(ref, distance):
-    return in_sector(ref, 0, distance)
+def dsl__sector_ahead(ref, distance):
+    return dsl__sector(ref, 0 deg, distance)
 
-def sector_left(ref, distance):
-    return in_sector(ref, 90, distance)
+def dsl__sector_left(ref, distance):
+    return dsl__sector(ref, 90 deg, distance)
 
-def sector_behind(ref, distance):
-    return in_sector(ref, 180, distance)
+def dsl__sector_behind(ref, distance):
+    return dsl__sector(ref, 180 deg, distance)
 
-def sector_right(ref, distance):
-    return in_sector(ref, 270, distance)
+def dsl__sector_right(ref, distance):
+    return dsl__sector(ref, 270 deg, distance)
 
-def relative_xy(ref, lateral, forward):
+def dsl__relative_xy(ref, lateral, forward):
     """`on lateral @ forward relative to ref`: offsets in ref's frame (+lateral = ref's right)."""
-    return ref.position + Vector(lateral, forward).rotatedBy(ref.heading)
+    return ref.position + (lateral @ forward).rotatedBy(ref.heading)
 
-def facing_toward(ref, p):
-    return (angle from p to ref.position) + Range(-DELTA2, DELTA2) deg
+def dsl__bearing(p, q):
+    """Heading of the ray from p to q (0 = +y, counter-clockwise), taken from a fixed origin (see r2sgen)."""
+    return angle from (0 @ 0) to (q - p)
 
-def facing_away_from(ref, p):
-    return (angle from ref.position to p) + Range(-DELTA2, DELTA2) deg
+def dsl__facing_toward(ref, p):
+    return dsl__bearing(p, ref.position) + Range(-dsl__DELTA2, dsl__DELTA2)
+
+def dsl__facing_away_from(ref, p):
+    return dsl__bearing(ref.position, p) + Range(-dsl__DELTA2, dsl__DELTA2)
 '''
 
-_SECTOR = {name: f"sector_{name}" for name in DIRECTIONS}
+
+def _range(r: Range) -> str:
+    return f"Range({fmt_number(r.lo)}, {fmt_number(r.hi)})"
 
 
-def _num(v: float) -> str:
-    return fmt_number(v)
+def _position(pos) -> str:
+    if isinstance(pos, DirectionPos):
+        return f"dsl__sector_{pos.direction}({pos.ref}, {_range(pos.distance)})"
+    if isinstance(pos, LocalXYPos):
+        return f"dsl__relative_xy({pos.ref}, {_range(pos.lateral)}, {_range(pos.forward)})"
+    if isinstance(pos, AbsoluteXYPos):
+        return f"({_range(pos.x)} @ {_range(pos.y)})"
+    raise TypeError(f"not a DSL position: {pos!r}")
 
 
-def _range(r) -> str:
-    return f"Range({_num(r.lo)}, {_num(r.hi)})"
+def _heading(head, at: str) -> str:
+    if isinstance(head, FacingRelation):
+        return f"dsl__facing_{'toward' if head.mode == 'toward' else 'away_from'}({head.ref}, {at})"
+    if isinstance(head, RelativeHeading):
+        return f"{head.ref}.heading + {_range(head.angle)} deg"
+    if isinstance(head, AbsoluteHeading):
+        return f"{_range(head.angle)} deg"
+    raise TypeError(f"not a DSL heading: {head!r}")
+
+
+def _props(e: Entity) -> str:
+    """`with name` (the id: how samples are read back) and the recorded box where known (class default else)."""
+    out = f", with name '{e.id}'"
+    if e.length is not None or e.width is not None:
+        length, width = e.dimensions()
+        out += f", with length {fmt_number(length)}, with width {fmt_number(width)}"
+    return out
+
+
+def _classes(types: list[str]) -> list[str]:
+    lines = []
+    for t in types:
+        length, width = ENTITY_TYPES[t]
+        lines += [f"class {t}:", f"    length: {fmt_number(length)}", f"    width: {fmt_number(width)}",
+                  "    requireVisible: False", f"    allowCollisions: globalParameters.{COLLISIONS_PARAM}", ""]
+    return lines
 
 
 def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: str = "") -> str:
     by_id = scene.by_id()
+    assert set(DIRECTIONS) == {"ahead", "left", "behind", "right"}  # the four dsl__sector_* helpers
     types = sorted({scene.ego.type} | {s.type for s in program.statements})
     lines = [f"# {line}" for line in header.splitlines()] if header else []
-    lines.append("# Generated by r2sgen. Compile in 2D mode: scenic.scenarioFromString(text, mode2D=True)")
-    lines.append("")
-    for t in types:
-        length, width = ENTITY_TYPES[t]
-        lines += [f"class {t}:", f"    length: {_num(length)}", f"    width: {_num(width)}",
-                  "    requireVisible: False", ""]
-    lines.append(PRELUDE.format(delta1=_num(config.delta1), delta2=_num(config.delta2)))
+    lines += [
+        "# Generated by r2sgen. Compile in 2D mode: scenic.scenarioFromString(text, mode2D=True).",
+        "# Each object's name is its entity id and its class its type (read back by `r2s sample`).",
+        f"param {FRAME_PARAM} = {scene.frame_id!r}",
+        f"param {COLLISIONS_PARAM} = False",
+        "",
+        *_classes(types),
+        PRELUDE.format(delta1=fmt_number(config.delta1), delta2=fmt_number(config.delta2)),
+    ]
     ego = scene.ego
     # ego is the recorded one, at full precision: every relation hangs off it.
-    lines.append(f"ego = new {ego.type} at ({ego.x!r}, {ego.y!r}), facing {ego.heading!r} deg{_dims(ego)}")
+    lines.append(f"ego = new {ego.type} at ({ego.x!r} @ {ego.y!r}), facing {ego.heading!r} deg{_props(ego)}")
     for st in program.statements:
-        e = by_id[st.id]
-        at = f"{st.id}__at"  # ids never contain '__', so this name cannot clash with an entity
-        pos = st.position
-        if isinstance(pos, DirectionPos):
-            where = f"{_SECTOR[pos.direction]}({pos.ref}, {_range(pos.distance)})"
-        elif isinstance(pos, LocalXYPos):
-            where = f"relative_xy({pos.ref}, {_range(pos.lateral)}, {_range(pos.forward)})"
-        elif isinstance(pos, AbsoluteXYPos):
-            where = f"Vector({_range(pos.x)}, {_range(pos.y)})"
-        else:  # pragma: no cover - the DSL has no other position
-            raise TypeError(pos)
-        head = st.heading
-        if isinstance(head, FacingRelation):
-            facing = f"facing_{'toward' if head.mode == 'toward' else 'away_from'}({head.ref}, {at})"
-        elif isinstance(head, RelativeHeading):
-            facing = f"{head.ref}.heading + {_range(head.angle)} deg"
-        elif isinstance(head, AbsoluteHeading):
-            facing = f"{_range(head.angle)} deg"
-        else:  # pragma: no cover
-            raise TypeError(head)
-        lines.append(f"{at} = {where}")
-        lines.append(f"{st.id} = new {st.type} at {at}, facing {facing}{_dims(e)}")
+        where = _position(st.position)
+        if isinstance(st.heading, FacingRelation):
+            # The heading depends on this entity's own position, which a specifier cannot name (no `self`).
+            at = f"{st.id}{POSITION_SUFFIX}"
+            lines.append(f"{at} = {where}")
+            where = at
+        lines.append(f"{st.id} = new {st.type} at {where}, facing {_heading(st.heading, where)}{_props(by_id[st.id])}")
     return "\n".join(lines) + "\n"
-
-
-def _dims(e) -> str:
-    if e.length is None and e.width is None:
-        return ""
-    length, width = e.dimensions()
-    return f", with length {_num(length)}, with width {_num(width)}"
