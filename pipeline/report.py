@@ -128,6 +128,9 @@ def side_by_side_section(t: SideBySide) -> Section:
             if status in STOPPED:
                 cells.append(STOPPED[status])
                 marks.append((r, col, "stopped"))
+            elif status == "feasible":  # stopped with a program but no proof: its time is no finishing time
+                cells.append(f"{fmt_seconds(secs)} (F)")
+                marks.append((r, col, "stopped"))
             else:
                 cells.append(fmt_seconds(secs))
                 times[col] = secs
@@ -146,7 +149,8 @@ def side_by_side_section(t: SideBySide) -> Section:
              if len(rows) < t.total_frames else f"All {t.total_frames} frames.")
     return Section(SIDE_BY_SIDE_TITLE, (
         f"Rows are frames in ascending N, columns are strategies, as in the paper's Table 3. {shown} "
-        f"TO = stopped at the time limit, OOM = stopped at the memory limit, ERR = error, {MISSING} = not run; "
+        "TO = stopped at the time limit, OOM = stopped at the memory limit, ERR = error, (F) = stopped with a "
+        f"program not proven optimal, {MISSING} = not run; "
         "the fastest time in a row is in bold. Mem is the worker's peak resident memory.",
         table,
     ))
@@ -186,7 +190,7 @@ def build_document(p: Prepared, source: str, plots: list[Plot], config_stats: li
                    failure_groups: list[FailureGroup]) -> Document:
     f = p.frame
     intro = [
-        f"Programs file: {source}. {len(f)} row(s): {f['frame_id'].nunique()} distinct frame(s) under "
+        f"Programs file: {source}. {len(f) + p.duplicates_dropped} row(s): {f['frame_id'].nunique()} distinct frame(s) under "
         f"{len(p.configs)} strategy configuration(s) ({', '.join(p.configs)}).",
         f"Oracles: {', '.join(sorted(f['oracle'].dropna().unique())) or MISSING}; solvers: "
         f"{', '.join(sorted(f['solver'].dropna().unique())) or MISSING}; r2sgen version(s): "

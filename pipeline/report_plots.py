@@ -72,6 +72,12 @@ def _legend(fig) -> None:
         fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False, fontsize=9)
 
 
+def _no_data(ax, what: str) -> None:
+    """Say so on an empty plot, rather than leave bare axes that look like a rendering bug."""
+    ax.text(0.5, 0.5, f"no data: {what}", transform=ax.transAxes, ha="center", va="center", color=REFERENCE,
+            fontsize=11)
+
+
 def _save(fig, path: Path) -> None:
     # No Software/date metadata: the same programs file gives byte-identical PNGs.
     fig.savefig(path, format="png", metadata={"Software": None})
@@ -88,14 +94,20 @@ def runtime_vs_n(p: Prepared, path: Path) -> Plot:
     for i, config in enumerate(p.configs):
         colour, _ = _style(i)
         rows = p.frame[(p.frame["config"] == config) & (p.frame["status"] != "error") & p.frame["runtime_s"].notna()]
-        done = rows[rows["status"].isin(("optimal", "feasible"))]
+        done = rows[rows["status"] == "optimal"]
+        unproven = rows[rows["status"] == "feasible"]
         stopped = rows[rows["status"].isin(("timeout", "memout"))]
         # Sub-0.1 ms runtimes would sit at -inf on a log axis; they are clamped to the axis floor instead.
         if len(done):
             _points(ax, done["n_entities"], done["runtime_s"].clip(lower=1e-4), i, config)
+        if len(unproven):  # stopped at a limit with a program: the time is the limit, not a finishing time
+            ax.scatter(unproven["n_entities"], unproven["runtime_s"].clip(lower=1e-4), s=55, color=colour, marker="+",
+                       linewidths=1.5, label=f"{config}: feasible (stopped, not proven)")
         if len(stopped):
             ax.scatter(stopped["n_entities"], stopped["runtime_s"].clip(lower=1e-4), s=60, color=colour, marker="x",
                        linewidths=1.8, label=f"{config}: timeout / memout")
+    if not ax.collections:
+        _no_data(ax, "no frame ran (every row is an error)")
     ax.set_yscale("log")
     ax.set_xlabel("entities in the frame, N (ego excluded)")
     ax.set_ylabel("runtime per frame (s, log scale)")
@@ -103,7 +115,8 @@ def runtime_vs_n(p: Prepared, path: Path) -> Plot:
     _legend(fig)
     _save(fig, path)
     return Plot(path.name, "Runtime against N",
-                "Wall-clock seconds per frame (log scale); crosses are frames stopped by the time or memory limit.")
+                "Wall-clock seconds per frame (log scale): open markers are proven optima, plus signs programs found "
+                "before a limit without a proof, crosses frames stopped by the time or memory limit.")
 
 
 def cost_vs_n(p: Prepared, path: Path) -> Plot:
@@ -117,6 +130,8 @@ def cost_vs_n(p: Prepared, path: Path) -> Plot:
         r = rows[rows["config"] == config]
         if len(r):
             _points(ax, r["n_entities"], r["cost"], i, config)
+    if rows.empty:
+        _no_data(ax, "no frame produced a program")
     ax.set_xlabel("entities in the frame, N (ego excluded)")
     ax.set_ylabel("program cost")
     ax.set_title("Program cost against scene size")
@@ -155,6 +170,9 @@ def cost_distribution(p: Prepared, path: Path) -> Plot:
             ax.bar(left_edges, counts, width=width, align="edge", color=colour, label=config)
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylabel("frames")
+    if not shown:
+        for ax in (left, right):
+            _no_data(ax, "no frame produced a program")
     left.set_xlabel("program cost")
     left.set_title("Program cost")
     right.set_xlabel(f"cost per entity (absolute coordinates: {ABSOLUTE_COST_PER_ENTITY})")
@@ -187,6 +205,9 @@ def relation_usage(usage: RelationUsage, configs: tuple[str, ...], path: Path) -
     fig, (left, right) = _figure(width=10.5, height=height, ncols=2)
     _grouped_barh(left, POSITION_KINDS, usage, configs, shown)
     _grouped_barh(right, HEADING_KINDS, usage, configs, shown)
+    if not shown:
+        for ax in (left, right):
+            _no_data(ax, "no program to count")
     left.set_title("Position relations (cost)")
     right.set_title("Heading relations (cost)")
     fig.suptitle("Relation usage in the synthesized programs")
@@ -213,6 +234,8 @@ def versus_absolute(stats: list[GroupStats], configs: tuple[str, ...], path: Pat
         values = [100.0 * ratio[b] for b in buckets if b in ratio]
         bars = ax.bar(xs, values, width=width, color=colour, label=config)
         ax.bar_label(bars, fmt="%.0f%%", padding=2, fontsize=7)
+    if not shown:
+        _no_data(ax, "no frame produced a program")
     ax.axhline(100.0, color=REFERENCE, linestyle="--", linewidth=1.2, label="absolute coordinates")
     ax.set_xticks(x, [f"N {b}" for b in buckets])
     ax.set_xlabel("entities in the frame (bucket)")
