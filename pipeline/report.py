@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import html
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -139,7 +140,8 @@ def side_by_side_section(t: SideBySide) -> Section:
                 marks.append((r, col + 1, "stopped"))
             else:  # failure rows record 0 MB when nothing was measured
                 cells.append(fmt_float(mem, 1) if mem and mem > 0 else MISSING)
-        if len(times) > 1:  # bold the fastest, as the paper does, when there is a race to win
+        raced = sum(not pd.isna(t.status.at[frame_id, c]) for c in configs)
+        if times and raced > 1:  # bold the fastest finisher, as the paper does, when two or more ran the frame
             best = min(times.values())
             marks += [(r, c, "best") for c, v in times.items() if v == best]
         rows.append(tuple(cells))
@@ -210,6 +212,16 @@ def build_document(p: Prepared, source: str, plots: list[Plot], config_stats: li
 
 # ------------------------------------------------------------------------------------------------ markdown
 
+def _walk(doc: Document, heading: Callable[[str], str], table: Callable[[Table], str], plot: Callable[[Plot], str],
+          text: Callable[[str], str]) -> list[str]:
+    """The sections' headings and blocks in order, each rendered by the function for its kind."""
+    out = []
+    for s in doc.sections:
+        out.append(heading(s.title))
+        out += [table(b) if isinstance(b, Table) else plot(b) if isinstance(b, Plot) else text(b) for b in s.blocks]
+    return out
+
+
 def _md_cell(text: str, mark: str | None) -> str:
     text = text.replace("|", "\\|").replace("\n", " ")
     return f"**{text}**" if mark == "best" and text else text
@@ -230,15 +242,8 @@ def _md_table(t: Table) -> str:
 
 def render_markdown(doc: Document) -> str:
     out = [f"# {doc.title}", *doc.intro]
-    for s in doc.sections:
-        out.append(f"## {s.title}")
-        for b in s.blocks:
-            if isinstance(b, Table):
-                out.append(_md_table(b))
-            elif isinstance(b, Plot):
-                out.append(f"![{b.title}]({b.filename})\n\n*{b.caption}*")
-            else:
-                out.append(b)
+    out += _walk(doc, lambda title: f"## {title}", _md_table,
+                 lambda plot: f"![{plot.title}]({plot.filename})\n\n*{plot.caption}*", lambda text: text)
     return "\n\n".join(out) + "\n"
 
 
@@ -310,15 +315,8 @@ def render_html(doc: Document, images: dict[str, bytes]) -> str:
     parts = [f"<h1>{html.escape(doc.title)}</h1>", *(f'<p class="intro">{html.escape(p)}</p>' for p in doc.intro),
              "<nav>" + "".join(f'<a href="#{_anchor(s.title)}">{html.escape(s.title)}</a>' for s in doc.sections)
              + "</nav>"]
-    for s in doc.sections:
-        parts.append(f'<h2 id="{_anchor(s.title)}">{html.escape(s.title)}</h2>')
-        for b in s.blocks:
-            if isinstance(b, Table):
-                parts.append(_html_table(b))
-            elif isinstance(b, Plot):
-                parts.append(_html_figure(b, images))
-            else:
-                parts.append(f"<p>{html.escape(b)}</p>")
+    parts += _walk(doc, lambda title: f'<h2 id="{_anchor(title)}">{html.escape(title)}</h2>', _html_table,
+                   lambda plot: _html_figure(plot, images), lambda text: f"<p>{html.escape(text)}</p>")
     body = "\n".join(parts)
     return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">\n'
