@@ -1,0 +1,219 @@
+"""Bird's-eye view of a scene: oriented boxes, the program's references, and sampled variants.
+
+Geometry first (pure: the ego frame, box corners, which reference places which entity how), drawing after
+(matplotlib's Agg canvas, imported lazily and without pyplot, so no global figure state). Everything is drawn
+in ego's frame (metres, +x right of ego, +y ahead of it, equal aspect), whatever frame the scene came in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from synth.dsl import DirectionPos, FacingRelation, LocalXYPos, Program, RelativeHeading
+from synth.geometry import heading_vector, normalize, to_local
+from synth.scene import Scene
+
+FORMATS = ("png", "svg", "pdf")
+
+
+@dataclass(frozen=True)
+class RelationKind:
+    label: str
+    color: str
+    linestyle: str  # solid: places the position; dashed: sets the heading
+    rad: float  # curvature, so a position and a heading arrow between the same pair stay apart
+
+
+# Colour by relation kind; cost-0 kinds warm, cost-1 kinds cool.
+RELATION_KINDS: dict[str, RelationKind] = {
+    "sector": RelationKind("ahead of / behind / left of / right of\n(position, cost 0)", "#e66101", "-", 0.08),
+    "relative_xy": RelationKind("on Range @ Range relative to\n(position, cost 1)", "#5e3c99", "-", 0.08),
+    "facing": RelationKind("facing toward / away from\n(heading, cost 0)", "#1a9641", "--", -0.2),
+    "relative_heading": RelationKind("facing Range deg relative to\n(heading, cost 1)", "#0571b0", "--", -0.2),
+}
+
+@dataclass(frozen=True)
+class Family:
+    fill: str  # the recorded box
+    variant: str  # sampled variants: darker, since they are drawn nearly transparent
+    types: tuple[str, ...]
+
+
+# Box colours by kind of road user; ego stands out in red.
+FAMILIES: dict[str, Family] = {
+    "vehicle": Family("#a6bddb", "#2b5a9b",
+                      ("Car", "Truck", "Bus", "Trailer", "ConstructionVehicle", "EmergencyVehicle")),
+    "two-wheeler": Family("#c2a5cf", "#6a3d9a", ("Motorcycle", "Bicycle")),
+    "pedestrian / animal": Family("#fee391", "#b8860b", ("Pedestrian", "Animal")),
+    "static object": Family("#d9d9d9", "#525252",
+                            ("Barrier", "TrafficCone", "PushableObject", "Debris", "BicycleRack", "Object")),
+}
+EGO_FILL, EGO_EDGE = "#e31a1c", "#67000d"
+
+
+def family_of(etype: str) -> str:
+    return next((name for name, f in FAMILIES.items() if etype in f.types), "static object")
+
+
+@dataclass(frozen=True)
+class Box:
+    id: str
+    type: str
+    x: float
+    y: float
+    heading: float  # degrees, counter-clockwise from +y, in ego's frame
+    length: float
+    width: float
+
+    def corners(self) -> tuple[tuple[float, float], ...]:
+        fx, fy = heading_vector(self.heading)
+        rx, ry = fy, -fx  # ego-frame right of the heading
+        hl, hw = self.length / 2, self.width / 2
+        return tuple((self.x + a * hl * fx + b * hw * rx, self.y + a * hl * fy + b * hw * ry)
+                     for a, b in ((1, 1), (1, -1), (-1, -1), (-1, 1)))
+
+    def front(self) -> tuple[float, float]:
+        fx, fy = heading_vector(self.heading)
+        return (self.x + fx * self.length / 2, self.y + fy * self.length / 2)
+
+
+def ego_frame(scene: Scene) -> dict[str, Box]:
+    """Every entity as a box in ego's frame (ego at the origin facing +y), by id, in scene order."""
+    ego = scene.ego
+    out = {}
+    for e in scene.entities:
+        lx, ly = to_local(e.x - ego.x, e.y - ego.y, ego.heading)
+        length, width = e.dimensions()
+        out[e.id] = Box(e.id, e.type, lx, ly, normalize(e.heading - ego.heading), length, width)
+    return out
+
+
+@dataclass(frozen=True)
+class Reference:
+    ref: str
+    entity: str
+    kind: str  # a key of RELATION_KINDS
+
+
+def references(program: Program) -> tuple[tuple[Reference, ...], tuple[str, ...], tuple[str, ...]]:
+    """(arrows from reference to entity, ids placed absolutely (cost 2), ids headed absolutely (cost 2))."""
+    arrows, abs_pos, abs_head = [], [], []
+    for st in program.statements:
+        pos, head = st.position, st.heading
+        if isinstance(pos, DirectionPos):
+            arrows.append(Reference(pos.ref, st.id, "sector"))
+        elif isinstance(pos, LocalXYPos):
+            arrows.append(Reference(pos.ref, st.id, "relative_xy"))
+        else:
+            abs_pos.append(st.id)
+        if isinstance(head, FacingRelation):
+            arrows.append(Reference(head.ref, st.id, "facing"))
+        elif isinstance(head, RelativeHeading):
+            arrows.append(Reference(head.ref, st.id, "relative_heading"))
+        else:
+            abs_head.append(st.id)
+    return tuple(arrows), tuple(abs_pos), tuple(abs_head)
+
+
+def _extent(boxes: Sequence[Box], margin: float) -> tuple[float, float, float, float]:
+    xs = [c[0] for b in boxes for c in b.corners()]
+    ys = [c[1] for b in boxes for c in b.corners()]
+    return (min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin)
+
+
+@dataclass(frozen=True)
+class View:
+    scene: Scene
+    program: Program | None = None
+    samples: tuple[Scene, ...] = ()
+    subtitle: str = ""
+
+
+def draw(view: View):
+    """A matplotlib Figure (Agg canvas) of the view."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import FancyArrowPatch, Patch, Polygon
+
+    boxes = ego_frame(view.scene)
+    sample_boxes = [b for s in view.samples for b in ego_frame(s).values() if b.id != "ego"]
+    x0, x1, y0, y1 = _extent([*boxes.values(), *sample_boxes], margin=4.0)
+    # Plot side ~ 9 in on the longer axis; the legend gets its own strip on the right.
+    span = max(x1 - x0, y1 - y0)
+    w_in, h_in = max(5.0, 9.0 * (x1 - x0) / span), max(4.0, 9.0 * (y1 - y0) / span)
+    fig = Figure(figsize=(w_in + 3.0, h_in + 0.9), dpi=150, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    n = len(boxes)
+    font = 7.0 if n <= 25 else 5.5 if n <= 70 else 4.5
+
+    # Dense enough that where variants pile up reads as likely, sparse enough that single ones still show.
+    alpha = max(0.06, min(0.3, 2.0 / max(1, len(view.samples))))
+    for b in sample_boxes:
+        color = FAMILIES[family_of(b.type)].variant
+        ax.add_patch(Polygon(b.corners(), closed=True, facecolor=color, edgecolor=color, linewidth=0.3,
+                             alpha=alpha, zorder=1))
+    for b in boxes.values():
+        ego = b.id == "ego"
+        face, edge = (EGO_FILL, EGO_EDGE) if ego else (FAMILIES[family_of(b.type)].fill, "#303030")
+        ax.add_patch(Polygon(b.corners(), closed=True, facecolor=face, edgecolor=edge, linewidth=1.2 if ego else 0.7,
+                             zorder=3))
+        ax.annotate("", xy=b.front(), xytext=(b.x, b.y), zorder=4,
+                    arrowprops={"arrowstyle": "-|>", "color": "white" if ego else "#303030", "lw": 0.8,
+                                "mutation_scale": 6, "shrinkA": 0, "shrinkB": 0})
+        # The id just below the box (in metres, so it follows the box at any zoom).
+        ax.text(b.x, min(c[1] for c in b.corners()) - 0.4, b.id, fontsize=font, ha="center", va="top", zorder=6,
+                color=EGO_EDGE if ego else "#202020", fontweight="bold" if ego else "normal")
+
+    handles = [Patch(facecolor=EGO_FILL, edgecolor=EGO_EDGE, label="ego")]
+    present = {family_of(b.type) for b in boxes.values() if b.id != "ego"}
+    handles += [Patch(facecolor=f.fill, edgecolor="#303030", label=name) for name, f in FAMILIES.items()
+                if name in present]
+    if view.samples:
+        handles.append(Patch(facecolor=FAMILIES["vehicle"].variant, alpha=0.3,
+                             label=f"{len(view.samples)} sampled variants\n(Scenic, translucent)"))
+    if view.program is not None:
+        arrows, abs_pos, abs_head = references(view.program)
+        for r in arrows:
+            k = RELATION_KINDS[r.kind]
+            a, e = boxes[r.ref], boxes[r.entity]
+            ax.add_patch(FancyArrowPatch((a.x, a.y), (e.x, e.y), arrowstyle="-|>", mutation_scale=9, color=k.color,
+                                         linestyle=k.linestyle, lw=1.0, alpha=0.85, shrinkA=3, shrinkB=3, zorder=5,
+                                         connectionstyle=f"arc3,rad={k.rad}"))
+        used = {r.kind for r in arrows}
+        handles += [Line2D([], [], color=k.color, linestyle=k.linestyle, label=k.label)
+                    for name, k in RELATION_KINDS.items() if name in used]
+        marks = (("*", abs_pos, "absolute position (cost 2)"), ("x", abs_head, "absolute heading (cost 2)"))
+        for marker, ids, label in marks:
+            if ids:
+                ax.scatter([boxes[i].x for i in ids], [boxes[i].y for i in ids], marker=marker, s=40, c="black",
+                           zorder=7, linewidths=1.0)
+                handles.append(Line2D([], [], color="black", marker=marker, linestyle="none", label=label))
+
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.grid(True, color="#e5e5e5", linewidth=0.6, zorder=0)
+    ax.set_axisbelow(True)
+    ax.set_xlabel("metres to the right of ego")
+    ax.set_ylabel("metres ahead of ego")
+    title = f"{view.scene.frame_id}: ego and {n - 1} entities"
+    ax.set_title(f"{title}\n{view.subtitle}" if view.subtitle else title, fontsize=8)
+    fig.legend(handles=handles, loc="outside right upper", fontsize=7, frameon=False, labelspacing=0.9)
+    return fig
+
+
+def save(fig, path: str | Path) -> None:
+    """Write the figure atomically; the format is the file's suffix (png, svg or pdf)."""
+    from extractors.atomic import atomic_path
+
+    fmt = Path(path).suffix.lstrip(".").lower()
+    with atomic_path(path) as tmp:
+        # No timestamps or version strings in the file: the same view gives the same bytes.
+        meta = {"Software": None} if fmt == "png" else {"Creator": None} if fmt == "svg" else {"Producer": None,
+                                                                                             "CreationDate": None}
+        fig.savefig(tmp, format=fmt, metadata=meta, bbox_inches="tight", pad_inches=0.15)
+

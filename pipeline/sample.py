@@ -1,0 +1,164 @@
+"""Sampling scenes from a Scenic program with the official compiler (scenic 3.1.1), read back as scene JSON.
+
+Shared by `r2s sample` and `r2s render --samples`. Scenic is imported here, lazily (≈ 1 s), never at module
+import. Scenic draws from Python's `random` and numpy's global generators; both are seeded for a run and
+restored afterwards, so the same text and seed give the same scenes in any process, and a caller's own random
+state is left as it was.
+
+Text given by a user is a program: compiling it runs it (Scenic is Python). The DSL route (`sample_program`)
+regenerates the text from a validated DSL program and scene instead, and checks every sample against the DSL.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from pipeline.errors import UserError
+from synth.config import SynthConfig
+from synth.dsl import Program
+from synth.emit_scenic import COLLISIONS_PARAM, FRAME_PARAM, render_scenic
+from synth.geometry import normalize
+from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
+from synth.semantics import check
+
+DEFAULT_MAX_ITERATIONS = 2000  # Scenic's own default for one scene
+MAX_SEED = 2**32 - 1  # numpy's seed range
+
+
+class ScenicProgramError(UserError):
+    """The Scenic text does not compile, or fails while sampling, or is not an r2sgen program. One line."""
+
+
+class SamplingFailed(UserError):
+    """Rejection sampling found no scene within its iteration budget. One line, with what to try."""
+
+
+@dataclass(frozen=True)
+class SampleOptions:
+    n: int = 1
+    seed: int = 0
+    max_iterations: int = DEFAULT_MAX_ITERATIONS  # per scene
+    allow_collisions: bool = False
+
+    def __post_init__(self) -> None:
+        if self.n < 1 or self.max_iterations < 1:
+            raise UserError("the number of scenes and the iteration budget must be at least 1")
+        if not 0 <= self.seed <= MAX_SEED:
+            raise UserError(f"the seed must be in [0, {MAX_SEED}], got {self.seed}")
+
+
+@dataclass(frozen=True)
+class Samples:
+    scenes: tuple[Scene, ...]
+    iterations: int  # rejection-sampling iterations over all scenes (n when nothing was rejected)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), "")
+    text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+@contextmanager
+def _seeded(seed: int) -> Iterator[None]:
+    import numpy
+
+    saved = random.getstate(), numpy.random.get_state()
+    random.seed(seed)
+    numpy.random.seed(seed)
+    try:
+        yield
+    finally:
+        random.setstate(saved[0])
+        numpy.random.set_state(saved[1])
+
+
+def _compile(text: str, options: SampleOptions, filename: str):
+    import scenic
+
+    try:
+        scenario = scenic.scenarioFromString(
+            text, params={COLLISIONS_PARAM: options.allow_collisions}, filename=filename, mode2D=True
+        )
+    except Exception as exc:  # any failure of a program text is the text's: Scenic raises all kinds
+        raise ScenicProgramError(f"{filename}: Scenic cannot compile it: {_first_line(exc)}") from None
+    if options.allow_collisions and any(o.allowCollisions is False for o in scenario.objects):
+        # A hand-written program need not read the parameter; then the flag would silently do nothing.
+        raise ScenicProgramError(
+            f"{filename}: --allow-collisions has no effect: its classes do not read globalParameters.{COLLISIONS_PARAM}"
+        )
+    return scenario
+
+
+def _frame_id(scenario, k: int) -> str:
+    base = scenario.params.get(FRAME_PARAM)
+    if not isinstance(base, str) or not base or not base.isprintable():
+        base = "sample"
+    return f"{base[:240]}#sample{k}"  # the scene contract caps frame ids at 256 characters
+
+
+def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>") -> Scene:
+    """A sampled Scenic scene as our scene: `name` is the id, the class the type; all of it re-validated."""
+    entities = []
+    for i, o in enumerate(sampled.objects):
+        name = getattr(o, "name", None)
+        if name is None:
+            raise ScenicProgramError(
+                f"{filename}: object {i} ({type(o).__name__}) has no name: not a program written by r2sgen"
+            )
+        entities.append({
+            # + 0.0 turns -0.0 into 0.0, which Scenic produces for a zero yaw and JSON would print as -0.0.
+            "id": name, "type": type(o).__name__, "x": float(o.position.x) + 0.0, "y": float(o.position.y) + 0.0,
+            "heading": normalize(math.degrees(float(o.heading))) + 0.0, "length": float(o.length),
+            "width": float(o.width),
+        })
+    try:
+        return scene_from_dict({"frame_id": frame_id, "entities": entities}, max_entities=DEFAULT_MAX_ENTITIES)
+    except SceneError as exc:
+        raise ScenicProgramError(f"{filename}: a sampled scene is not a valid scene: {exc}") from None
+
+
+def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>") -> Samples:
+    """Compile Scenic text and draw options.n scenes from it."""
+    from scenic.core.distributions import RejectionException
+
+    with _seeded(options.seed):
+        scenario = _compile(text, options, filename)
+        scenes, total = [], 0
+        for k in range(options.n):
+            try:
+                sampled, iterations = scenario.generate(maxIterations=options.max_iterations)
+            except RejectionException:
+                hint = "" if options.allow_collisions else " or pass --allow-collisions"
+                raise SamplingFailed(
+                    f"{filename}: no scene {'satisfies the requirements' if options.allow_collisions else 'without collisions'} "
+                    f"found in {options.max_iterations} iterations (scene {k + 1} of {options.n}); "
+                    f"raise --max-iterations{hint}"
+                ) from None
+            except Exception as exc:
+                raise ScenicProgramError(f"{filename}: Scenic fails while sampling: {_first_line(exc)}") from None
+            total += iterations
+            scenes.append(scene_from_scenic(sampled, _frame_id(scenario, k), filename))
+    return Samples(tuple(scenes), total)
+
+
+def sample_program(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions) -> Samples:
+    """The DSL route: Scenic text regenerated from a validated program and scene; every sample is checked."""
+    ids = {e.id for e in scene.others}
+    unknown = [s.id for s in program.statements if s.id not in ids]
+    if unknown:
+        raise UserError(f"the program declares {unknown[0]!r}, which is not an entity of scene {scene.frame_id}")
+    text = render_scenic(program, scene, config)
+    try:
+        samples = sample_scenic(text, options, filename="<emitted Scenic>")
+    except ScenicProgramError as exc:  # our own text failing is a bug, not bad input
+        raise RuntimeError(str(exc)) from None
+    for k, s in enumerate(samples.scenes):
+        result = check(program, s, config)
+        if not result.ok:
+            raise RuntimeError(f"sampled scene {k} is outside the program's semantics: {result.violations[0]}")
+    return samples
