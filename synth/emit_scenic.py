@@ -15,10 +15,15 @@ and runs every sampled scene through synth.semantics.check):
   away from) binds the position to `<id>__at` first.
 - Bearings are taken as `angle from (0 @ 0) to (q - p)`: scenic 3.1.1 fails to sample `angle from p to q` when
   p is the position of a random object ("cannot iterate through a random value"); from a fixed origin it works.
-- Ranges are printed exactly as in the DSL, unshrunk. Scenic samples Range(a, b) with random.uniform, so a
-  bound itself can come out; what could then land outside the DSL's bound is float rounding in the offsets,
-  rotations and atan2 — on the order of 1e-13 m or degrees for scenes of hundreds of metres, four orders of
-  magnitude inside the checker's 1e-9 slack. A shrunk range would only hide that margin, so there is none.
+- Ranges are printed as in the DSL, unshrunk, with one exception. Scenic samples Range(a, b) with
+  random.uniform, so a bound itself can come out (tests/test_scenic.py forces every Range to its bounds); float
+  rounding then moves a distance or an angle by ~1e-13, far inside the checker's 1e-9 slack. The exception is
+  a distance Range that starts at 0 (the synthesizer clamps centred distances there): at distance 0 the bearing
+  is undefined and the DSL's direction relations do not hold, and just above 0 the bearing the checker
+  recomputes from the rounded coordinates (p - ref, each rounded to ~1e-14 m) is off by ~1e-14 / d radians.
+  Such a Range is sampled from dsl__MIN_DISTANCE = 0.05 m instead: bearings stay exact to 1e-10 degrees for
+  coordinates up to a kilometre, and what is left out, centres within 5 cm of each other, is a sliver no
+  recorded scene occupies. Every sample stays inside the semantics; only that sliver is never drawn.
 - Each object carries `name` = its entity id and its class is its type, which is how `r2s sample` writes the
   sampled scene back as scene JSON (ids re-validated there). `param r2s_frame_id` names the recorded frame.
 - Scenic's non-intersection requirement stays on unless the global parameter r2s_allow_collisions is overridden
@@ -45,12 +50,14 @@ from synth.scene import ENTITY_TYPES, Entity, Scene
 FRAME_PARAM = "r2s_frame_id"
 COLLISIONS_PARAM = "r2s_allow_collisions"
 POSITION_SUFFIX = "__at"
+MIN_DISTANCE = 0.05  # metres; see the module docstring
 
 PRELUDE = '''\
 # The DSL's relations with its tolerances (Scenic's own `ahead of X by d` is an edge gap on X's axis and its
 # `facing toward X` is exact, so they would describe other scenes).
 dsl__DELTA1 = {delta1} deg  # half-width of the ahead / left / behind / right sectors
 dsl__DELTA2 = {delta2} deg  # tolerance of facing toward / away from
+dsl__MIN_DISTANCE = {min_distance}  # m: a distance Range from 0 is sampled from here (no bearing at distance 0)
 
 def dsl__sector(ref, phi, distance):
     """Centre distance to ref in `distance`, bearing within DELTA1 of ref.heading + phi."""
@@ -88,9 +95,18 @@ def _range(r: Range) -> str:
     return f"Range({fmt_number(r.lo)}, {fmt_number(r.hi)})"
 
 
+def _distance(r: Range) -> str:
+    """A sector's distance Range, kept off 0 where the bearing vanishes (see the module docstring)."""
+    if r.lo >= MIN_DISTANCE:
+        return _range(r)
+    if r.hi >= MIN_DISTANCE:
+        return f"Range(dsl__MIN_DISTANCE, {fmt_number(r.hi)})"
+    return f"Range({fmt_number(r.hi)}, {fmt_number(r.hi)})"  # all of it under the floor: its top only
+
+
 def _position(pos) -> str:
     if isinstance(pos, DirectionPos):
-        return f"dsl__sector_{pos.direction}({pos.ref}, {_range(pos.distance)})"
+        return f"dsl__sector_{pos.direction}({pos.ref}, {_distance(pos.distance)})"
     if isinstance(pos, LocalXYPos):
         return f"dsl__relative_xy({pos.ref}, {_range(pos.lateral)}, {_range(pos.forward)})"
     if isinstance(pos, AbsoluteXYPos):
@@ -138,7 +154,8 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
         f"param {COLLISIONS_PARAM} = False",
         "",
         *_classes(types),
-        PRELUDE.format(delta1=fmt_number(config.delta1), delta2=fmt_number(config.delta2)),
+        PRELUDE.format(delta1=fmt_number(config.delta1), delta2=fmt_number(config.delta2),
+                       min_distance=fmt_number(MIN_DISTANCE)),
     ]
     ego = scene.ego
     # ego is the recorded one, at full precision: every relation hangs off it.
