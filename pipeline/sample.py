@@ -77,7 +77,8 @@ def _seeded(seed: int) -> Iterator[None]:
         numpy.random.set_state(saved[1])
 
 
-def _compile(text: str, options: SampleOptions, filename: str):
+def compile_scenic(text: str, options: SampleOptions, filename: str = "<program>"):
+    """The Scenic scenario of a text, with the collision switch of the options (a UserError if it fails)."""
     import scenic
 
     try:
@@ -122,12 +123,11 @@ def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>") -> Sc
         raise ScenicProgramError(f"{filename}: a sampled scene is not a valid scene: {exc}") from None
 
 
-def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>") -> Samples:
-    """Compile Scenic text and draw options.n scenes from it."""
+def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>") -> Samples:
+    """options.n scenes of a compiled scenario, seeded: compiling draws nothing, sampling starts from the seed."""
     from scenic.core.distributions import RejectionException
 
     with _seeded(options.seed):
-        scenario = _compile(text, options, filename)
         scenes, total = [], 0
         for k in range(options.n):
             try:
@@ -146,6 +146,21 @@ def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>"
     return Samples(tuple(scenes), total)
 
 
+def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>") -> Samples:
+    """Compile Scenic text and draw options.n scenes from it."""
+    return draw_scenes(compile_scenic(text, options, filename), options, filename)
+
+
+def recorded_overlaps(scene: Scene) -> list[tuple[str, str]]:
+    """Pairs of entities whose boxes overlap in the scene: why collision-free sampling may find nothing."""
+    from shapely.geometry import Polygon  # a dependency of scenic
+
+    from pipeline.render import ego_frame
+
+    boxes = [(b.id, Polygon(b.corners())) for b in ego_frame(scene).values()]
+    return [(a, b) for i, (a, pa) in enumerate(boxes) for b, pb in boxes[i + 1:] if pa.intersection(pb).area > 0]
+
+
 def sample_program(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions) -> Samples:
     """The DSL route: Scenic text regenerated from a validated program and scene; every sample is checked."""
     ids = {e.id for e in scene.others}
@@ -155,6 +170,13 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
     text = render_scenic(program, scene, config)
     try:
         samples = sample_scenic(text, options, filename="<emitted Scenic>")
+    except SamplingFailed as exc:
+        pairs = recorded_overlaps(scene)
+        if not pairs or options.allow_collisions:
+            raise
+        a, b = pairs[0]
+        raise SamplingFailed(f"{exc}; the recorded scene itself has {len(pairs)} overlapping "
+                             f"pair{'s' if len(pairs) > 1 else ''} of boxes (e.g. {a} and {b})") from None
     except ScenicProgramError as exc:  # our own text failing is a bug, not bad input
         raise RuntimeError(str(exc)) from None
     for k, s in enumerate(samples.scenes):

@@ -161,7 +161,8 @@ def test_collisions_refused_by_default_allowed_with_the_flag():
         {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
         {"id": "car1", "type": "Car", "x": 0, "y": 1.0, "heading": 0}]})
     program = parse_program("car1 = new Car ahead of ego by Range(0.5, 1.5), facing Range(-2.5, 2.5) deg\n")
-    with pytest.raises(SamplingFailed, match="without collisions found in 50 iterations.*--allow-collisions"):
+    with pytest.raises(SamplingFailed, match="without collisions found in 50 iterations.*--allow-collisions.*"
+                                             "recorded scene itself has 1 overlapping pair of boxes .e.g. ego and car1"):
         sample_program(program, scene, SynthConfig(), SampleOptions(n=1, max_iterations=50))
     samples = sample_program(program, scene, SynthConfig(), SampleOptions(n=3, allow_collisions=True))
     assert all(check(program, s).ok for s in samples.scenes)
@@ -205,11 +206,15 @@ def test_cli_writes_scene_json_byte_identical_for_a_seed(files, tmp_path, monkey
 
 
 def test_cli_budget_exhausted_is_one_line_exit_2_nothing_written(files, tmp_path):
-    scenic_file, _, _ = files["crowded"]
+    scenic_file, dsl, scene = files["crowded"]
     out = tmp_path / "none"
     proc = run_r2s("sample", str(scenic_file), "--n", "2", "--max-iterations", "3", "--out", str(out))
     assert_one_line_error(proc, 2, contains="no scene without collisions found in 3 iterations")
     assert "--allow-collisions" in proc.stderr and "--max-iterations" in proc.stderr
+    assert not out.exists()
+    # From the DSL program and its scene, the message also says why: the recording's own boxes overlap.
+    proc = run_r2s("sample", "--program", str(dsl), "--scene", str(scene), "--max-iterations", "3", "--out", str(out))
+    assert_one_line_error(proc, 2, contains="the recorded scene itself has 8 overlapping pairs of boxes")
     assert not out.exists()
     proc = run_r2s("sample", str(scenic_file), "--n", "2", "--allow-collisions", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
