@@ -97,23 +97,21 @@ class Reference:
     kind: str  # a key of RELATION_KINDS
 
 
+# The DSL's relative forms, by the kind of arrow they draw; the absolute forms (cost 2) have no reference.
+_KINDS = {DirectionPos: "sector", LocalXYPos: "relative_xy", FacingRelation: "facing",
+          RelativeHeading: "relative_heading"}
+
+
 def references(program: Program) -> tuple[tuple[Reference, ...], tuple[str, ...], tuple[str, ...]]:
     """(arrows from reference to entity, ids placed absolutely (cost 2), ids headed absolutely (cost 2))."""
     arrows, abs_pos, abs_head = [], [], []
     for st in program.statements:
-        pos, head = st.position, st.heading
-        if isinstance(pos, DirectionPos):
-            arrows.append(Reference(pos.ref, st.id, "sector"))
-        elif isinstance(pos, LocalXYPos):
-            arrows.append(Reference(pos.ref, st.id, "relative_xy"))
-        else:
-            abs_pos.append(st.id)
-        if isinstance(head, FacingRelation):
-            arrows.append(Reference(head.ref, st.id, "facing"))
-        elif isinstance(head, RelativeHeading):
-            arrows.append(Reference(head.ref, st.id, "relative_heading"))
-        else:
-            abs_head.append(st.id)
+        for part, absolute in ((st.position, abs_pos), (st.heading, abs_head)):
+            kind = _KINDS.get(type(part))
+            if kind is None:
+                absolute.append(st.id)
+            else:
+                arrows.append(Reference(part.ref, st.id, kind))
     return tuple(arrows), tuple(abs_pos), tuple(abs_head)
 
 
