@@ -9,6 +9,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from synth.scene import MAX_HEADING_SIGMA, MAX_POS_SIGMA
+
 STRATEGIES = (
     "auto",
     "bfs",
@@ -47,6 +49,12 @@ class SynthConfig:
     memory_limit: float | None = None
     # dReal's delta (only used with solver = dreal).
     dreal_delta: float = 1e-3
+    # Robust synthesis (`--uncertainty POS_M,HEAD_DEG`): every entity but ego may be anywhere within this many
+    # metres of where it was recorded (a disc) and face anywhere within this many degrees of its heading; a
+    # relation is used only where it holds for all of them, and every Range covers all of them. An entity's
+    # own pos_sigma / heading_sigma overrides these. 0, 0 is plain synthesis, byte for byte.
+    pos_uncertainty: float = 0.0
+    heading_uncertainty: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("delta1", "delta2"):
@@ -64,6 +72,12 @@ class SynthConfig:
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
                 raise ConfigError(f"{name} must be a positive number of {'seconds' if 'time' in name else 'MB'}")
+        if not (_number(self.pos_uncertainty) and 0.0 <= self.pos_uncertainty < MAX_POS_SIGMA):
+            raise ConfigError(f"pos_uncertainty must be a number of metres in [0, {MAX_POS_SIGMA:g}), "
+                              f"got {self.pos_uncertainty!r}")
+        if not (_number(self.heading_uncertainty) and 0.0 <= self.heading_uncertainty < MAX_HEADING_SIGMA):
+            raise ConfigError(f"heading_uncertainty must be a number of degrees in [0, {MAX_HEADING_SIGMA:g}), "
+                              f"got {self.heading_uncertainty!r}")
         _one_of("strategy", self.strategy, STRATEGIES)
         _one_of("oracle", self.oracle, ORACLES)
         _one_of("solver", self.solver, SOLVERS)
@@ -76,9 +90,37 @@ class SynthConfig:
         """Hash of what decides the program: constants, strategy, oracle, solver, limits.
 
         Two runs with the same hash on the same frame produce the same row, so the pipeline may skip one.
+        The uncertainty fields enter only when non-zero: plain synthesis keeps the hashes it always had, so
+        programs.parquet files written before robust synthesis existed still resume.
         """
-        blob = json.dumps(asdict(self), sort_keys=True).encode()
+        values = asdict(self)
+        for name in ("pos_uncertainty", "heading_uncertainty"):
+            if values[name] == 0.0:
+                del values[name]
+        blob = json.dumps(values, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def parse_uncertainty(text: str) -> tuple[float, float]:
+    """`POS_M,HEAD_DEG` (as `--uncertainty` takes it) -> (metres, degrees); ConfigError when it is not that."""
+    parts = str(text).split(",")
+    if len(parts) != 2:
+        raise ConfigError(f"uncertainty must be POS_M,HEAD_DEG (two numbers), got {text!r}")
+    try:
+        pos, head = (float(p) for p in parts)
+    except ValueError:
+        raise ConfigError(f"uncertainty must be POS_M,HEAD_DEG (two numbers), got {text!r}") from None
+    if not (math.isfinite(pos) and 0.0 <= pos < MAX_POS_SIGMA):
+        raise ConfigError(f"position uncertainty must be a number of metres in [0, {MAX_POS_SIGMA:g}), got {parts[0]!r}")
+    if not (math.isfinite(head) and 0.0 <= head < MAX_HEADING_SIGMA):
+        raise ConfigError(
+            f"heading uncertainty must be a number of degrees in [0, {MAX_HEADING_SIGMA:g}), got {parts[1]!r}"
+        )
+    return pos, head
 
 
 def _one_of(name: str, value: Any, allowed: tuple[str, ...]) -> None:

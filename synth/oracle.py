@@ -22,6 +22,7 @@ from synth.relations import (
     closed_form_table,
     settle_exactly,
 )
+from synth.robust import is_robust, robust_closed_form_table, settle_conservatively
 from synth.scene import Entity, Scene
 from synth.smt import make_backend
 
@@ -92,14 +93,18 @@ class RelationOracle:
 def make_oracle(scene: Scene, config: SynthConfig) -> RelationOracle:
     """The oracle the config names. Index 0 is ego, then the scene's other entities in scene order."""
     ids = (scene.ego.id,) + tuple(e.id for e in scene.others)
+    # Robust synthesis asks a stronger question of every pair (synth.robust); its floats are a pre-filter too.
+    robust = is_robust(scene, config)
     if config.oracle == "closed-form":
+        if robust:
+            return RelationOracle(scene, config, ids, settle_conservatively(robust_closed_form_table(scene, config)))
         table = settle_exactly(closed_form_table(scene, config), scene, config)
         return RelationOracle(scene, config, ids, table)
     backend = make_backend(config)
     if config.oracle == "smt":
         return RelationOracle(scene, config, ids, None, backend)
     # hybrid: floats settle the clear pairs; the solver settles the ones inside the guard band.
-    table = closed_form_table(scene, config)
+    table = (robust_closed_form_table if robust else closed_form_table)(scene, config)
     oracle = RelationOracle(scene, config, ids, None, backend)
     pos, head = table.position.copy(), table.heading.copy()
     for kind, r, e in table.undecided():

@@ -13,7 +13,7 @@ import keyword
 import math
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
@@ -39,6 +39,9 @@ ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
 EGO_ID = "ego"
 MAX_ID_LENGTH = 64
 DEFAULT_MAX_ENTITIES = 1000
+# Bounds on a measurement error (robust synthesis): metres of position, degrees of heading.
+MAX_POS_SIGMA = 1000.0
+MAX_HEADING_SIGMA = 90.0
 
 _ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
@@ -89,6 +92,10 @@ class Entity:
     heading: float
     length: float | None = None
     width: float | None = None
+    # This entity's own bound on its measurement error (position: metres, a disc; heading: degrees, each side),
+    # overriding the configured uncertainty (robust synthesis). None: the configured one applies.
+    pos_sigma: float | None = None
+    heading_sigma: float | None = None
 
     @property
     def is_ego(self) -> bool:
@@ -133,6 +140,9 @@ class Scene:
                 d["length"] = e.length
             if e.width is not None:
                 d["width"] = e.width
+            for key in ("pos_sigma", "heading_sigma"):
+                if (v := getattr(e, key)) is not None:
+                    d[key] = v
             out.append(d)
         return {"frame_id": self.frame_id, "entities": out}
 
@@ -162,6 +172,16 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         if f <= 0.0:
             raise SceneError(f"entity {eid!r} {key} must be positive, got {v!r}")
         dims.append(f)
+    sigmas = []
+    for key in ("pos_sigma", "heading_sigma"):
+        v = raw.get(key)
+        if v is not None:
+            v = _finite(v, f"entity {eid!r} {key}")
+            # Two headings' bounds together must stay under half a turn, so a heading Range stays < 360 wide.
+            cap = MAX_HEADING_SIGMA if key == "heading_sigma" else MAX_POS_SIGMA
+            if not 0.0 <= v < cap:
+                raise SceneError(f"entity {eid!r} {key} must be in [0, {cap:g}), got {v!r}")
+        sigmas.append(v)
     return Entity(
         id=eid,
         type=etype,
@@ -170,6 +190,8 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         heading=_finite(raw["heading"], f"entity {eid!r} heading"),
         length=dims[0],
         width=dims[1],
+        pos_sigma=sigmas[0],
+        heading_sigma=sigmas[1],
     )
 
 
@@ -194,9 +216,7 @@ def make_scene(frame_id: str, entities: Iterable[Entity]) -> Scene:
 
     return Scene(
         frame_id=frame_id,
-        entities=tuple(
-            Entity(e.id, e.type, e.x, e.y, normalize(e.heading), e.length, e.width) for e in entities
-        ),
+        entities=tuple(replace(e, heading=normalize(e.heading)) for e in entities),
     )
 
 

@@ -11,6 +11,7 @@ arithmetic, exact in z3 (nlsat). dReal (optional) gets the same formula over dou
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -22,12 +23,14 @@ from synth.dsl import (
     AbsoluteHeading,
     AbsoluteXYPos,
     DirectionPos,
+    FacingRelation,
     Program,
     RelativeHeading,
     Statement,
     fmt_number,
 )
 from synth.geometry import exact_cos_squared, exact_heading_vector
+from synth.robust import bounds_of, is_robust, narrowed, pair_is_robust, radius_of
 from synth.scene import Entity, Scene
 
 
@@ -140,7 +143,15 @@ class Z3Backend:
 
     # ------------------------------------------------------------------------------------ relation queries
     def position_relation(self, direction: str, ref: Entity, e: Entity) -> bool:
-        """Is there a Range(a, a + C_dist), a >= 0, such that `e = ... direction ref by Range(a, ...)` holds?"""
+        """Is there a Range(a, a + C_dist), a >= 0, such that `e = ... direction ref by Range(a, ...)` holds?
+
+        Robust (either entity uncertain): does it hold for every perturbation? The Range then widens to cover
+        every distance (synth.robust), so only the sector is in question.
+        """
+        if pair_is_robust(ref, e, self.config):
+            cone = narrowed(self.config.delta1, bounds_of(ref, self.config).heading)
+            return self.robust_cone(_exact_offset(ref, e), radius_of(ref, e, self.config),
+                                    ref.heading + DIRECTIONS[direction][1], cone)
         vx, vy = self._offset(ref, e)
         a = self._var("a")
         return self._check(
@@ -150,10 +161,31 @@ class Z3Backend:
         )
 
     def heading_relation(self, mode: str, ref: Entity, e: Entity) -> bool:
+        if pair_is_robust(ref, e, self.config):
+            cx, cy = _exact_offset(ref, e)
+            sign = -1 if mode == "toward" else 1
+            cone = narrowed(self.config.delta2, bounds_of(e, self.config).heading)
+            return self.robust_cone((sign * cx, sign * cy), radius_of(ref, e, self.config), e.heading, cone)
         vx, vy = self._offset(ref, e)
         if mode == "toward":
             vx, vy = -vx, -vy
         return self._check(self._cone(vx, vy, e.heading, self.config.delta2))
+
+    def robust_cone(self, c: tuple[Fraction, Fraction], radius: Fraction, axis: float, cone: float | None) -> bool:
+        """Does every v in the disc D(c, radius) lie within `cone` degrees of the axis (synth.robust)?
+
+        The existentially quantified violation is asked: a v in the disc outside the cone. unsat = it holds.
+        """
+        if cone is None:
+            return False
+        cx, cy = self.q(c[0]), self.q(c[1])
+        if radius == 0:
+            return self._check(self._cone(cx, cy, axis, cone))
+        wx, wy = self._var("wx"), self._var("wy")
+        return not self._fresh_check(
+            wx * wx + wy * wy <= self.q(radius * radius),
+            self.z3.Not(self._cone(cx + wx, cy + wy, axis, cone)),
+        )
 
     # ------------------------------------------------------------------------------------ range values
     def measure(self, requests: list[MeasureRequest]) -> list[Measurement]:
@@ -248,7 +280,11 @@ class Z3Backend:
         """Ids of the statements the solver cannot show to hold on the scene (empty: certified).
 
         One check for the whole program; only when it fails is each statement asked alone, to name it.
+        Robust: each statement's violations over every perturbation must be unsat (robust_violations).
         """
+        if is_robust(scene, self.config):
+            by_id = scene.by_id()
+            return [st.id for st in program.statements if not self.robust_holds(st, by_id)]
         t = time.perf_counter()  # building the formulas is solver work too: it is counted
         by_id = scene.by_id()
         formulas = [self.statement_formula(st, by_id) for st in program.statements]
@@ -260,6 +296,100 @@ class Z3Backend:
         if ok:
             return []
         return [st.id for st, f in zip(program.statements, formulas) if not self._check(f)]
+
+
+    # ------------------------------------------------------------------------------------ robust certification
+    def robust_violations(self, st: Statement, by_id: dict[str, Entity]) -> list[Any]:
+        """Ways `st` (as printed) could fail under a perturbation of the scene within its bounds (synth.robust).
+
+        The statement fails for some perturbation iff one of these is satisfiable: each is one part (distance,
+        sector, coordinates, heading) over the perturbations of the entities that part depends on. A position
+        part depends on p_e - p_r only, which ranges over the disc of radius rho_e + rho_r (Minkowski sum);
+        the reference frame of a local position turns by (c, s) on the unit circle with c >= cos(eta); heading
+        offsets move linearly; sectors narrow by reduction 1 of synth.robust.
+        """
+        z3, cfg = self.z3, self.config
+        e = by_id[st.id]
+        out: list[Any] = []
+
+        def offset(ref: Entity, sign: int = 1) -> tuple[Any, Any, list[Any]]:
+            cx, cy = _exact_offset(ref, e)
+            vx, vy = self.q(sign * cx), self.q(sign * cy)
+            radius = radius_of(ref, e, cfg)
+            if radius == 0:
+                return vx, vy, []
+            wx, wy = self._var("wx"), self._var("wy")
+            return vx + wx, vy + wy, [wx * wx + wy * wy <= self.q(radius * radius)]
+
+        def outside(v: Any, rng: Any) -> list[Any]:
+            return [v < self.q(_printed(rng.lo)), v > self.q(_printed(rng.hi))]
+
+        def cone_fails(vx: Any, vy: Any, cons: list[Any], axis: float, cone: float | None) -> None:
+            out.append(z3.BoolVal(True) if cone is None else z3.And(*cons, z3.Not(self._cone(vx, vy, axis, cone))))
+
+        pos, head = st.position, st.heading
+        if isinstance(pos, AbsoluteXYPos):
+            rho = Fraction(bounds_of(e, cfg).pos)
+            wx, wy = self._var("wx"), self._var("wy")
+            disc = wx * wx + wy * wy <= self.q(rho * rho)
+            x, y = self.q(e.x) + wx, self.q(e.y) + wy
+            out += [z3.And(disc, bad) for bad in outside(x, pos.x) + outside(y, pos.y)]
+        elif isinstance(pos, DirectionPos):
+            ref = by_id[pos.ref]
+            vx, vy, cons = offset(ref)
+            lo, hi = max(_printed(pos.distance.lo), Fraction(0)), _printed(pos.distance.hi)
+            sq = vx * vx + vy * vy
+            out += [z3.And(*cons, sq < self.q(lo * lo)), z3.And(*cons, sq > self.q(hi * hi))]
+            cone_fails(vx, vy, cons, ref.heading + DIRECTIONS[pos.direction][1],
+                       narrowed(cfg.delta1, bounds_of(ref, cfg).heading))
+        else:
+            ref = by_id[pos.ref]
+            vx, vy, cons = offset(ref)
+            ux, uy = (self.q(c) for c in exact_heading_vector(ref.heading))
+            lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+            eta = bounds_of(ref, cfg).heading
+            if eta > 0:
+                c, s = self._var("c"), self._var("s")
+                cons = cons + [c * c + s * s == 1, c >= self.q(Fraction(math.cos(math.radians(eta))))]
+                lx, ly = c * lx - s * ly, s * lx + c * ly
+            out += [z3.And(*cons, bad) for bad in outside(lx, pos.lateral) + outside(ly, pos.forward)]
+        if isinstance(head, FacingRelation):
+            vx, vy, cons = offset(by_id[head.ref], -1 if head.mode == "toward" else 1)
+            cone_fails(vx, vy, cons, e.heading, narrowed(cfg.delta2, bounds_of(e, cfg).heading))
+        else:
+            ref = by_id[head.ref] if isinstance(head, RelativeHeading) else None
+            lo, hi = _printed(head.angle.lo), _printed(head.angle.hi)
+            # The branch k that puts the observed offset just above lo (as _angle_in): the perturbed offsets
+            # move continuously by less than half a turn, so within the Range they stay on that branch.
+            gap = _frac(e.heading) - _frac(ref.heading if ref else 0.0)
+            alpha = gap - 360 * ((gap - lo) // 360)
+            eta = _frac(bounds_of(e, cfg).heading) + (_frac(bounds_of(ref, cfg).heading) if ref else 0)
+            turn = self._var("theta")
+            out += [z3.And(-self.q(eta) <= turn, turn <= self.q(eta), bad) for bad in outside(self.q(alpha) + turn, head.angle)]
+        return out
+
+    def robust_holds(self, st: Statement, by_id: dict[str, Entity]) -> bool:
+        """Is every violation of `st` unsat? Each is asked of a fresh solver: z3's incremental (push/pop)
+        solver does not run nlsat, and on these nonlinear questions it can take seconds where nlsat takes ms."""
+        for f in self.robust_violations(st, by_id):
+            if self._fresh_check(f):
+                return False
+        return True
+
+    def _fresh_check(self, *constraints: Any) -> bool:
+        t = time.perf_counter()
+        s = self.z3.SolverFor("QF_NRA")
+        s.add(*constraints)
+        result = s.check()
+        self.stats.queries += 1
+        self.stats.seconds += time.perf_counter() - t
+        if result == self.z3.unknown:
+            raise RuntimeError(f"z3 returned unknown: {s.reason_unknown()}")
+        return result == self.z3.sat
+
+
+def _exact_offset(ref: Entity, e: Entity) -> tuple[Fraction, Fraction]:
+    return _frac(e.x) - _frac(ref.x), _frac(e.y) - _frac(ref.y)
 
 
 @dataclass
@@ -301,7 +431,15 @@ class DrealBackend:
         self.stats.seconds += time.perf_counter() - t
         return box
 
+    def _exact(self) -> Z3Backend:
+        # Robust questions are about every point of a disc: z3 decides them exactly (dReal only delta-close).
+        if getattr(self, "_z3", None) is None:
+            self._z3 = Z3Backend(self.config, self.stats)
+        return self._z3
+
     def position_relation(self, direction: str, ref: Entity, e: Entity) -> bool:
+        if pair_is_robust(ref, e, self.config):
+            return self._exact().position_relation(direction, ref, e)
         vx, vy = e.x - ref.x, e.y - ref.y
         d, a = self._var("d"), self._var("a")
         f = self.dreal.And(
@@ -311,6 +449,8 @@ class DrealBackend:
         return self._sat(f) is not None
 
     def heading_relation(self, mode: str, ref: Entity, e: Entity) -> bool:
+        if pair_is_robust(ref, e, self.config):
+            return self._exact().heading_relation(mode, ref, e)
         vx, vy = e.x - ref.x, e.y - ref.y
         if mode == "toward":
             vx, vy = -vx, -vy

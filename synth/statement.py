@@ -3,7 +3,8 @@
 For each entity, in order: its type from the scene; a direction relation to the nearest reference (ego or an
 entity declared earlier) that has one, else `on Range @ Range relative to ego` (cost 1); a facing relation to
 the nearest reference that has one, else `facing Range deg relative to ego` (cost 1). Ranges are centred on the
-exact values the oracle's solver measures (closed form: on float geometry).
+exact values the oracle's solver measures (closed form: on float geometry); in robust synthesis they widen to
+cover every scene within the measurement error (synth.robust).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from synth.geometry import signed, to_local
 from synth.oracle import RelationOracle
 from synth.ranges import centred
 from synth.relations import DIRECTION_NAMES, FACING_NAMES, NONE
+from synth.robust import angle_range, bounds_of, distance_range, is_robust, local_ranges, radius_of
 from synth.smt import Measurement, MeasureRequest
 
 
@@ -65,20 +67,32 @@ def build_program(oracle: RelationOracle, order: tuple[int, ...], config: SynthC
         )
         for i, (pr, pc, hr, hc) in zip(order, choices)
     ]
-    if oracle.backend is not None:
+    robust = is_robust(oracle.scene, config)
+    if robust:
+        # Robust Ranges come from exact rationals, widened over every perturbation (synth.robust).
+        measured = [None] * len(requests)
+    elif oracle.backend is not None:
         measured = oracle.backend.measure(requests)
     else:
         measured = [_float_measure(r) for r in requests]
     statements = []
     for i, (pr, pc, hr, hc), m in zip(order, choices, measured):
-        e = ents[i]
+        e, p, h = ents[i], ents[pr], ents[hr]
         if pc != NONE:
-            position = DirectionPos(DIRECTION_NAMES[pc], ents[pr].id, centred(m.distance, config.c_dist, True))
+            distance = (distance_range(e, p, radius_of(e, p, config), config.c_dist) if robust
+                        else centred(m.distance, config.c_dist, True))
+            position = DirectionPos(DIRECTION_NAMES[pc], p.id, distance)
+        elif robust:
+            lateral, forward = local_ranges(e, p, radius_of(e, p, config), bounds_of(p, config).heading, config.c_dist)
+            position = LocalXYPos(lateral, forward, p.id)
         else:
-            position = LocalXYPos(centred(m.lateral, config.c_dist), centred(m.forward, config.c_dist), ents[pr].id)
+            position = LocalXYPos(centred(m.lateral, config.c_dist), centred(m.forward, config.c_dist), p.id)
         if hc != NONE:
-            heading = FacingRelation(FACING_NAMES[hc], ents[hr].id)
+            heading = FacingRelation(FACING_NAMES[hc], h.id)
+        elif robust:
+            angle = angle_range(e, h, bounds_of(e, config).heading, bounds_of(h, config).heading, config.c_head)
+            heading = RelativeHeading(angle, h.id)
         else:
-            heading = RelativeHeading(centred(m.angle, config.c_head), ents[hr].id)
+            heading = RelativeHeading(centred(m.angle, config.c_head), h.id)
         statements.append(Statement(e.id, e.type, position, heading))
     return Program(tuple(statements))

@@ -7,9 +7,10 @@ from dataclasses import dataclass
 
 from synth import __version__
 from synth.config import SynthConfig
-from synth.dsl import Program
+from synth.dsl import Program, fmt_number
 from synth.emit_scenic import render_scenic
 from synth.oracle import make_oracle
+from synth.robust import is_robust
 from synth.scene import Scene
 from synth.search import Budget, CostModel, search
 from synth.search.budget import peak_rss_mb
@@ -86,10 +87,11 @@ def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
         if failed:
             raise CertificationError(f"the solver refutes the statements of {', '.join(failed)}")
         certified = True
-    scenic = render_scenic(
-        program, scene, config,
-        header=f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}",
-    )
+    header = f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}"
+    if is_robust(scene, config):
+        header += (f"; robust to {fmt_number(config.pos_uncertainty)} m, {fmt_number(config.heading_uncertainty)} deg"
+                   " (entity sigmas override)")
+    scenic = render_scenic(program, scene, config, header=header)
     stats = oracle.backend.stats if oracle.backend is not None else None
     return SynthResult(
         frame_id=scene.frame_id,
