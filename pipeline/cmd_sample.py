@@ -41,7 +41,9 @@ def add_sampling_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenic_file", nargs="?", metavar="PROGRAM.scenic",
-                   help="Scenic program written by r2sgen (compiling runs it: only programs you trust)")
+                   help="Scenic program written by r2sgen, unedited (anything else is refused: compiling runs it)")
+    p.add_argument("--trusted", action="store_true",
+                   help="compile a hand-written or edited Scenic file too (it runs as Python: only files you checked)")
     p.add_argument("--program", dest="dsl_file", metavar="P.dsl", help="sample from a DSL program instead (with --scene)")
     p.add_argument("--scene", metavar="S.json", help="the scene the DSL program was synthesized for (ego, sizes)")
     p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2) for the DSL route")
@@ -84,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         if args.scene is not None or args.config is not None:
             raise UserError("--scene and --config belong to the --program route, not to a Scenic file")
-        samples = sample_scenic(read_text_file(args.scenic_file, "program"), options, filename=args.scenic_file)
+        samples = sample_scenic(read_text_file(args.scenic_file, "program"), options, filename=args.scenic_file,
+                                trusted=args.trusted)
     width = max(3, len(str(args.n - 1)))
     for k, scene in enumerate(samples.scenes):
         write_text_atomic(out / f"sample_{k:0{width}d}.json", scene.to_json())

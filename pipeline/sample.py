@@ -5,8 +5,11 @@ import. Scenic draws from Python's `random` and numpy's global generators; both 
 restored afterwards, so the same text and seed give the same scenes in any process, and a caller's own random
 state is left as it was.
 
-Text given by a user is a program: compiling it runs it (Scenic is Python). The DSL route (`sample_program`)
-regenerates the text from a validated DSL program and scene instead, and checks every sample against the DSL.
+Text given by a user is a program: compiling it runs it (Scenic is Python). So a Scenic file is compiled only
+if the emitter renders it again byte for byte from its own `# r2s-source` record (synth.emit_scenic): an edited
+or foreign file is refused before anything runs, unless the caller says it is trusted (`r2s sample --trusted`).
+The DSL route (`sample_program`) regenerates the text from a validated DSL program and scene instead, and
+checks every sample against the DSL.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from dataclasses import dataclass
 from pipeline.errors import UserError
 from synth.config import SynthConfig
 from synth.dsl import Program
-from synth.emit_scenic import COLLISIONS_PARAM, FRAME_PARAM, render_scenic
+from synth.emit_scenic import COLLISIONS_PARAM, FRAME_PARAM, NotGenerated, rebuild_from_source, render_scenic
 from synth.geometry import normalize
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.semantics import check
@@ -146,8 +149,24 @@ def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>") -
     return Samples(tuple(scenes), total)
 
 
-def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>") -> Samples:
-    """Compile Scenic text and draw options.n scenes from it."""
+def ensure_generated(text: str, filename: str = "<program>") -> None:
+    """Refuse, before anything runs, Scenic text that r2sgen's emitter would not write from its own record."""
+    hint = "refusing to run it (compiling Scenic runs it as Python); pass --trusted for a program you have checked"
+    try:
+        expected = rebuild_from_source(text)
+    except NotGenerated as exc:
+        raise ScenicProgramError(f"{filename} is not Scenic text written by r2sgen: {exc}; {hint}") from None
+    if expected != text:
+        got, want = text.splitlines(), expected.splitlines()
+        line = next((i for i, (a, b) in enumerate(zip(got, want)) if a != b), min(len(got), len(want)))
+        raise ScenicProgramError(f"{filename} differs from what r2sgen writes for its own record at line {line + 1}; "
+                                 f"{hint}")
+
+
+def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>", trusted: bool = False) -> Samples:
+    """Compile Scenic text and draw options.n scenes from it; untrusted text must be r2sgen's own, unedited."""
+    if not trusted:
+        ensure_generated(text, filename)
     return draw_scenes(compile_scenic(text, options, filename), options, filename)
 
 
@@ -169,7 +188,7 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
         raise UserError(f"the program declares {unknown[0]!r}, which is not an entity of scene {scene.frame_id}")
     text = render_scenic(program, scene, config)
     try:
-        samples = sample_scenic(text, options, filename="<emitted Scenic>")
+        samples = sample_scenic(text, options, filename="<emitted Scenic>", trusted=True)
     except SamplingFailed as exc:
         pairs = recorded_overlaps(scene)
         if not pairs or options.allow_collisions:

@@ -26,11 +26,19 @@ and runs every sampled scene through synth.semantics.check):
   recorded scene occupies. Every sample stays inside the semantics; only that sliver is never drawn.
 - Each object carries `name` = its entity id and its class is its type, which is how `r2s sample` writes the
   sampled scene back as scene JSON (ids re-validated there). `param r2s_frame_id` names the recorded frame.
+- The last line, `# r2s-source: {json}`, records what the text was rendered from (program, frame id, ego, boxes,
+  tolerances, header). Compiling Scenic runs it as Python, so `r2s sample` only compiles text that
+  `rebuild_from_source` renders again byte for byte from that record: an edited or foreign file is refused
+  (unless the user says --trusted), while the record itself can only ever yield what this emitter writes from
+  validated ids, closed-set types and finite numbers.
 - Scenic's non-intersection requirement stays on unless the global parameter r2s_allow_collisions is overridden
   (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).
 """
 
 from __future__ import annotations
+
+import json
+from typing import Any
 
 from synth.config import SynthConfig
 from synth.dsl import (
@@ -44,13 +52,15 @@ from synth.dsl import (
     Range,
     RelativeHeading,
     fmt_number,
+    parse_program,
 )
-from synth.scene import ENTITY_TYPES, Entity, Scene
+from synth.scene import ENTITY_TYPES, Entity, Scene, scene_from_dict
 
 FRAME_PARAM = "r2s_frame_id"
 COLLISIONS_PARAM = "r2s_allow_collisions"
 POSITION_SUFFIX = "__at"
 MIN_DISTANCE = 0.05  # metres; see the module docstring
+SOURCE_PREFIX = "# r2s-source: "
 
 PRELUDE = '''\
 # The DSL's relations with its tolerances (Scenic's own `ahead of X by d` is an edge gap on X's axis and its
@@ -168,4 +178,48 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
             lines.append(f"{at} = {where}")
             where = at
         lines.append(f"{st.id} = new {st.type} at {where}, facing {_heading(st.heading, where)}{_props(by_id[st.id])}")
+    lines.append(SOURCE_PREFIX + json.dumps(_source_record(program, scene, config, header), separators=(",", ":")))
     return "\n".join(lines) + "\n"
+
+
+def _entity_record(e: Entity) -> dict[str, Any]:
+    return {"id": e.id, "type": e.type, "x": e.x, "y": e.y, "heading": e.heading, "length": e.length,
+            "width": e.width}
+
+
+def _source_record(program: Program, scene: Scene, config: SynthConfig, header: str) -> dict[str, Any]:
+    """Exactly what render_scenic reads: ego in full, the declared entities' boxes (their positions are not
+    printed, so they are recorded as 0), the two tolerances, the header and the program."""
+    by_id = scene.by_id()
+    others = [{**_entity_record(by_id[st.id]), "x": 0.0, "y": 0.0, "heading": 0.0} for st in program.statements]
+    return {"frame_id": scene.frame_id, "header": header, "delta1": config.delta1, "delta2": config.delta2,
+            "entities": [_entity_record(scene.ego), *others], "program": str(program)}
+
+
+class NotGenerated(ValueError):
+    """Scenic text that this emitter did not write (or that was edited since). One line."""
+
+
+def rebuild_from_source(text: str) -> str:
+    """The text render_scenic writes from the record on the last line of `text`; NotGenerated if there is none.
+
+    The caller compares it with `text`: equal means every line is this emitter's, whatever the record says,
+    because the record passes the same validation as any scene and program (ids, types, finite numbers).
+    """
+    lines = text.splitlines()
+    if not lines or not lines[-1].startswith(SOURCE_PREFIX):
+        raise NotGenerated("it has no r2s-source record on its last line")
+    try:
+        rec = json.loads(lines[-1][len(SOURCE_PREFIX):])
+        if not isinstance(rec, dict):
+            raise ValueError("the record is not an object")
+        entities = [{k: v for k, v in e.items() if v is not None} for e in rec["entities"]]
+        scene = scene_from_dict({"frame_id": rec["frame_id"], "entities": entities})
+        program = parse_program(rec["program"])
+        config = SynthConfig(delta1=rec["delta1"], delta2=rec["delta2"])
+        header = rec["header"]
+        if not isinstance(header, str):
+            raise ValueError("the header is not a string")
+        return render_scenic(program, scene, config, header)
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # SceneError, DslError, ConfigError, JSON
+        raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None

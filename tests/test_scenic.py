@@ -240,19 +240,20 @@ BAD_SCENIC = {
 def test_bad_scenic_is_a_user_error(case):
     text, message = BAD_SCENIC[case]
     with pytest.raises(ScenicProgramError, match=message):
-        sample_scenic(text, SampleOptions(n=1, max_iterations=20))
+        sample_scenic(text, SampleOptions(n=1, max_iterations=20), trusted=True)
 
 
 def test_allow_collisions_on_a_program_that_ignores_it_is_refused():
     with pytest.raises(ScenicProgramError, match="no effect"):
-        sample_scenic(HANDWRITTEN, SampleOptions(allow_collisions=True))
+        sample_scenic(HANDWRITTEN, SampleOptions(allow_collisions=True), trusted=True)
 
 
 @pytest.mark.parametrize("args, message", [
     ((), "either PROGRAM.scenic or --program"),
     (("--program", "P.dsl"), "needs --scene"),
     (("missing.scenic",), "does not exist"),
-    (("BROKEN",), "cannot compile"),
+    (("BROKEN", "--trusted"), "cannot compile"),
+    (("BROKEN",), "not Scenic text written by r2sgen"),
     (("SCENIC", "--scene", "S.json"), "belong to the --program route"),
     (("SCENIC", "--n", "0"), "--n"),
     (("SCENIC", "--seed", "-1"), "--seed"),
