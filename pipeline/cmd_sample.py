@@ -89,7 +89,11 @@ def run(args: argparse.Namespace) -> int:
         samples = sample_scenic(read_text_file(args.scenic_file, "program"), options, filename=args.scenic_file,
                                 trusted=args.trusted)
     width = max(3, len(str(args.n - 1)))
+    written = {out / f"sample_{k:0{width}d}.json" for k in range(len(samples.scenes))}
     for k, scene in enumerate(samples.scenes):
         write_text_atomic(out / f"sample_{k:0{width}d}.json", scene.to_json())
+    # Samples of an earlier, larger run would read as part of this one: the directory holds this run only.
+    for stale in sorted(set(out.glob("sample_*.json")) - written):
+        stale.unlink()
     print(f"wrote {len(samples.scenes)} scenes to {out} (seed {args.seed}, {samples.iterations} iterations)")
     return 0

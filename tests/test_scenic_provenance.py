@@ -93,3 +93,16 @@ def test_trusted_compiles_an_edited_file(generated, tmp_path):
     proc = run_r2s("sample", str(path), "--n", "1", "--allow-collisions", "--trusted", "--out", str(tmp_path / "b"))
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "b" / "sample_000.json").exists()
+
+
+def test_a_smaller_rerun_leaves_no_samples_of_the_earlier_run(generated, tmp_path):
+    pytest.importorskip("scenic", reason="scenic is not installed (pip install .[scenic])")
+    path = tmp_path / "p.scenic"
+    path.write_text(generated)
+    out = tmp_path / "out"
+    (out).mkdir()
+    (out / "notes.txt").write_text("mine")
+    for n in ("4", "2"):
+        proc = run_r2s("sample", str(path), "--n", n, "--allow-collisions", "--out", str(out))
+        assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "sample_000.json", "sample_001.json"]
