@@ -159,6 +159,11 @@ def _dim(v: Any) -> float | None:
     return f if math.isfinite(f) and f > 0 else None
 
 
+def _given(v: Any) -> float | None:
+    # NaN is how pandas stores a missing float; anything else (negative, inf) is for the scene to refuse.
+    return None if v is None or pd.isna(v) else float(v)
+
+
 def frame_to_scene(rows: pd.DataFrame) -> Scene:
     """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone)."""
     from synth.scene import scene_from_dict
@@ -169,6 +174,10 @@ def frame_to_scene(rows: pd.DataFrame) -> Scene:
         d = {"id": r.entity_id, "type": r.type, "x": float(r.x), "y": float(r.y), "heading": float(r.heading)}
         for key in ("length", "width"):
             if (v := _dim(getattr(r, key))) is not None:
+                d[key] = v
+        # Optional measurement bounds (robust synthesis); a missing value (NaN, None) means "not given".
+        for key in OPTIONAL_COLUMNS:
+            if (v := _given(getattr(r, key, None))) is not None:
                 d[key] = v
         entities.append(d)
     try:

@@ -142,8 +142,10 @@ def settle_conservatively(table: RelationTable) -> RelationTable:
 def _sqrt_bracket(x: Fraction, digits: int = 15) -> tuple[Fraction, Fraction]:
     """lo <= sqrt(x) <= hi with hi - lo = 10^-digits, from integer square roots (exact)."""
     scale = 10**digits
-    root = math.isqrt(math.floor(x * scale * scale))
-    return Fraction(root, scale), Fraction(root + 1, scale)
+    scaled = x * scale * scale
+    root = math.isqrt(math.floor(scaled))
+    exact = root * root == scaled  # a perfect square (3-4-5 offsets): no need to round up
+    return Fraction(root, scale), Fraction(root if exact else root + 1, scale)
 
 
 def _floor_cents(v: Fraction) -> Fraction:
