@@ -150,8 +150,9 @@ class _Run:
         """Scenes for the workers; a frame that is not a valid scene is an error row here (the run goes on)."""
         from extractors.frames import FramesError, frame_to_scene
         from pipeline.programs import failure_row
-        from pipeline.run_task import FrameTask
+        from pipeline.run_task import TEST_HOOK_ENV, FrameTask
 
+        hook = os.environ.get(TEST_HOOK_ENV) or None
         tasks, failed = [], []
         for fid in todo:
             try:
@@ -160,7 +161,8 @@ class _Run:
                 failed.append(failure_row(fid, "error", str(exc), len(groups[fid]) - 1, self.config,
                                           self.config_hash))
                 continue
-            tasks.append(FrameTask(fid, scene, self.config, self.config_hash, hard_cap=self.args.backend == "loky"))
+            tasks.append(FrameTask(fid, scene, self.config, self.config_hash, hard_cap=self.args.backend == "loky",
+                                   test_hook=hook))
         return tasks, failed
 
     def _finish(self, store, order, computed: int) -> int:

@@ -93,7 +93,7 @@ class ChunkBuffer:
     def due(self, now: float) -> bool:
         if not self.rows:
             return False
-        return len(self.rows) >= self.size or now - (self._since or now) >= self.max_age_s
+        return len(self.rows) >= self.size or (self._since is not None and now - self._since >= self.max_age_s)
 
     def take(self) -> list[Row]:
         rows, self.rows, self._since = self.rows, [], None

@@ -72,11 +72,14 @@ class LokyPool:
                     row = future.result()
                 except BrokenProcessPool as exc:
                     lost = [task.frame_id] + [t.frame_id for t, _ in running.values()]
-                    raise WorkerLost(lost, _loky_reason(exc), death_status(str(exc))) from None
+                    reason = _loky_reason(exc)  # not the whole message: it speculates about memory
+                    raise WorkerLost(lost, reason, death_status(reason)) from None
                 yield row
             overdue = self._overdue(running)
             if overdue:
-                executor.shutdown(wait=False, kill_workers=True)
+                # wait=True: the next get_reusable_executor() shuts the old pool down again with
+                # kill_workers=False, which would override ours and join a worker that never returns.
+                executor.shutdown(wait=True, kill_workers=True)
                 raise WorkerLost(overdue, f"no answer after {self.guard_s:.0f} s (wall-clock guard); worker killed",
                                  "timeout", known=True)
 

@@ -23,7 +23,8 @@ from synth.synthesize import synthesize
 
 # Test-only fault injection: R2S_RUN_TEST_HOOK="ACTION[=ARG]@FRAME_ID" (FRAME_ID "*" = every frame). Actions:
 # kill (SIGKILL itself, as the kernel's OOM killer would), exit (os._exit(3)), alloc=MB (allocate MB under the
-# hard cap), raise, sleep=S, hang. Real runs never set it; the tests need a worker that dies on cue.
+# hard cap), raise, sleep=S, hang. Real runs never set it; the tests need a worker that dies on cue. The run
+# reads it once and hands it to every task (a reused or remote worker may not have the run's environment).
 TEST_HOOK_ENV = "R2S_RUN_TEST_HOOK"
 
 # Room left above the soft limit before the hard cap: the Budget's RSS poll (every 4096 nodes) should stop the
@@ -41,6 +42,7 @@ class FrameTask:
     # Set only where the worker is a process of its own (loky): an address-space limit is per process, and a
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
+    test_hook: str | None = None  # see TEST_HOOK_ENV
 
 
 def run_frame(task: FrameTask) -> dict:
@@ -50,7 +52,8 @@ def run_frame(task: FrameTask) -> dict:
     _reset_peak_rss()
     try:
         with _hard_memory_cap(config.memory_limit if task.hard_cap else None):
-            _test_hook(task.frame_id)
+            if task.test_hook:
+                _test_hook(task.test_hook, task.frame_id)
             return result_row(synthesize(task.scene, config), task.config_hash)
     except MemoryError:
         status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
@@ -112,10 +115,7 @@ def _hard_memory_cap(limit_mb: float | None) -> Iterator[None]:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
-def _test_hook(frame_id: str) -> None:
-    spec = os.environ.get(TEST_HOOK_ENV)
-    if not spec:
-        return
+def _test_hook(spec: str, frame_id: str) -> None:
     action, _, target = spec.partition("@")
     if target not in ("*", frame_id):
         return

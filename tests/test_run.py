@@ -1,0 +1,349 @@
+"""`r2s run` as a user runs it: real frames, real worker processes, real kills. No timed assertions: limits are
+checked through the statuses they produce, resume through rows that keep their measured values."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from conftest import ROOT, assert_one_line_error, run_r2s
+
+from extractors.frames import frame_to_scene, read_frames, scene_to_rows, write_frames
+from pipeline.programs import failure_row, read_programs
+from pipeline.run import ChunkBuffer, merge_rows, plan_run, summarize
+from pipeline.run_pool import LokyPool, compute
+from pipeline.run_task import TEST_HOOK_ENV, FrameTask
+from synth.config import SynthConfig
+from synth.dsl import parse_program
+from synth.semantics import check
+
+EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
+
+
+# ---------------------------------------------------------------------------------------------------- helpers
+
+def _write_scenes(scenes, path: Path) -> Path:
+    rows = [r for i, s in enumerate(scenes) for r in scene_to_rows(s, source="test", frame_index=i)]
+    write_frames(rows, path)
+    return path
+
+
+def _frame_ids(path: Path) -> list[str]:
+    return list(dict.fromkeys(read_frames(path)["frame_id"]))
+
+
+def _programs(out: Path):
+    return read_programs(out).set_index("frame_id", drop=False)
+
+
+def _summary(stderr: str) -> str:
+    lines = [ln for ln in stderr.splitlines() if " frames (" in ln and " computed, " in ln]
+    assert len(lines) == 1, stderr
+    return lines[0]
+
+
+def _assert_programs_contain_scenes(frames: Path, out: Path, config: SynthConfig) -> None:
+    df = read_frames(frames)
+    programs = _programs(out)
+    for fid, rows in df.groupby("frame_id", sort=False):
+        row = programs.loc[fid]
+        assert row["program"] is not None, (fid, row["status"], row["error"])
+        result = check(parse_program(row["program"]), frame_to_scene(rows), config)
+        assert result.ok, (fid, [str(v) for v in result.violations])
+
+
+def _assert_nothing_written(out: Path) -> None:
+    assert not out.exists()
+    assert not Path(f"{out}.parts").exists()
+    assert [p.name for p in out.parent.iterdir() if p.name.startswith(f".{out.name}")] == []
+
+
+@pytest.fixture(scope="module")
+def json_frames(tmp_path_factory, real_frames) -> Path:
+    """The 18 shipped nuScenes-mini keyframes (4 to 141 entities) as a frames file."""
+    return _write_scenes(real_frames, tmp_path_factory.mktemp("frames") / "frames.parquet")
+
+
+@pytest.fixture(scope="module")
+def small_frames(tmp_path_factory, real_frames) -> Path:
+    """Six small real frames: fast enough to run several times."""
+    scenes = sorted(real_frames, key=lambda s: len(s.entities))[:6]
+    return _write_scenes(scenes, tmp_path_factory.mktemp("small") / "frames.parquet")
+
+
+# ---------------------------------------------------------------------------------------------- the pipeline
+
+def test_extract_then_run_with_two_jobs(tmp_path):
+    frames, out = tmp_path / "frames.parquet", tmp_path / "programs.parquet"
+    proc = run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(frames), "--categories", "all")
+    assert proc.returncode == 0, proc.stderr
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    order = _frame_ids(frames)
+    df = read_programs(out)
+    assert list(df["frame_id"]) == order  # every frame once, in input order
+    assert set(df["status"]) == {"optimal"}
+    assert set(df["config_hash"]) == {SynthConfig().semantic_hash()}
+    assert (df["cost"] == df["lower_bound"]).all()
+    _assert_programs_contain_scenes(frames, out, SynthConfig())
+    assert not Path(f"{out}.parts").exists()
+    assert f"{len(order)} frames ({len(order)} computed, 0 kept), 100.0% optimal" in _summary(proc.stderr)
+
+
+def test_rerun_keeps_rows_and_a_new_config_replaces_them(small_frames, tmp_path):
+    out = tmp_path / "programs.parquet"
+    assert run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2").returncode == 0
+    first = _programs(out)
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "(0 computed, 6 kept)" in _summary(proc.stderr)
+    again = _programs(out)
+    assert list(again["runtime_s"]) == list(first["runtime_s"])  # not recomputed: the measured values stay
+
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2", "--strategy", "astar-cpa")
+    assert proc.returncode == 0, proc.stderr
+    assert "recomputing 6 frame(s) whose rows have another config hash" in proc.stderr
+    replaced = _programs(out)
+    assert list(replaced["frame_id"]) == list(first["frame_id"])
+    assert set(replaced["strategy"]) == {"astar-cpa"}
+    assert set(replaced["config_hash"]) == {SynthConfig(strategy="astar-cpa").semantic_hash()}
+    assert list(replaced["cost"]) == list(first["cost"])  # both strategies are exact
+
+
+def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp_path):
+    out = tmp_path / "programs.parquet"
+    parts = Path(f"{out}.parts")
+    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=0.4@*"})  # slow every frame so the kill lands mid-run
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", str(out), "--jobs", "2",
+         "--chunk-size", "1"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 240
+        while not list(parts.glob("part-*.parquet")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the run ended before it could be killed"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the run and its workers
+        proc.wait()
+    assert not out.exists()
+    saved = {r["frame_id"]: r for p in sorted(parts.glob("part-*.parquet")) for r in pq.read_table(p).to_pylist()}
+    order = _frame_ids(json_frames)
+    assert 1 <= len(saved) < len(order)
+
+    proc = run_r2s("run", str(json_frames), "--out", str(out), "--jobs", "2", "--chunk-size", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert f"({len(order) - len(saved)} computed, {len(saved)} kept)" in _summary(proc.stderr)
+    df = read_programs(out)
+    assert list(df["frame_id"]) == order  # complete, no duplicate, input order
+    done = _programs(out)
+    for fid, row in saved.items():  # the rows of the killed run, untouched
+        assert done.loc[fid, "runtime_s"] == row["runtime_s"]
+        assert done.loc[fid, "peak_rss_mb"] == row["peak_rss_mb"]
+    assert not parts.exists()
+    _assert_programs_contain_scenes(json_frames, out, SynthConfig())
+
+
+# --------------------------------------------------------------------------------------------------- limits
+
+def test_time_limit_gives_the_best_program_and_a_lower_bound(real_frames, tmp_path):
+    scenes = [min(real_frames, key=lambda s: len(s.entities)), max(real_frames, key=lambda s: len(s.entities))]
+    frames = _write_scenes(scenes, tmp_path / "frames.parquet")
+    out = tmp_path / "programs.parquet"
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2", "--strategy", "bfs", "--time-limit", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    small, big = (_programs(out).loc[s.frame_id] for s in scenes)
+    assert small["status"] == "optimal"
+    assert big["status"] in ("feasible", "timeout")
+    assert big["lower_bound"] < big["cost"]
+    config = SynthConfig(strategy="bfs", time_limit=0.2)
+    _assert_programs_contain_scenes(frames, out, config)
+
+
+def test_memory_limit_below_the_baseline_is_memout(real_frames, tmp_path):
+    # 1 MB is below any Python process: the Budget's RSS poll (every 4096 nodes) stops BFS on the large frame;
+    # the small one finishes before its first poll.
+    scenes = [min(real_frames, key=lambda s: len(s.entities)), max(real_frames, key=lambda s: len(s.entities))]
+    frames = _write_scenes(scenes, tmp_path / "frames.parquet")
+    out = tmp_path / "programs.parquet"
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2", "--strategy", "bfs",
+                   "--memory-limit", "1")
+    assert proc.returncode == 0, proc.stderr
+    small, big = (_programs(out).loc[s.frame_id] for s in scenes)
+    assert small["status"] == "optimal"
+    assert big["status"] == "memout"
+    assert big["program"] is not None  # anytime: the best program found so far is kept
+    assert "1 memout" in _summary(proc.stderr)
+
+
+@pytest.mark.parametrize(
+    ("hook", "limit", "status", "message"),
+    [
+        ("kill", None, "memout", "worker died (exit code SIGKILL(-9))"),  # as the OOM killer does
+        ("exit", None, "error", "worker died (exit code"),
+        ("alloc=4000", "300", "memout", "hard cap"),  # the RLIMIT_AS cap turns it into a MemoryError
+        ("raise", None, "error", "RuntimeError: test hook raised"),
+    ],
+)
+def test_a_failing_frame_is_recorded_and_the_run_goes_on(small_frames, tmp_path, hook, limit, status, message):
+    order = _frame_ids(small_frames)
+    victim = order[2]
+    out = tmp_path / "programs.parquet"
+    args = ["run", str(small_frames), "--out", str(out), "--jobs", "2"] + (["--memory-limit", limit] if limit else [])
+    env = dict(os.environ, **{TEST_HOOK_ENV: f"{hook}@{victim}"})
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *args], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    df = _programs(out)
+    assert list(df["frame_id"]) == order
+    assert df.loc[victim, "status"] == status
+    assert message in df.loc[victim, "error"]
+    assert "\n" not in df.loc[victim, "error"]
+    assert set(df.drop(index=victim)["status"]) == {"optimal"}  # the innocent frames in flight got programs
+
+
+def test_wall_clock_guard_kills_a_hung_frame(real_frames):
+    config = SynthConfig()
+    scenes = sorted(real_frames, key=lambda s: len(s.entities))[:4]
+    hung = scenes[1].frame_id
+    tasks = [FrameTask(s.frame_id, s, config, "h", hard_cap=True, test_hook=f"hang@{hung}") for s in scenes]
+    log: list[str] = []
+    rows = {r["frame_id"]: r for r in compute(LokyPool(2, guard_s=2.0), tasks, log.append)}
+    assert sorted(rows) == sorted(s.frame_id for s in scenes)
+    assert rows[hung]["status"] == "timeout"
+    assert "wall-clock guard" in rows[hung]["error"]
+    assert all(rows[s.frame_id]["status"] == "optimal" for s in scenes if s.frame_id != hung)
+    assert any(hung in line for line in log)
+
+
+def test_a_frame_that_is_not_a_scene_is_an_error_row(small_frames, tmp_path):
+    df = read_frames(small_frames)
+    bad = df["frame_id"].iloc[-1]
+    df.loc[(df["frame_id"] == bad) & ~df["is_ego"], "entity_id"] = "lambda"  # a Python keyword, twice
+    frames, out = tmp_path / "frames.parquet", tmp_path / "programs.parquet"
+    write_frames(df, frames)
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    programs = _programs(out)
+    assert programs.loc[bad, "status"] == "error"
+    assert "lambda" in programs.loc[bad, "error"]
+    assert (programs.drop(index=bad)["status"] == "optimal").all()
+
+
+# ------------------------------------------------------------------------------------------------ bad input
+
+@pytest.mark.parametrize("kind", ["missing", "corrupt", "wrong-schema", "directory", "empty"])
+def test_bad_frames_file_exits_2_and_writes_nothing(tmp_path, small_frames, kind):
+    frames, out = tmp_path / "frames.parquet", tmp_path / "programs.parquet"
+    if kind == "corrupt":
+        frames.write_bytes(small_frames.read_bytes()[: 300] + b"\x00garbage")
+    elif kind == "wrong-schema":
+        pq.write_table(pq.read_table(small_frames).drop(["heading", "is_ego"]), frames)
+    elif kind == "directory":
+        frames.mkdir()
+    elif kind == "empty":
+        write_frames(read_frames(small_frames).iloc[:0], frames)
+    proc = run_r2s("run", str(frames), "--out", str(out))
+    assert_one_line_error(proc, 2)
+    _assert_nothing_written(out)
+
+
+@pytest.mark.parametrize(
+    ("extra", "contains"),
+    [
+        (["--jobs", "0"], "--jobs"),
+        (["--chunk-size", "0"], "--chunk-size"),
+        (["--time-limit", "-1"], "time_limit"),
+        (["--scheduler", "tcp://127.0.0.1:8786"], "--backend dask"),
+        (["--strategy", "nope"], "strategy"),
+    ],
+)
+def test_bad_options_exit_2_and_write_nothing(small_frames, tmp_path, extra, contains):
+    out = tmp_path / "programs.parquet"
+    proc = run_r2s("run", str(small_frames), "--out", str(out), *extra)
+    assert_one_line_error(proc, 2, contains)
+    _assert_nothing_written(out)
+
+
+def test_an_output_that_is_not_a_programs_file_is_not_overwritten(small_frames, tmp_path):
+    out = tmp_path / "programs.parquet"
+    out.write_text("my notes\n")
+    proc = run_r2s("run", str(small_frames), "--out", str(out))
+    assert_one_line_error(proc, 2, "not a readable parquet")
+    assert out.read_text() == "my notes\n"
+    assert not Path(f"{out}.parts").exists()
+    proc = run_r2s("run", str(small_frames), "--out", str(small_frames))
+    assert_one_line_error(proc, 2, "input frames file")
+
+
+# ------------------------------------------------------------------------------------------------------ dask
+
+def test_dask_backend_on_a_running_scheduler(small_frames, tmp_path):
+    distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed (pip install '.[dask]')")
+    import logging
+
+    out = tmp_path / "programs.parquet"
+    # Threads in this process: the worker imports r2sgen as the tests do, and the run connects over TCP.
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        proc = run_r2s("run", str(small_frames), "--out", str(out), "--backend", "dask",
+                       "--scheduler", cluster.scheduler_address)
+    assert proc.returncode == 0, proc.stderr
+    df = read_programs(out)
+    assert list(df["frame_id"]) == _frame_ids(small_frames)
+    assert set(df["status"]) == {"optimal"}
+    _assert_programs_contain_scenes(small_frames, out, SynthConfig())
+
+
+def test_dask_scheduler_that_does_not_answer_exits_2(small_frames, tmp_path):
+    pytest.importorskip("distributed", reason="dask.distributed is not installed (pip install '.[dask]')")
+    out = tmp_path / "programs.parquet"
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--backend", "dask", "--scheduler", "tcp://127.0.0.1:9")
+    assert_one_line_error(proc, 2, "cannot reach the dask scheduler")
+    _assert_nothing_written(out)
+
+
+# -------------------------------------------------------------------------------------------- pure logic
+
+def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0) -> dict:
+    return dict(failure_row(fid, "error", "x", 1, SynthConfig(), h, runtime_s=runtime), status=status)
+
+
+def test_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames():
+    existing = [_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0"), _row("c", "h1", runtime=2.0)]
+    plan = plan_run(["a", "b", "c", "d"], existing, "h1")
+    assert [r["frame_id"] for r in plan.kept] == ["a", "c"]
+    assert plan.kept[1]["runtime_s"] == 2.0  # the later row of c (a later part) wins
+    assert plan.todo == ("b", "d")
+    assert plan.stale == ("b",)
+    assert plan.foreign == 1
+
+
+def test_merge_is_input_order_without_duplicates():
+    rows = [_row("b", runtime=1.0), _row("a"), _row("b", runtime=3.0), _row("x")]
+    merged = merge_rows(["a", "b", "c"], rows)
+    assert [(r["frame_id"], r["runtime_s"]) for r in merged] == [("a", 1.0), ("b", 3.0)]
+
+
+def test_chunk_buffer_flushes_by_size_and_by_age():
+    buf = ChunkBuffer(size=2, max_age_s=10.0)
+    buf.add(_row("a"), now=0.0)
+    assert not buf.due(now=5.0)
+    assert buf.due(now=10.0)
+    buf.add(_row("b"), now=1.0)
+    assert buf.due(now=1.0)
+    assert [r["frame_id"] for r in buf.take()] == ["a", "b"]
+    assert not buf.due(now=100.0)
+
+
+def test_summary_line():
+    rows = [_row("a"), _row("b", status="memout"), _row("c", status="error"), _row("d")]
+    line = summarize(rows, computed=3, seconds=2.04).line()
+    assert line == "4 frames (3 computed, 1 kept), 50.0% optimal, 0 feasible, 0 timeout, 1 memout, 1 errors, 2.0 s"
