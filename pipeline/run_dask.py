@@ -36,11 +36,11 @@ def dask_pool(scheduler: str | None, jobs: int | None) -> Iterator[DaskPool]:
         else:
             cluster = stack.enter_context(LocalCluster(
                 n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
+                dashboard_address=None, silence_logs=logging.CRITICAL,  # deaths are our log lines
             ))
             client = stack.enter_context(Client(cluster))
         try:
             client.wait_for_workers(1, timeout=WORKERS_TIMEOUT_S)
         except TimeoutError:
             raise UserError(f"the dask scheduler {scheduler} has no workers (waited {WORKERS_TIMEOUT_S} s)") from None
-        yield DaskPool(client, jobs or -1)
+        yield DaskPool(client, jobs)

@@ -1,5 +1,5 @@
-"""Workers of `r2s run`: a loky process pool or a dask.distributed cluster (through joblib's dask backend),
-and the rule that keeps a run going when a worker dies.
+"""Workers of `r2s run`: a loky process pool (joblib's) or a dask.distributed cluster, and the rule that keeps
+a run going when a worker dies.
 
 When a worker dies (killed at its memory limit, by the OOM killer, a segfault in a native library), every
 frame in flight fails with it and nobody says which frame was to blame. A lone suspect is the culprit; several
@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import re
 import time
+import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -45,91 +46,118 @@ def wall_guard_s(time_limit: float | None) -> float | None:
     return None if time_limit is None else 3.0 * time_limit + 60.0
 
 
+def _bounded(
+    tasks: Sequence[FrameTask],
+    slots: int,
+    submit: Callable[[FrameTask], Any],
+    wait_first: Callable[[list, float | None], Iterable],
+    death: Callable[[BaseException], tuple[str, bool] | None],
+    guard_s: float | None = None,
+    kill: Callable[[], None] | None = None,
+) -> Iterator[Row]:
+    """At most `slots` frames submitted at once, so that "in flight" means running and a death names few frames.
+
+    `death(exc)` tells a worker death (reason, and whether the death is pinned on this frame) from a bug, which
+    propagates. Frames running longer than `guard_s` are taken for hung: `kill()` ends the pool's workers.
+    """
+    pending = list(reversed(tasks))
+    running: dict[Any, tuple[FrameTask, float]] = {}
+    poll_s = None if guard_s is None else min(5.0, guard_s / 4)
+    while pending or running:
+        while pending and len(running) < slots:
+            task = pending.pop()
+            running[submit(task)] = (task, time.monotonic())
+        for future in wait_first(list(running), poll_s):
+            task, _ = running.pop(future)
+            try:
+                row = future.result()
+            except Exception as exc:
+                died = death(exc)
+                if died is None:
+                    raise
+                reason, pinned = died
+                lost = [task.frame_id] + ([] if pinned else [t.frame_id for t, _ in running.values()])
+                raise WorkerLost(lost, reason, death_status(reason), known=pinned) from None
+            yield row
+        now = time.monotonic()
+        overdue = [t.frame_id for t, started in running.values() if guard_s is not None and now - started > guard_s]
+        if overdue:
+            if kill is not None:
+                kill()
+            raise WorkerLost(overdue, f"no answer after {guard_s:.0f} s (wall-clock guard); worker killed",
+                             "timeout", known=True)
+
+
 @dataclass(frozen=True)
 class LokyPool:
     """joblib's loky executor, used directly rather than through joblib.Parallel: Parallel runs n_jobs=1 in the
     calling process (no memory isolation: one bad frame would end the run) and does not say which frames were
-    in flight when a worker died. At most `jobs` frames are submitted at once, so in flight means running."""
+    in flight when a worker died."""
 
     jobs: int
     guard_s: float | None = None
 
     def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row]:
         from joblib.externals.loky import get_reusable_executor
-        from joblib.externals.loky.process_executor import BrokenProcessPool
 
         executor = get_reusable_executor(max_workers=self.jobs)  # a fresh one after a death or a kill
-        pending = list(reversed(tasks))
-        running: dict[Future, tuple[FrameTask, float]] = {}
-        while pending or running:
-            while pending and len(running) < self.jobs:
-                task = pending.pop()
-                running[executor.submit(run_frame, task)] = (task, time.monotonic())
-            done, _ = wait(running, timeout=self._poll_s(), return_when=FIRST_COMPLETED)
-            for future in done:
-                task, _ = running.pop(future)
-                try:
-                    row = future.result()
-                except BrokenProcessPool as exc:
-                    lost = [task.frame_id] + [t.frame_id for t, _ in running.values()]
-                    reason = _loky_reason(exc)  # not the whole message: it speculates about memory
-                    raise WorkerLost(lost, reason, death_status(reason)) from None
-                yield row
-            overdue = self._overdue(running)
-            if overdue:
-                # wait=True: the next get_reusable_executor() shuts the old pool down again with
-                # kill_workers=False, which would override ours and join a worker that never returns.
-                executor.shutdown(wait=True, kill_workers=True)
-                raise WorkerLost(overdue, f"no answer after {self.guard_s:.0f} s (wall-clock guard); worker killed",
-                                 "timeout", known=True)
 
-    def _poll_s(self) -> float | None:
-        return None if self.guard_s is None else min(5.0, self.guard_s / 4)
+        def wait_first(futures: list, timeout: float | None) -> Iterable:
+            return wait(futures, timeout=timeout, return_when=FIRST_COMPLETED).done
 
-    def _overdue(self, running: dict[Future, tuple[FrameTask, float]]) -> list[str]:
-        if self.guard_s is None:
-            return []
-        now = time.monotonic()
-        return [t.frame_id for t, started in running.values() if now - started > self.guard_s]
+        def kill() -> None:
+            # wait=True: the next get_reusable_executor() shuts the old pool down again with
+            # kill_workers=False, which would override ours and join a worker that never returns.
+            executor.shutdown(wait=True, kill_workers=True)
+
+        yield from _bounded(tasks, self.jobs, lambda t: executor.submit(run_frame, t), wait_first, _loky_death,
+                            self.guard_s, kill)
 
 
-def _loky_reason(exc: BaseException) -> str:
+def _loky_death(exc: BaseException) -> tuple[str, bool] | None:
+    from joblib.externals.loky.process_executor import BrokenProcessPool
+
+    if not isinstance(exc, BrokenProcessPool):
+        return None
+    # The whole pool breaks with one worker, and the message does not say which frame it ran: not pinned.
+    # Only the exit code is kept: the rest of the message speculates about memory.
     codes = re.search(r"exit codes of the workers are \{([^}]*)\}", str(exc))
-    return f"worker died (exit code {codes.group(1)})" if codes else one_line(f"worker died: {exc}")
+    return (f"worker died (exit code {codes.group(1)})" if codes else one_line(f"worker died: {exc}")), False
 
 
 @dataclass(frozen=True)
 class DaskPool:
-    """The same stage on a dask.distributed cluster through joblib's dask backend. In flight = handed to
-    joblib and not returned (joblib dispatches at most 2 * n_jobs ahead). Dask itself retries a task whose
-    worker died on other workers; after `allowed_failures` deaths it raises KilledWorker, handled here."""
+    """The same stage on a dask.distributed cluster, with dask futures.
+
+    Not through joblib's dask backend, deliberately: joblib 1.6's backend never calls the completion callback
+    of a task whose future errs (KilledWorker after a worker death), so Parallel waits for it forever, in every
+    return_as mode. Dask itself retries a task whose worker died on other workers; after `allowed-failures`
+    deaths it raises KilledWorker for that task alone, so the death is pinned on its frame.
+    """
 
     client: Any
-    jobs: int = -1
+    jobs: int | None = None
 
     def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row]:
         from distributed import KilledWorker
-        from joblib import Parallel, delayed, parallel_config
+        from distributed import wait as dask_wait
 
-        dispatched: list[str] = []
-        returned: set[str] = set()
+        slots = self.jobs or max(1, sum(self.client.nthreads().values()))
 
-        def calls() -> Iterable[Any]:
-            for task in tasks:
-                dispatched.append(task.frame_id)
-                yield delayed(run_frame)(task)
+        def submit(task: FrameTask) -> Any:
+            return self.client.submit(run_frame, task, key=f"r2s-run-{uuid.uuid4().hex}", pure=False)
 
-        # The backend is bound when Parallel is made, so the config does not leak into the caller between rows.
-        with parallel_config(backend="dask", client=self.client):
-            parallel = Parallel(n_jobs=self.jobs, return_as="generator_unordered", batch_size=1,
-                                pre_dispatch="2*n_jobs")
-        try:
-            for row in parallel(calls()):
-                returned.add(row["frame_id"])
-                yield row
-        except KilledWorker as exc:
-            reason = one_line(f"worker died: {exc}")
-            raise WorkerLost([f for f in dispatched if f not in returned], reason, death_status(reason)) from None
+        def wait_first(futures: list, timeout: float | None) -> Iterable:
+            return dask_wait(futures, timeout=timeout, return_when="FIRST_COMPLETED").done
+
+        def death(exc: BaseException) -> tuple[str, bool] | None:
+            if not isinstance(exc, KilledWorker):
+                return None
+            tries = re.search(r"on (\d+) different workers", str(exc))
+            return (f"worker died (dask: each of the {tries.group(1)} workers that ran it died)" if tries
+                    else one_line(f"worker died: {exc}")), True
+
+        yield from _bounded(tasks, slots, submit, wait_first, death)
 
 
 def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) -> Iterator[Row]:

@@ -310,6 +310,24 @@ def test_dask_scheduler_that_does_not_answer_exits_2(small_frames, tmp_path):
     _assert_nothing_written(out)
 
 
+def test_dask_local_cluster_replaces_a_dead_worker(small_frames, tmp_path):
+    pytest.importorskip("distributed", reason="dask.distributed is not installed (pip install '.[dask]')")
+    order = _frame_ids(small_frames)
+    victim = order[1]
+    out = tmp_path / "programs.parquet"
+    # No --scheduler: r2s run starts its own LocalCluster. Dask gives up on the task at its first worker death.
+    env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="0", **{TEST_HOOK_ENV: f"kill@{victim}"})
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out),
+                           "--backend", "dask", "--jobs", "2"], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    df = _programs(out)
+    assert list(df["frame_id"]) == order
+    assert df.loc[victim, "status"] == "error"
+    assert df.loc[victim, "error"].startswith("worker died")
+    assert set(df.drop(index=victim)["status"]) == {"optimal"}
+
+
 # -------------------------------------------------------------------------------------------- pure logic
 
 def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0) -> dict:
@@ -347,3 +365,4 @@ def test_summary_line():
     rows = [_row("a"), _row("b", status="memout"), _row("c", status="error"), _row("d")]
     line = summarize(rows, computed=3, seconds=2.04).line()
     assert line == "4 frames (3 computed, 1 kept), 50.0% optimal, 0 feasible, 0 timeout, 1 memout, 1 errors, 2.0 s"
+
