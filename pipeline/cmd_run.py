@@ -135,8 +135,9 @@ class _Run:
                          dynamic_ncols=True)
         try:
             for row in itertools.chain(failed, compute(pool, tasks, self.log)):
-                buffer.add(row, time.monotonic())
-                self._bar.update(1)
+                if row is not None:  # None: a heartbeat, no frame finished
+                    buffer.add(row, time.monotonic())
+                    self._bar.update(1)
                 if buffer.due(time.monotonic()):
                     store.write_part(buffer.take())
         finally:

@@ -31,8 +31,13 @@ class WorkerLost(Exception):
 
 
 class Pool(Protocol):
-    def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row]:
-        """Rows as frames finish; raises WorkerLost naming the frames whose worker died."""
+    def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row | None]:
+        """Rows as frames finish, None as a heartbeat while none does; raises WorkerLost naming the frames
+        whose worker died."""
+
+
+# How often a pool wakes up when no frame finishes, so that a waiting chunk can be written on time.
+HEARTBEAT_S = 5.0
 
 
 def death_status(reason: str) -> str:
@@ -54,7 +59,7 @@ def _bounded(
     death: Callable[[BaseException], tuple[str, bool] | None],
     guard_s: float | None = None,
     kill: Callable[[], None] | None = None,
-) -> Iterator[Row]:
+) -> Iterator[Row | None]:
     """At most `slots` frames submitted at once, so that "in flight" means running and a death names few frames.
 
     `death(exc)` tells a worker death (reason, and whether the death is pinned on this frame) from a bug, which
@@ -62,12 +67,15 @@ def _bounded(
     """
     pending = list(reversed(tasks))
     running: dict[Any, tuple[FrameTask, float]] = {}
-    poll_s = None if guard_s is None else min(5.0, guard_s / 4)
+    poll_s = HEARTBEAT_S if guard_s is None else min(HEARTBEAT_S, guard_s / 4)
     while pending or running:
         while pending and len(running) < slots:
             task = pending.pop()
             running[submit(task)] = (task, time.monotonic())
-        for future in wait_first(list(running), poll_s):
+        done = wait_first(list(running), poll_s)
+        if not done:
+            yield None  # the caller may write a chunk that has waited long enough
+        for future in done:
             task, _ = running.pop(future)
             try:
                 row = future.result()
@@ -148,7 +156,10 @@ class DaskPool:
             return self.client.submit(run_frame, task, key=f"r2s-run-{uuid.uuid4().hex}", pure=False)
 
         def wait_first(futures: list, timeout: float | None) -> Iterable:
-            return dask_wait(futures, timeout=timeout, return_when="FIRST_COMPLETED").done
+            try:
+                return dask_wait(futures, timeout=timeout, return_when="FIRST_COMPLETED").done
+            except TimeoutError:
+                return ()
 
         def death(exc: BaseException) -> tuple[str, bool] | None:
             if not isinstance(exc, KilledWorker):
@@ -160,13 +171,14 @@ class DaskPool:
         yield from _bounded(tasks, slots, submit, wait_first, death)
 
 
-def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) -> Iterator[Row]:
-    """One row per task, in completion order, whatever happens to the workers."""
+def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) -> Iterator[Row | None]:
+    """One row per task, in completion order, whatever happens to the workers (None: a heartbeat)."""
     queue = {t.frame_id: t for t in tasks}
     while queue:
         try:
             for row in pool.map_unordered(list(queue.values())):
-                queue.pop(row["frame_id"], None)
+                if row is not None:
+                    queue.pop(row["frame_id"], None)
                 yield row
         except WorkerLost as lost:
             suspects = [queue.pop(fid) for fid in lost.frame_ids if fid in queue]
@@ -180,7 +192,7 @@ def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) 
                 yield from _alone(pool, task, log)
 
 
-def _alone(pool: Pool, task: FrameTask, log: Callable[[str], None]) -> Iterator[Row]:
+def _alone(pool: Pool, task: FrameTask, log: Callable[[str], None]) -> Iterator[Row | None]:
     try:
         yield from pool.map_unordered([task])
     except WorkerLost as lost:
