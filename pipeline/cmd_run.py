@@ -31,7 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "with --backend dask and --scheduler: all workers of the cluster)")
     p.add_argument("--time-limit", type=float, metavar="S", help="seconds of search per frame; the best program "
                    "found and a proven lower bound are recorded (status feasible or timeout)")
-    p.add_argument("--memory-limit", type=float, metavar="MB", help="memory per frame (status memout past it)")
+    p.add_argument("--memory-limit", type=float, metavar="MB", help="resident memory per frame: the search stops "
+                   "past it (status memout, its best program kept); with loky a hard cap 50%% (at least 256 MB) "
+                   "above it ends the frame")
     p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
@@ -42,7 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "--backend dask starts a local cluster of --jobs single-threaded worker processes")
     p.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK_SIZE, metavar="K",
                    help=f"frames per part file written while running (default {DEFAULT_CHUNK_SIZE}); "
-                        "a kill loses at most the frames in flight and the current chunk")
+                        "a kill loses at most the frames in flight and the finished rows of the last "
+                        f"{CHUNK_MAX_AGE_S:.0f} s")
 
 
 def run(args: argparse.Namespace) -> int:

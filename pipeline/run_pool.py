@@ -41,8 +41,9 @@ HEARTBEAT_S = 5.0
 
 
 def death_status(reason: str) -> str:
-    # SIGKILL is what the kernel's OOM killer sends; dask's nanny names memory when it restarts a worker.
-    return "memout" if ("SIGKILL" in reason or "memory" in reason.lower()) else "error"
+    # SIGKILL is what the kernel's OOM killer sends (or a user's kill -9); any other death is an error. Dask's
+    # KilledWorker does not say how its workers died, so a death on dask is an error with that message.
+    return "memout" if "SIGKILL" in reason else "error"
 
 
 def wall_guard_s(time_limit: float | None) -> float | None:
