@@ -17,7 +17,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from synth.scene import EGO_ID, ENTITY_TYPES, Scene, SceneError, make_scene
+from synth.scene import EGO_ID, ENTITY_TYPES, Scene, SceneError, check_identifier, make_scene
 
 FRAMES_SCHEMA = pa.schema(
     [
@@ -150,6 +150,20 @@ def validate_frames(df: pd.DataFrame) -> None:
     egos = df.groupby("frame_id", sort=False)["is_ego"].sum()
     if (egos != 1).any():
         raise FramesError(f"frame {egos.index[(egos != 1).to_numpy()][0]!r} does not have exactly one ego row")
+    # Ids are printed into generated programs: the whole file is refused before any frame is synthesized.
+    for eid in pd.unique(df["entity_id"].astype(str)):
+        try:
+            check_identifier(eid, "entity id")
+        except SceneError as exc:
+            frame = df.loc[df["entity_id"].astype(str) == eid, "frame_id"].iloc[0]
+            raise FramesError(f"{exc} (frame {frame})") from None
+    ego_named = (df["entity_id"].astype(str) == EGO_ID).to_numpy() != df["is_ego"].astype(bool).to_numpy()
+    if ego_named.any():
+        raise FramesError(f"frame {df.loc[ego_named, 'frame_id'].iloc[0]!r}: the id 'ego' belongs to the ego row only")
+    dup = df.duplicated(["frame_id", "entity_id"]).to_numpy()
+    if dup.any():
+        row = df.loc[dup].iloc[0]
+        raise FramesError(f"frame {row['frame_id']!r} has entity id {row['entity_id']!r} twice")
 
 
 def _dim(v: Any) -> float | None:

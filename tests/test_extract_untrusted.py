@@ -8,6 +8,7 @@ import pickle
 import shutil
 
 import numpy as np
+import pyarrow as pa
 import pytest
 from _extract_util import EXCERPT, assert_refused, r2s
 from hypothesis import HealthCheck, given, settings
@@ -163,3 +164,32 @@ def test_outputs_get_the_permissions_of_a_plain_file(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "out.txt").stat().st_mode & 0o777 == (tmp_path / "plain.txt").stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda df: df.assign(entity_id=df["entity_id"].where(df["is_ego"], "car1); import os; (")), "not an identifier"),
+    (lambda df: df.assign(entity_id=df["entity_id"].replace({df["entity_id"].iloc[1]: "exec"})), "reserved"),
+    (lambda df: df.assign(entity_id=df["entity_id"].replace({df["entity_id"].iloc[1]: "ego"})), "ego row only"),
+    (lambda df: df.assign(entity_id=df["entity_id"].replace({df["entity_id"].iloc[2]: df["entity_id"].iloc[1]})),
+     "twice"),
+])
+def test_frames_with_smuggled_or_clashing_ids_are_refused_whole(tmp_path, capsys, change, message):
+    from extractors.frames import write_frames
+
+    good = tmp_path / "frames.parquet"
+    assert r2s(capsys, "extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(good)).returncode == 0
+    df = read_frames(good)
+    bad = change(df[df["frame_id"] == df["frame_id"].iloc[0]].copy())
+    path = tmp_path / "bad.parquet"
+    import pyarrow.parquet as pq
+
+    from extractors.frames import FRAMES_SCHEMA
+    pq.write_table(pa.Table.from_pandas(bad, schema=FRAMES_SCHEMA, preserve_index=False), path)
+    with pytest.raises(FramesError, match=message):
+        read_frames(path)
+    with pytest.raises(FramesError, match=message):
+        write_frames(bad, tmp_path / "never.parquet")
+    assert not (tmp_path / "never.parquet").exists()
+    res = r2s(capsys, "run", str(path), "--out", str(tmp_path / "programs.parquet"))
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "programs.parquet").exists()
