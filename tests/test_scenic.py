@@ -126,8 +126,6 @@ def test_ids_that_look_like_the_prelude_cannot_shadow_it():
         _assert_inside(result.program, scene, s)
 
 
-@pytest.mark.xfail(reason="synth/scene.py's reserved words lack Scenic's keyword 'at': an entity id 'at' passes "
-                          "validation but its Scenic text does not parse (one-word fix there, reported)", strict=False)
 def test_every_scenic_keyword_is_a_reserved_id():
     from scenic.syntax.parser import ScenicParser
 
