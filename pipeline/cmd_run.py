@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from pipeline.cmd_synth import uncertainty_arg
 from synth.config import ORACLES, SOLVERS, STRATEGIES
 
 DEFAULT_CHUNK_SIZE = 32
@@ -38,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
     p.add_argument("--config", metavar="F", help="TOML config (configs/default.toml, configs/paper.toml)")
+    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG",
+                   help="robust synthesis, as in r2s synth (frames' pos_sigma / heading_sigma columns override)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local worker processes (default); dask: a dask.distributed cluster")
     p.add_argument("--scheduler", metavar="ADDR", help="dask scheduler address (tcp://host:8786); without it, "
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--out is the input frames file; choose another path")
     config = load_config(args.config).with_(
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,
-        time_limit=args.time_limit, memory_limit=args.memory_limit,
+        time_limit=args.time_limit, memory_limit=args.memory_limit, **(args.uncertainty or {}),
     )
     return _Run(args, config).go()
 

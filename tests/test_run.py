@@ -377,3 +377,29 @@ def test_summary_line():
     line = summarize(rows, computed=3, seconds=2.04).line()
     assert line == "4 frames (3 computed, 1 kept), 50.0% optimal, 0 feasible, 0 timeout, 1 memout, 1 errors, 2.0 s"
 
+
+
+def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
+    """`r2s run --uncertainty` gives each frame the robust program `r2s synth --uncertainty` gives it."""
+    import pandas as pd
+
+    from extractors.frames import iter_scenes, read_frames
+    from synth.config import SynthConfig
+    from synth.synthesize import synthesize
+
+    frames = tmp_path / "frames.parquet"
+    proc = run_r2s("extract", "scenarionet", str(ROOT / "data/nuscenes-mini-excerpt/scenarionet"), "--out", str(frames))
+    assert proc.returncode == 0, proc.stderr
+    plain, robust = tmp_path / "plain.parquet", tmp_path / "robust.parquet"
+    assert run_r2s("run", str(frames), "--out", str(plain), "--jobs", "1").returncode == 0
+    proc = run_r2s("run", str(frames), "--out", str(robust), "--jobs", "1", "--uncertainty", "0.3,2")
+    assert proc.returncode == 0, proc.stderr
+    a, b = pd.read_parquet(plain), pd.read_parquet(robust)
+    assert (a["config_hash"] != b["config_hash"]).all()
+    config = SynthConfig(pos_uncertainty=0.3, heading_uncertainty=2.0)
+    scenes = {s.frame_id: s for s in iter_scenes(read_frames(frames))}
+    for row in b.itertuples():
+        assert row.program == str(synthesize(scenes[row.frame_id], config).program)
+    assert (b["cost"].to_numpy() >= a["cost"].to_numpy()).all()
+    bad = run_r2s("run", str(frames), "--out", str(tmp_path / "x.parquet"), "--uncertainty", "-1,2")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
