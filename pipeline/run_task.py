@@ -69,7 +69,7 @@ def one_line(text: str, limit: int = 300) -> str:
 
 
 def _reset_peak_rss() -> None:
-    # A worker takes many frames and ru_maxrss is a lifetime peak: without a reset, peak_rss_mb of a frame would
+    # A worker takes many frames and VmHWM is a lifetime peak: without a reset, peak_rss_mb of a frame would
     # be the worst of every frame before it in that worker. Linux resets the high-water mark on "5".
     try:
         with open("/proc/self/clear_refs", "w") as f:

@@ -41,3 +41,16 @@ def test_memory_limit_stops_the_search_with_memout(hard_scene):
     assert result.status == "memout"
     assert result.lower_bound <= result.cost
     assert check(result.program, hard_scene).ok
+
+
+def test_peak_memory_is_the_process_own_not_its_parents():
+    """A child of a large parent reports its own peak (Linux keeps ru_maxrss across exec; VmHWM is per process)."""
+    import subprocess
+    import sys
+
+    big = "x = bytearray(300 * 2**20); x[::4096] = b'1' * len(x[::4096]); "
+    child = "from synth.search.budget import peak_rss_mb; print(peak_rss_mb())"
+    code = big + f"import subprocess, sys; print(subprocess.run([sys.executable, '-c', {child!r}], " \
+                 "capture_output=True, text=True, check=True).stdout)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert float(out.split()[0]) < 200.0, out

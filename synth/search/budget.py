@@ -19,6 +19,19 @@ def current_rss_mb() -> float:
 
 
 def peak_rss_mb() -> float:
+    """This process's peak resident memory: VmHWM, not ru_maxrss.
+
+    Linux carries ru_maxrss over exec, so a process started by a large parent (a pool worker, a benchmark's
+    child) would report the parent's size; VmHWM belongs to this process's own memory, and a pool worker can
+    reset it between frames (/proc/self/clear_refs), which ru_maxrss ignores.
+    """
+    try:
+        with open("/proc/self/status", "rb") as f:
+            for line in f:
+                if line.startswith(b"VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:  # pragma: no cover - non-Linux
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
