@@ -50,9 +50,10 @@ demo: setup
 test: setup
 	$(PY) -m pytest
 
-# Benchmarks (not tests): results in bench/results/*.json and *.md. Needs ../shared/data for the real-data parts.
+# Benchmarks (not tests): results in bench/results/*.json and *.md; about an hour in full, BENCH_ARGS=--quick for a
+# short pass. Needs ../shared/data for the real-data parts (each script says what it skips without it).
 bench: setup
-	$(PY) bench/run_all.py
+	$(PY) bench/run_all.py $(BENCH_ARGS)
 
 # A whole dataset: frames, programs (resumable: rerun the same command after a stop) and a report.
 corpus: setup
