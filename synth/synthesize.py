@@ -90,7 +90,7 @@ def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
     header = f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}"
     if is_robust(scene, config):
         header += (f"; robust to {fmt_number(config.pos_uncertainty)} m, {fmt_number(config.heading_uncertainty)} deg"
-                   " (entity sigmas override)")
+                   " (entities' own sigmas override)")
     scenic = render_scenic(program, scene, config, header=header)
     stats = oracle.backend.stats if oracle.backend is not None else None
     return SynthResult(

@@ -89,10 +89,18 @@ def json_without_timings(result) -> dict:
 # ---------------------------------------------------------------------------------------------- containment
 
 
+def with_uncertain_ego(scene: Scene, pos: float, head: float) -> Scene:
+    """Ego given its own sigma: then local positions and heading offsets relative to ego move with it."""
+    return Scene(scene.frame_id, tuple(replace(e, pos_sigma=pos, heading_sigma=head) if e.is_ego else e
+                                       for e in scene.entities))
+
+
 @given(grid_scenes(), st.sampled_from([0.1, 0.25, 0.5, 1.0]), st.sampled_from([0.0, 1.0, 2.5, 4.0]),
-       st.integers(0, 2**31))
-def test_robust_programs_contain_sampled_perturbations(scene, pos, head, seed):
+       st.booleans(), st.integers(0, 2**31))
+def test_robust_programs_contain_sampled_perturbations(scene, pos, head, ego_uncertain, seed):
     config = SynthConfig(pos_uncertainty=pos, heading_uncertainty=head)
+    if ego_uncertain:
+        scene = with_uncertain_ego(scene, pos, head)
     result = synthesize(scene, config)
     assert result.certified
     assert_contains_perturbations(result, scene, config, n=60, seed=seed)
@@ -109,6 +117,19 @@ def test_real_frames_robust_contain_perturbations_and_cost_no_less(real_frames, 
         assert result.certified == (oracle != "closed-form")
         assert result.cost >= synthesize(scene, SynthConfig(oracle=oracle)).cost
         assert_contains_perturbations(result, scene, config, n=90, seed=i)
+
+
+@pytest.mark.parametrize("oracle", ["hybrid", "closed-form"])
+def test_uncertain_ego_turns_the_local_frame(oracle):
+    """Ego's own heading error turns every `on Range @ Range relative to ego`: the Ranges widen by |c| rot(eta)."""
+    config = SynthConfig(pos_uncertainty=0.3, heading_uncertainty=2.0, oracle=oracle)
+    local = 0
+    for i, scene in enumerate(SMALL_FRAMES[:6]):
+        shaky = with_uncertain_ego(scene, 0.3, 3.0)
+        result = synthesize(shaky, config)
+        local += str(result.program).count("on Range(")
+        assert_contains_perturbations(result, shaky, config, n=150, seed=i)
+    assert local >= 5  # the turning frame was really exercised
 
 
 def test_robust_oracles_agree_on_real_frames():
