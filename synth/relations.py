@@ -82,19 +82,26 @@ def closed_form_table(scene: Scene, config: SynthConfig) -> RelationTable:
     position = np.full(dx.shape, NONE, dtype=np.int8)
     for code, name in enumerate(DIRECTION_NAMES):
         ux, uy = _unit_vectors(h + DIRECTIONS[name][1])
-        holds, unsure = _within(dx * ux[:, None] + dy * uy[:, None], dist, cos1)
-        position[holds] = code
-        position[unsure & (position == NONE)] = UNDECIDED
+        mark(position, code, *_within(dx * ux[:, None] + dy * uy[:, None], dist, cos1))
 
     heading = np.full(dx.shape, NONE, dtype=np.int8)
     hx, hy = _unit_vectors(h)
     # toward r: e's heading vector against (r - e); away: against (e - r).
     toward = -(dx * hx[None, :] + dy * hy[None, :])
     for code, dot in enumerate((toward, -toward)):
-        holds, unsure = _within(dot, dist, cos2)
-        heading[holds] = code
-        heading[unsure & (heading == NONE)] = UNDECIDED
+        mark(heading, code, *_within(dot, dist, cos2))
+    return finish_table(ids, position, heading)
 
+
+def mark(codes: np.ndarray, code: int, holds: np.ndarray, unsure: np.ndarray) -> None:
+    """Record one relation's float decisions: its code where it holds; UNDECIDED where the floats cannot tell
+    and no other relation holds (sectors are disjoint, so at most one ever does)."""
+    codes[holds] = code
+    codes[unsure & (codes == NONE)] = UNDECIDED
+
+
+def finish_table(ids: tuple[str, ...], position: np.ndarray, heading: np.ndarray) -> RelationTable:
+    """No entity is its own witness."""
     np.fill_diagonal(position, NONE)
     np.fill_diagonal(heading, NONE)
     return RelationTable(ids, position, heading)

@@ -37,7 +37,16 @@ import numpy as np
 from synth.config import SynthConfig
 from synth.dsl import DIRECTIONS, Range
 from synth.geometry import exact_heading_vector
-from synth.relations import DIRECTION_NAMES, GUARD, NONE, UNDECIDED, RelationTable, scene_arrays
+from synth.relations import (
+    DIRECTION_NAMES,
+    GUARD,
+    NONE,
+    UNDECIDED,
+    RelationTable,
+    finish_table,
+    mark,
+    scene_arrays,
+)
 from synth.scene import Entity, Scene
 
 # Narrowest cone (degrees) a robust relation may use. Below it, cos^2 of the rounded constant no longer pins
@@ -111,21 +120,14 @@ def robust_closed_form_table(scene: Scene, config: SynthConfig) -> RelationTable
     cone1 = cones(config.delta1)[:, None] + np.zeros_like(dx)  # the reference's heading is perturbed
     for code, name in enumerate(DIRECTION_NAMES):
         axis = (h + DIRECTIONS[name][1])[:, None] + np.zeros_like(dx)
-        holds, unsure = _disc_in_cone(dx, dy, radius, axis, cone1)
-        position[holds] = code
-        position[unsure & (position == NONE)] = UNDECIDED
+        mark(position, code, *_disc_in_cone(dx, dy, radius, axis, cone1))
 
     heading = np.full(dx.shape, NONE, dtype=np.int8)
     cone2 = cones(config.delta2)[None, :] + np.zeros_like(dx)  # the target's heading is perturbed
     axis = h[None, :] + np.zeros_like(dx)
     for code, sign in enumerate((-1.0, 1.0)):  # toward: v = r - e; away: v = e - r
-        holds, unsure = _disc_in_cone(sign * dx, sign * dy, radius, axis, cone2)
-        heading[holds] = code
-        heading[unsure & (heading == NONE)] = UNDECIDED
-
-    np.fill_diagonal(position, NONE)
-    np.fill_diagonal(heading, NONE)
-    return RelationTable(ids, position, heading)
+        mark(heading, code, *_disc_in_cone(sign * dx, sign * dy, radius, axis, cone2))
+    return finish_table(ids, position, heading)
 
 
 def settle_conservatively(table: RelationTable) -> RelationTable:

@@ -135,8 +135,12 @@ class Z3Backend:
         s.add(*constraints)
         result = s.check()
         s.pop()
+        return self._verdict(result, s, t)
+
+    def _verdict(self, result: Any, s: Any, started: float) -> bool:
+        """Count one query and its time; sat -> True. unknown would be a guess either way: refuse it."""
         self.stats.queries += 1
-        self.stats.seconds += time.perf_counter() - t
+        self.stats.seconds += time.perf_counter() - started
         if result == self.z3.unknown:
             raise RuntimeError(f"z3 returned unknown: {s.reason_unknown()}")
         return result == self.z3.sat
@@ -392,12 +396,7 @@ class Z3Backend:
             self._nlsat = self.z3.Tactic("qfnra-nlsat")
         s = self._nlsat.solver()
         s.add(*constraints)
-        result = s.check()
-        self.stats.queries += 1
-        self.stats.seconds += time.perf_counter() - t
-        if result == self.z3.unknown:
-            raise RuntimeError(f"z3 returned unknown: {s.reason_unknown()}")
-        return result == self.z3.sat
+        return self._verdict(s.check(), s, t)
 
 
 def _exact_offset(ref: Entity, e: Entity) -> tuple[Fraction, Fraction]:
