@@ -84,7 +84,9 @@ def plot(ev, doc: dict, method: str, path: Path) -> None:
     width = 0.8 / max(1, len(series))
     for k, (name, rbr) in enumerate(series.items()):
         xs = [i + (k - (len(series) - 1) / 2) * width for i in range(len(buckets))]
-        ax.bar(xs, [rbr[b]["recall"] or 0.0 for b in buckets], width, label=name)
+        # "all" in black; categories from a 20-colour cycle so that up to 20 stay distinct.
+        color = "#202020" if k == 0 else _tab20(k - 1)
+        ax.bar(xs, [rbr[b]["recall"] or 0.0 for b in buckets], width, label=name, color=color)
     ax.set_xticks(range(len(buckets)), [f"{b} m" for b in buckets])
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("recall")
@@ -98,3 +100,9 @@ def plot(ev, doc: dict, method: str, path: Path) -> None:
     ax_head.set_xlabel("heading error (deg)")
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
+
+
+def _tab20(i: int):
+    from matplotlib import colormaps
+
+    return colormaps["tab20"](i % 20)
