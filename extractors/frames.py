@@ -91,7 +91,10 @@ def frame_rows(
 
 def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
     """Rows as a table of exactly FRAMES_SCHEMA (plus optional columns present), validated."""
-    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows, columns=list(FRAMES_COLUMNS))
+    if not isinstance(rows, pd.DataFrame):
+        optional = [c for c in OPTIONAL_COLUMNS if any(c in r for r in rows)]
+        rows = pd.DataFrame(rows, columns=list(FRAMES_COLUMNS) + optional)
+    df = rows
     validate_frames(df)
     extra = [c for c in OPTIONAL_COLUMNS if c in df.columns]
     schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in extra])
@@ -207,7 +210,8 @@ def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
 
 
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
-    """A Scene back as frames rows (ids kept as they are)."""
+    """A Scene back as frames rows (ids kept as they are; measurement sigmas as their optional columns, if any)."""
+    sigmas = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
     rows = []
     for e in scene.entities:
         rows.append(
@@ -216,6 +220,7 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
                 "frame_index": frame_index, "timestamp_us": None, "entity_id": e.id, "track_id": e.id,
                 "type": e.type, "category": e.type, "x": e.x, "y": e.y, "heading": e.heading,
                 "length": e.length, "width": e.width, "is_ego": e.is_ego,
+                **{c: getattr(e, c) for c in sigmas},
             }
         )
     return rows

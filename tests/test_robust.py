@@ -418,3 +418,22 @@ def test_parse_uncertainty():
         SynthConfig(pos_uncertainty=-1.0)
     with pytest.raises(ConfigError):
         SynthConfig(heading_uncertainty=float("nan"))
+
+
+def test_sigmas_survive_a_round_trip_through_frames(tmp_path):
+    from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
+    from synth.scene import scene_from_dict
+
+    doc = {"frame_id": "s/0", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+        {"id": "car1", "type": "Car", "x": 1, "y": 9, "heading": 3, "pos_sigma": 0.4, "heading_sigma": 2.5},
+        {"id": "car2", "type": "Car", "x": -4, "y": 2, "heading": 90}]}
+    scene = scene_from_dict(doc)
+    write_frames(scene_to_rows(scene), tmp_path / "f.parquet")
+    (back,) = iter_scenes(read_frames(tmp_path / "f.parquet"))
+    assert back == scene
+    plain = scene_from_dict({**doc, "entities": [{k: v for k, v in e.items() if "sigma" not in k}
+                                                 for e in doc["entities"]]})
+    write_frames(scene_to_rows(plain), tmp_path / "p.parquet")
+    import pyarrow.parquet as pq
+    assert "pos_sigma" not in pq.ParquetFile(tmp_path / "p.parquet").schema_arrow.names
