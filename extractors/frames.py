@@ -111,24 +111,33 @@ def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str
     return table.num_rows
 
 
-def read_frames(path: str | os.PathLike) -> pd.DataFrame:
-    """Read and validate a frames file; any problem is a FramesError naming the file."""
+def read_parquet_columns(
+    path: str | os.PathLike, required: Iterable[str], optional: Iterable[str], what: str, error: type[ValueError]
+) -> pd.DataFrame:
+    """The required (and present optional) columns of a Parquet file as a DataFrame; a missing file, a directory,
+    a file that is not Parquet or lacks a column is an `error` naming the file (shared by the frames and programs
+    readers, whose files come from anyone)."""
+    required, optional = list(required), list(optional)
     if not os.path.exists(path):
-        raise FramesError(f"{path} does not exist")
+        raise error(f"{path} does not exist")
     if os.path.isdir(path):
-        raise FramesError(f"{path} is a directory, not a frames Parquet file")
+        raise error(f"{path} is a directory, not a {what} Parquet file")
     try:
         pf = pq.ParquetFile(path)
         names = set(pf.schema_arrow.names)
-        missing = [c for c in FRAMES_COLUMNS if c not in names]
+        missing = [c for c in required if c not in names]
         if missing:
-            raise FramesError(f"{path} is not a frames file: it lacks column(s) {', '.join(missing)}")
-        cols = list(FRAMES_COLUMNS) + [c for c in OPTIONAL_COLUMNS if c in names]
-        df = pf.read(columns=cols).to_pandas()
-    except FramesError:
+            raise error(f"{path} is not a {what} file: it lacks column(s) {', '.join(missing)}")
+        return pf.read(columns=required + [c for c in optional if c in names]).to_pandas()
+    except error:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
-        raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+        raise error(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+
+
+def read_frames(path: str | os.PathLike) -> pd.DataFrame:
+    """Read and validate a frames file; any problem is a FramesError naming the file."""
+    df = read_parquet_columns(path, FRAMES_COLUMNS, OPTIONAL_COLUMNS, "frames", FramesError)
     try:
         validate_frames(df)
     except FramesError as exc:

@@ -77,22 +77,9 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
 
 def read_programs(path: str | os.PathLike):
     """Read and validate a programs file as a DataFrame; any problem is a ProgramsError naming the file."""
-    import pyarrow.parquet as pq
+    from extractors.frames import read_parquet_columns
 
-    if not os.path.exists(path):
-        raise ProgramsError(f"{path} does not exist")
-    if os.path.isdir(path):
-        raise ProgramsError(f"{path} is a directory, not a programs Parquet file")
-    try:
-        pf = pq.ParquetFile(path)
-        missing = [c for c in PROGRAMS_COLUMNS if c not in pf.schema_arrow.names]
-        if missing:
-            raise ProgramsError(f"{path} is not a programs file: it lacks column(s) {', '.join(missing)}")
-        df = pf.read(columns=list(PROGRAMS_COLUMNS)).to_pandas()
-    except ProgramsError:
-        raise
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise ProgramsError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    df = read_parquet_columns(path, PROGRAMS_COLUMNS, (), "programs", ProgramsError)
     bad = sorted(set(df["status"].astype(str)) - set(STATUSES))
     if bad:
         raise ProgramsError(f"{path}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
