@@ -379,16 +379,23 @@ def test_sigmas_in_scene_json_and_frames(tmp_path):
         raw["entities"][1]["heading_sigma"] = bad
         with pytest.raises(SceneError):
             scene_from_dict(raw)
-    rows = scene_to_rows(scene)
-    rows[1]["pos_sigma"], rows[1]["heading_sigma"] = 0.5, 2.0
-    rows[2]["pos_sigma"], rows[2]["heading_sigma"] = float("nan"), None
+    rows = scene_to_rows(scene)  # scene -> frames keeps the sigmas where given
+    assert (rows[1]["pos_sigma"], rows[1]["heading_sigma"], rows[2]["pos_sigma"]) == (0.5, 2.0, None)
+    rows[2]["pos_sigma"] = float("nan")  # NaN in a file means "not given"
     import pandas as pd
+    import pyarrow.parquet as pq
 
     path = tmp_path / "frames.parquet"
     write_frames(pd.DataFrame(rows), path)
     (back,) = list(iter_scenes(read_frames(path)))
     assert (back.others[0].pos_sigma, back.others[0].heading_sigma) == (0.5, 2.0)
     assert (back.others[1].pos_sigma, back.others[1].heading_sigma) == (None, None)
+    assert back == scene
+    # A scene without sigmas writes the plain schema.
+    plain = scene_from_dict({**doc, "entities": [{k: v for k, v in e.items() if "sigma" not in k}
+                                                 for e in doc["entities"]]})
+    write_frames(scene_to_rows(plain), tmp_path / "plain.parquet")
+    assert "pos_sigma" not in pq.ParquetFile(tmp_path / "plain.parquet").schema_arrow.names
 
 
 # ---------------------------------------------------------------------------------------------- CLI
@@ -419,21 +426,3 @@ def test_parse_uncertainty():
     with pytest.raises(ConfigError):
         SynthConfig(heading_uncertainty=float("nan"))
 
-
-def test_sigmas_survive_a_round_trip_through_frames(tmp_path):
-    from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
-    from synth.scene import scene_from_dict
-
-    doc = {"frame_id": "s/0", "entities": [
-        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
-        {"id": "car1", "type": "Car", "x": 1, "y": 9, "heading": 3, "pos_sigma": 0.4, "heading_sigma": 2.5},
-        {"id": "car2", "type": "Car", "x": -4, "y": 2, "heading": 90}]}
-    scene = scene_from_dict(doc)
-    write_frames(scene_to_rows(scene), tmp_path / "f.parquet")
-    (back,) = iter_scenes(read_frames(tmp_path / "f.parquet"))
-    assert back == scene
-    plain = scene_from_dict({**doc, "entities": [{k: v for k, v in e.items() if "sigma" not in k}
-                                                 for e in doc["entities"]]})
-    write_frames(scene_to_rows(plain), tmp_path / "p.parquet")
-    import pyarrow.parquet as pq
-    assert "pos_sigma" not in pq.ParquetFile(tmp_path / "p.parquet").schema_arrow.names
