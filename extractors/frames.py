@@ -111,12 +111,12 @@ def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str
     return table.num_rows
 
 
-def read_parquet_columns(
+def read_parquet_table(
     path: str | os.PathLike, required: Iterable[str], optional: Iterable[str], what: str, error: type[ValueError]
-) -> pd.DataFrame:
-    """The required (and present optional) columns of a Parquet file as a DataFrame; a missing file, a directory,
-    a file that is not Parquet or lacks a column is an `error` naming the file (shared by the frames and programs
-    readers, whose files come from anyone)."""
+) -> pa.Table:
+    """The required (and present optional) columns of a Parquet file; a missing file, a directory, a file that is
+    not Parquet or lacks a column is an `error` naming the file (shared by the frames and programs readers, whose
+    files come from anyone)."""
     required, optional = list(required), list(optional)
     if not os.path.exists(path):
         raise error(f"{path} does not exist")
@@ -128,7 +128,7 @@ def read_parquet_columns(
         missing = [c for c in required if c not in names]
         if missing:
             raise error(f"{path} is not a {what} file: it lacks column(s) {', '.join(missing)}")
-        return pf.read(columns=required + [c for c in optional if c in names]).to_pandas()
+        return pf.read(columns=required + [c for c in optional if c in names])
     except error:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
@@ -137,7 +137,7 @@ def read_parquet_columns(
 
 def read_frames(path: str | os.PathLike) -> pd.DataFrame:
     """Read and validate a frames file; any problem is a FramesError naming the file."""
-    df = read_parquet_columns(path, FRAMES_COLUMNS, OPTIONAL_COLUMNS, "frames", FramesError)
+    df = read_parquet_table(path, FRAMES_COLUMNS, OPTIONAL_COLUMNS, "frames", FramesError).to_pandas()
     try:
         validate_frames(df)
     except FramesError as exc:

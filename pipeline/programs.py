@@ -75,12 +75,25 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
     return pa.Table.from_pylist([{c: r.get(c) for c in PROGRAMS_COLUMNS} for r in rows], schema=PROGRAMS_SCHEMA)
 
 
-def read_programs(path: str | os.PathLike):
-    """Read and validate a programs file as a DataFrame; any problem is a ProgramsError naming the file."""
-    from extractors.frames import read_parquet_columns
+def read_programs_table(path: str | os.PathLike) -> pa.Table:
+    """Read and validate a programs file as a table of exactly PROGRAMS_SCHEMA; any problem (a column of another
+    type, a missing frame id or status, an unknown status) is a ProgramsError naming the file."""
+    from extractors.frames import read_parquet_table
 
-    df = read_parquet_columns(path, PROGRAMS_COLUMNS, (), "programs", ProgramsError)
-    bad = sorted(set(df["status"].astype(str)) - set(STATUSES))
+    table = read_parquet_table(path, PROGRAMS_COLUMNS, (), "programs", ProgramsError).select(list(PROGRAMS_COLUMNS))
+    try:
+        table = table.cast(PROGRAMS_SCHEMA)
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError) as exc:
+        raise ProgramsError(f"{path}: a column does not have the programs schema's type ({str(exc)[:120]})") from None
+    for column in ("frame_id", "status", "config_hash"):
+        if table.column(column).null_count:
+            raise ProgramsError(f"{path}: column {column} has a missing value")
+    bad = sorted(set(table.column("status").to_pylist()) - set(STATUSES))
     if bad:
         raise ProgramsError(f"{path}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
-    return df
+    return table
+
+
+def read_programs(path: str | os.PathLike):
+    """read_programs_table as a DataFrame (for the report and users' pandas)."""
+    return read_programs_table(path).to_pandas()

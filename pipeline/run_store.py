@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 
 from extractors.atomic import atomic_path
 from pipeline.errors import UserError
-from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, programs_table, read_programs
+from pipeline.programs import ProgramsError, programs_table, read_programs_table
 from pipeline.run import Row
 
 PART_PREFIX, PART_SUFFIX = "part-", ".parquet"
@@ -89,9 +89,8 @@ def _write(table: pa.Table, path: Path) -> None:
 
 
 def _rows(path: Path) -> list[Row]:
-    # read_programs validates; back through Arrow so nullable integers come back as int or None, not NaN.
-    df = read_programs(path)
-    return pa.Table.from_pandas(df, schema=PROGRAMS_SCHEMA, preserve_index=False).to_pylist()
+    # Arrow rows, not pandas: nullable integers come back as int or None, not NaN.
+    return read_programs_table(path).to_pylist()
 
 
 def _part_number(path: Path) -> int:

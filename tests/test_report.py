@@ -241,3 +241,32 @@ def test_refuses_to_replace_a_directory_of_other_files(two_strategies, tmp_path)
     proc = run_r2s("report", str(two_strategies), "--out", str(out))
     assert_one_line_error(proc, 2, "not part of a report")
     assert os.listdir(out) == ["notes.txt"] and (out / "notes.txt").read_text() == "keep me"
+
+
+@pytest.mark.parametrize("column, value, message", [
+    ("cost", "three", "type"),
+    ("frame_id", None, "frame_id has a missing value"),
+    ("status", "done", "unknown status"),
+])
+def test_programs_files_with_wrong_types_or_values_exit_2_everywhere(two_strategies, tmp_path, column, value,
+                                                                      message):
+    """A programs file is input too (`r2s report`, and `r2s run --out` resuming into it): typed, not trusted."""
+    table = pq.read_table(two_strategies)
+    values = table.column(column).to_pylist()
+    values[0] = value
+    field = table.schema.field(column)
+    if isinstance(value, str) and not pa.types.is_string(field.type):
+        field = pa.field(column, pa.string())  # a file whose writer put text where the schema has a number
+        values = [None if v is None else str(v) for v in values]
+    bad = table.set_column(table.schema.get_field_index(column), field, pa.array(values, type=field.type))
+    path = tmp_path / "bad.parquet"
+    pq.write_table(bad, path)
+    before = path.read_bytes()
+    proc = run_r2s("report", str(path), "--out", str(tmp_path / "report"))
+    assert_one_line_error(proc, 2, contains=message)
+    assert not (tmp_path / "report").exists()
+    frames = tmp_path / "frames.parquet"
+    assert run_r2s("extract", "scenarionet", "data/nuscenes-mini-excerpt/scenarionet", "--out", str(frames)).returncode == 0
+    proc = run_r2s("run", str(frames), "--out", str(path), "--jobs", "1")
+    assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    assert path.read_bytes() == before
