@@ -64,6 +64,7 @@ def read_dsl_program(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    import re
     from pathlib import Path
 
     from extractors.atomic import write_text_atomic
@@ -94,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         write_text_atomic(out / f"sample_{k:0{width}d}.json", scene.to_json())
     # Samples of an earlier, larger run would read as part of this one: the directory holds this run only.
     for stale in sorted(set(out.glob("sample_*.json")) - written):
-        stale.unlink()
+        if re.fullmatch(r"sample_\d{3,}\.json", stale.name):  # only names this verb writes
+            stale.unlink()
     print(f"wrote {len(samples.scenes)} scenes to {out} (seed {args.seed}, {samples.iterations} iterations)")
     return 0

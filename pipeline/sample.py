@@ -23,7 +23,14 @@ from dataclasses import dataclass
 from pipeline.errors import UserError
 from synth.config import SynthConfig
 from synth.dsl import Program
-from synth.emit_scenic import COLLISIONS_PARAM, FRAME_PARAM, NotGenerated, rebuild_from_source, render_scenic
+from synth.emit_scenic import (
+    COLLISIONS_PARAM,
+    FRAME_PARAM,
+    MIN_DISTANCE,
+    NotGenerated,
+    rebuild_from_source,
+    render_scenic,
+)
 from synth.geometry import normalize
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.semantics import check
@@ -201,5 +208,9 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
     for k, s in enumerate(samples.scenes):
         result = check(program, s, config)
         if not result.ok:
-            raise RuntimeError(f"sampled scene {k} is outside the program's semantics: {result.violations[0]}")
+            # The program is the user's: a statement no scene can satisfy as sampled (a distance Range under
+            # dsl__MIN_DISTANCE, an entity placed on the reference it must face) is bad input, named as such.
+            raise UserError(f"sampled scene {k} is outside the program's own semantics ({result.violations[0]}): "
+                            "the program has a statement no sampled scene satisfies, e.g. a distance Range under "
+                            f"{MIN_DISTANCE} m or an entity placed on the reference it faces")
     return samples

@@ -221,5 +221,5 @@ def rebuild_from_source(text: str) -> str:
         if not isinstance(header, str):
             raise ValueError("the header is not a string")
         return render_scenic(program, scene, config, header)
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # SceneError, DslError, ConfigError, JSON
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:  # Scene/Dsl/ConfigError, JSON
         raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None

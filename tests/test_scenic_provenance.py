@@ -77,7 +77,7 @@ def test_a_forged_record_can_only_yield_what_the_emitter_writes(generated, tmp_p
 
 
 @pytest.mark.parametrize("text", ["", "ego = new Car\n", "# r2s-source: {\n", "# r2s-source: []\n",
-                                  "# r2s-source: {\"frame_id\": 1}\n"])
+                                  "# r2s-source: {\"frame_id\": 1}\n", "# r2s-source: " + "[" * 100_000 + "\n"])
 def test_foreign_or_broken_records_are_refused(text):
     with pytest.raises(ScenicProgramError, match="not Scenic text written by r2sgen"):
         ensure_generated(text)
@@ -102,7 +102,27 @@ def test_a_smaller_rerun_leaves_no_samples_of_the_earlier_run(generated, tmp_pat
     out = tmp_path / "out"
     (out).mkdir()
     (out / "notes.txt").write_text("mine")
+    (out / "sample_notes.json").write_text("{}")  # looks like ours, is not: kept
     for n in ("4", "2"):
         proc = run_r2s("sample", str(path), "--n", n, "--allow-collisions", "--out", str(out))
         assert proc.returncode == 0, proc.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "sample_000.json", "sample_001.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "sample_000.json", "sample_001.json",
+                                                     "sample_notes.json"]
+
+
+@pytest.mark.parametrize("statement", [
+    "car1 = new Car ahead of ego by Range(-5, 0), facing Range(0, 5) deg relative to ego",  # distance 0 only
+    "car1 = new Car on Range(0, 0) @ Range(0, 0) relative to ego, facing toward ego",
+])
+def test_a_degenerate_user_program_is_bad_input_not_a_crash(tmp_path, statement):
+    pytest.importorskip("scenic", reason="scenic is not installed (pip install .[scenic])")
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps({"frame_id": "f", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+        {"id": "car1", "type": "Car", "x": 0, "y": 10, "heading": 0}]}))
+    program = tmp_path / "p.dsl"
+    program.write_text(statement + "\n")
+    proc = run_r2s("sample", "--program", str(program), "--scene", str(scene), "--allow-collisions",
+                   "--out", str(tmp_path / "out"))
+    assert_one_line_error(proc, 2)
+    assert not (tmp_path / "out").exists()
