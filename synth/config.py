@@ -93,7 +93,9 @@ class SynthConfig:
         The uncertainty fields enter only when non-zero: plain synthesis keeps the hashes it always had, so
         programs.parquet files written before robust synthesis existed still resume.
         """
-        values = asdict(self)
+        # 10 in a TOML file and 10.0 on the command line are one setting: hash numbers as floats.
+        values = {k: float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+                  for k, v in asdict(self).items()}
         for name in ("pos_uncertainty", "heading_uncertainty"):
             if values[name] == 0.0:
                 del values[name]

@@ -33,3 +33,11 @@ def test_semantic_hash_changes_with_what_decides_the_program():
     assert a.semantic_hash() == SynthConfig().semantic_hash()
     assert a.semantic_hash() != a.with_(delta1=8.0).semantic_hash()
     assert a.semantic_hash() != a.with_(strategy="bfs-cpa").semantic_hash()
+
+
+def test_an_int_and_the_same_float_are_one_setting():
+    from synth.config import SynthConfig
+
+    assert SynthConfig(time_limit=10, pos_uncertainty=1).semantic_hash() == \
+        SynthConfig(time_limit=10.0, pos_uncertainty=1.0).semantic_hash()
+    assert SynthConfig(time_limit=10).semantic_hash() != SynthConfig(time_limit=11).semantic_hash()
