@@ -145,10 +145,10 @@ class _Run:
                     buffer.add(row, time.monotonic())
                     self._bar.update(1)
                 if buffer.due(time.monotonic()):
-                    store.write_part(buffer.take())
+                    _write_part(store, buffer.take())
         finally:
             if buffer.rows:
-                store.write_part(buffer.take())
+                _write_part(store, buffer.take())
             self._bar.close()
             self._bar = None
         return len(todo)
@@ -188,3 +188,13 @@ class _Run:
             self._bar.write(line, file=sys.stderr)
         else:
             sys.stderr.write(line + "\n")
+
+
+def _write_part(store, rows) -> None:
+    """Write a chunk with SIGTERM held back: the rows have left the buffer, so an exit in the middle of the write
+    would lose them; the signal is delivered (and the run ends) right after."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    try:
+        store.write_part(rows)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)

@@ -60,14 +60,28 @@ def _bounded(
     death: Callable[[BaseException], tuple[str, bool] | None],
     guard_s: float | None = None,
     kill: Callable[[], None] | None = None,
+    abandon: Callable[[list], None] | None = None,
 ) -> Iterator[Row | None]:
     """At most `slots` frames submitted at once, so that "in flight" means running and a death names few frames.
 
     `death(exc)` tells a worker death (reason, and whether the death is pinned on this frame) from a bug, which
     propagates. Frames running longer than `guard_s` are taken for hung: `kill()` ends the pool's workers.
+    When the run itself stops (SIGTERM, Ctrl-C, a bug, the consumer closing us), `abandon(futures)` stops the
+    frames in flight at once: a scheduler's grace period is seconds, and their rows are lost either way.
     """
-    pending = list(reversed(tasks))
     running: dict[Any, tuple[FrameTask, float]] = {}
+    try:
+        yield from _bounded_loop(tasks, slots, submit, wait_first, death, guard_s, kill, running)
+    except WorkerLost:
+        raise
+    except BaseException:
+        if abandon is not None and running:
+            abandon(list(running))
+        raise
+
+
+def _bounded_loop(tasks, slots, submit, wait_first, death, guard_s, kill, running) -> Iterator[Row | None]:
+    pending = list(reversed(tasks))
     poll_s = HEARTBEAT_S if guard_s is None else min(HEARTBEAT_S, guard_s / 4)
     while pending or running:
         while pending and len(running) < slots:
@@ -119,8 +133,12 @@ class LokyPool:
             # kill_workers=False, which would override ours and join a worker that never returns.
             executor.shutdown(wait=True, kill_workers=True)
 
+        def abandon(_futures: list) -> None:
+            # The process is on its way out: no pool follows, so nothing can override kill_workers.
+            executor.shutdown(wait=False, kill_workers=True)
+
         yield from _bounded(tasks, self.jobs, lambda t: executor.submit(run_frame, t), wait_first, _loky_death,
-                            self.guard_s, kill)
+                            self.guard_s, kill, abandon)
 
 
 def _loky_death(exc: BaseException) -> tuple[str, bool] | None:
@@ -169,7 +187,7 @@ class DaskPool:
             return (f"worker died (dask: each of the {tries.group(1)} workers that ran it died)" if tries
                     else one_line(f"worker died: {exc}")), True
 
-        yield from _bounded(tasks, slots, submit, wait_first, death)
+        yield from _bounded(tasks, slots, submit, wait_first, death, abandon=self.client.cancel)
 
 
 def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) -> Iterator[Row | None]:

@@ -152,6 +152,37 @@ def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp
     _assert_programs_contain_scenes(json_frames, out, SynthConfig())
 
 
+def test_sigterm_stops_the_frames_in_flight_and_their_workers(json_frames, tmp_path):
+    """A scheduler's stop must not wait for slow frames: their workers are killed, no process is left behind."""
+    out = tmp_path / "programs.parquet"
+    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=120@*"})  # every frame would take two minutes
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", str(out), "--jobs", "2"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+    )
+    try:
+        time.sleep(4)  # workers started and sleeping in their first frames
+        assert proc.poll() is None
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)  # far less than the frames in flight would take
+        assert proc.returncode == 128 + signal.SIGTERM
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            try:
+                os.killpg(proc.pid, 0)  # anyone left in the run's process group?
+            except ProcessLookupError:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("worker processes outlived the run")
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not out.exists()
+
+
 # --------------------------------------------------------------------------------------------------- limits
 
 def test_time_limit_gives_the_best_program_and_a_lower_bound(real_frames, tmp_path):
