@@ -87,7 +87,8 @@ class _Run:
 
         store = RunStore(self.args.out)
         store.check_writable()
-        df = read_frames(self.args.frames)
+        df = read_frames(self.args.frames)  # bad input is refused before even the lock file is made
+        store.lock()
         if df.empty:
             raise UserError(f"{self.args.frames} has no frames")
         groups = {str(fid): rows for fid, rows in df.groupby("frame_id", sort=False)}

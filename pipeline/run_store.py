@@ -28,6 +28,7 @@ class RunStore:
         self.out = Path(out)
         self.parts = Path(f"{self.out}.parts")
         self._next = 0
+        self._lock_fd: int | None = None
 
     def check_writable(self) -> None:
         """Refuse, before anything is written, an output that a run must not overwrite or cannot create."""
@@ -38,6 +39,26 @@ class RunStore:
         parent = self.out.parent
         if parent.exists() and not os.access(parent, os.W_OK):
             raise UserError(f"cannot write in {parent}")
+
+    def lock(self) -> None:
+        """Hold `<out>`'s lock for the rest of this process, or refuse: two runs on one output would overwrite
+        each other's parts and consolidate under each other. The lock is an flock on an empty file in the temp
+        directory named by the output's resolved path (nothing appears beside the output, so refused input still
+        writes nothing there); the kernel drops it when the process ends, however it ends: no stale lock."""
+        import fcntl
+        import hashlib
+        import tempfile
+
+        key = hashlib.sha256(str(self.out.resolve()).encode()).hexdigest()[:24]
+        path = Path(tempfile.gettempdir()) / f"r2s-run-{key}.lock"
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise UserError(f"another r2s run on this machine is writing {self.out} (lock {path}); "
+                            "wait for it or choose another --out") from None
+        self._lock_fd = fd  # kept open: closing it would release the lock
 
     def existing_rows(self) -> tuple[list[Row], list[str]]:
         """Rows of an earlier run (output first, then parts in order) and warnings about unreadable parts."""

@@ -152,8 +152,9 @@ def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp
     _assert_programs_contain_scenes(json_frames, out, SynthConfig())
 
 
-def test_sigterm_stops_the_frames_in_flight_and_their_workers(json_frames, tmp_path):
-    """A scheduler's stop must not wait for slow frames: their workers are killed, no process is left behind."""
+def test_a_second_run_on_the_same_out_is_refused_and_sigterm_stops_the_first(json_frames, tmp_path):
+    """Two runs on one output would overwrite each other's parts: the second is refused while the first holds
+    the lock. A scheduler's stop must not wait for slow frames: their workers are killed, none is left behind."""
     out = tmp_path / "programs.parquet"
     env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=120@*"})  # every frame would take two minutes
     proc = subprocess.Popen(
@@ -163,6 +164,8 @@ def test_sigterm_stops_the_frames_in_flight_and_their_workers(json_frames, tmp_p
     try:
         time.sleep(4)  # workers started and sleeping in their first frames
         assert proc.poll() is None
+        second = run_r2s("run", str(json_frames), "--out", str(out), "--jobs", "1")
+        assert_one_line_error(second, 2, contains="another r2s run on this machine is writing")
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=60)  # far less than the frames in flight would take
         assert proc.returncode == 128 + signal.SIGTERM
