@@ -74,7 +74,7 @@ def plot(ev, doc: dict, method: str, path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from extractors.atomic import atomic_path
+    from pipeline.render import save
 
     buckets = doc["protocol"]["range_buckets_m"]
     series = {"all": doc["recall_by_range"]} | {t: c["recall_by_range"] for t, c in doc["per_category"].items()}
@@ -98,8 +98,7 @@ def plot(ev, doc: dict, method: str, path: Path) -> None:
     ax_pos.set_title("matched pairs")
     ax_head.hist([q.heading_error for q in pairs], bins=36, range=(0, 180), color="#dd8452")
     ax_head.set_xlabel("heading error (deg)")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save(fig, path)  # atomic, and without version or date metadata: the same inputs give the same bytes
 
 
 def _tab20(i: int):

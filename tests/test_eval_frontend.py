@@ -109,3 +109,23 @@ def test_bad_input_exits_2(files, tmp_path):
     a_file.write_text("x")
     assert_one_line_error(run_r2s("eval-frontend", pred, gt, "--out", str(a_file)), 2, "not a directory")
     assert not (tmp_path / "o").exists()
+
+
+def test_the_plot_is_byte_identical_across_runs(tmp_path):
+    """Deterministic output: no matplotlib version or timestamp inside the PNG."""
+    from extractors.frames import scene_to_rows, write_frames
+    from synth.scene import scene_from_dict
+
+    scene = scene_from_dict({"frame_id": "s/0", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+        {"id": "car1", "type": "Car", "x": 1, "y": 9, "heading": 3},
+        {"id": "pedestrian2", "type": "Pedestrian", "x": -4, "y": 22, "heading": 90}]})
+    write_frames(scene_to_rows(scene), tmp_path / "gt.parquet")
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"out{k}"
+        proc = run_r2s("eval-frontend", str(tmp_path / "gt.parquet"), str(tmp_path / "gt.parquet"), "--out", str(out))
+        assert proc.returncode == 0, proc.stderr
+        outs.append({p.name: p.read_bytes() for p in out.iterdir() if p.suffix == ".png"})
+    assert outs[0] and outs[0] == outs[1]
+    assert all(b"matplotlib" not in data for data in outs[0].values())
