@@ -116,12 +116,7 @@ def parse_uncertainty(text: str) -> tuple[float, float]:
         pos, head = (float(p) for p in parts)
     except ValueError:
         raise ConfigError(f"uncertainty must be POS_M,HEAD_DEG (two numbers), got {text!r}") from None
-    if not (math.isfinite(pos) and 0.0 <= pos < MAX_POS_SIGMA):
-        raise ConfigError(f"position uncertainty must be a number of metres in [0, {MAX_POS_SIGMA:g}), got {parts[0]!r}")
-    if not (math.isfinite(head) and 0.0 <= head < MAX_HEADING_SIGMA):
-        raise ConfigError(
-            f"heading uncertainty must be a number of degrees in [0, {MAX_HEADING_SIGMA:g}), got {parts[1]!r}"
-        )
+    SynthConfig(pos_uncertainty=pos, heading_uncertainty=head)  # the one range check, at parse time
     return pos, head
 
 
