@@ -92,6 +92,7 @@ class Z3Backend:
             raise SolverUnavailable(f"z3 is not installed ({exc}); pip install z3-solver") from None
         self.z3 = z3
         self._solver = z3.SolverFor("QF_NRA")
+        self._nlsat = z3.Tactic("qfnra-nlsat")  # robust questions; see _fresh_check
         self._fresh = 0
 
     # --------------------------------------------------------------------------------- building blocks
@@ -392,8 +393,6 @@ class Z3Backend:
         nlsat, and on these questions it can take seconds where nlsat takes milliseconds; the qfnra-nlsat tactic
         (complete for nonlinear real arithmetic) skips SolverFor's portfolio set-up, 3x faster again."""
         t = time.perf_counter()
-        if getattr(self, "_nlsat", None) is None:
-            self._nlsat = self.z3.Tactic("qfnra-nlsat")
         s = self._nlsat.solver()
         s.add(*constraints)
         return self._verdict(s.check(), s, t)
@@ -412,6 +411,7 @@ class DrealBackend:
 
     config: SynthConfig
     stats: SolverStats = field(default_factory=SolverStats)
+    _z3: Z3Backend | None = field(default=None, init=False, repr=False)  # made on the first robust question
 
     def __post_init__(self) -> None:
         try:
@@ -444,7 +444,7 @@ class DrealBackend:
 
     def _exact(self) -> Z3Backend:
         # Robust questions are about every point of a disc: z3 decides them exactly (dReal only delta-close).
-        if getattr(self, "_z3", None) is None:
+        if self._z3 is None:
             self._z3 = Z3Backend(self.config, self.stats)
         return self._z3
 
