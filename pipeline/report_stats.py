@@ -13,11 +13,12 @@ import numpy as np
 import pandas as pd
 
 from pipeline.programs import STATUSES
+from synth.dsl import AbsoluteHeading, AbsoluteXYPos
 
 # Entity-count buckets (N excludes ego). Later buckets are wide because dense frames are rare and slow.
 BUCKETS: tuple[tuple[int, int | None], ...] = ((0, 0), (1, 5), (6, 10), (11, 20), (21, 40), (41, 80), (81, None))
 # The absolute-coordinate program declares every entity with `on Range @ Range, facing Range deg`: 2 + 2.
-ABSOLUTE_COST_PER_ENTITY = 4
+ABSOLUTE_COST_PER_ENTITY = AbsoluteXYPos.cost + AbsoluteHeading.cost
 # Relation kinds in the order the paper's grammar lists them (position first, then heading).
 POSITION_KINDS = ("ahead", "behind", "left", "right", "relative position", "absolute position")
 HEADING_KINDS = ("toward", "away", "relative heading", "absolute heading")
