@@ -5,15 +5,24 @@ files are plain dicts, lists, strings, numbers and numpy arrays, which reference
 (measured on the shared nuScenes-mini pickles: numpy.core.multiarray._reconstruct, numpy.ndarray,
 numpy.dtype; the others are what numpy writes for scalars, for pickle protocols 2 and 5, and under numpy 2's
 module names). Anything else is refused before it is imported.
+
+One callable needs more care: ScenarioNet's converters (metadrive's ScenarioDescription.update_summaries) store
+`collections.defaultdict(int)` in every scenario's metadata.number_summary and so in dataset_summary.pkl. A
+defaultdict's default factory is itself a global that pickle hands to the constructor (REDUCE), and pickle's
+BUILD could set it afterwards. So the factory names resolve to inert tokens, not to the types (int, str, ...
+never become callable from a pickle), the defaultdict constructor accepts only a token of the closed set
+DEFAULT_FACTORIES, and what it builds refuses BUILD.
 """
 
 from __future__ import annotations
 
+import _compat_pickle
 import codecs
 import collections
 import io
 import os
 import pickle
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -41,15 +50,67 @@ for _mod in ("builtins", "__builtin__"):
 
 MAX_PICKLE_BYTES = 2 * 2**30
 
+# The closed set of default factories a ScenarioNet defaultdict may name.
+DEFAULT_FACTORIES = (int, float, str, list, dict, set, tuple)
+
 
 class RefusedGlobal(pickle.UnpicklingError):
     pass
 
 
+@dataclass(frozen=True)
+class _FactoryName:
+    """What a pickle gets for `builtins.int` & co.: not callable, only accepted as a defaultdict's factory."""
+
+    factory: type
+
+
+def _python2_name(t: type) -> tuple[str, str]:
+    # protocol < 3 writes Python 2 names (int as __builtin__.long, str as __builtin__.unicode)
+    return _compat_pickle.REVERSE_NAME_MAPPING.get(("builtins", t.__name__), ("__builtin__", t.__name__))
+
+
+FACTORY_NAMES: dict[tuple[str, str], _FactoryName] = {}
+for _t in DEFAULT_FACTORIES:
+    FACTORY_NAMES[("builtins", _t.__name__)] = FACTORY_NAMES[_python2_name(_t)] = _FactoryName(_t)
+
+
+class _DefaultDict(collections.defaultdict):
+    """A defaultdict as unpickled. BUILD would set default_factory to whatever object the pickle put on the stack
+    after the constructor checked it, so any BUILD is refused; it pickles again as a plain defaultdict."""
+
+    __slots__ = ()
+
+    def __setstate__(self, state: Any) -> None:
+        raise RefusedGlobal("collections.defaultdict with state set after construction (BUILD)")
+
+    def __reduce__(self) -> tuple:
+        args = () if self.default_factory is None else (self.default_factory,)
+        return collections.defaultdict, args, None, None, iter(self.items())
+
+
+def _defaultdict(*args: Any) -> _DefaultDict:
+    """collections.defaultdict(factory[, items]) with factory None or one of DEFAULT_FACTORIES (as its token)."""
+    factory, rest = (args[0], args[1:]) if args else (None, ())
+    if isinstance(factory, _FactoryName):
+        factory = factory.factory
+    elif factory is not None and not any(factory is t for t in DEFAULT_FACTORIES):
+        qualname = getattr(factory, "__qualname__", None)
+        what = f"{getattr(factory, '__module__', '?')}.{qualname}" if qualname else f"a {type(factory).__name__} object"
+        raise RefusedGlobal(f"collections.defaultdict with default factory {what}")
+    return _DefaultDict(factory, *rest)
+
+
 class _RestrictedUnpickler(pickle.Unpickler):
     def find_class(self, module: str, name: str) -> Any:
+        if (module, name) == ("collections", "defaultdict"):
+            return _defaultdict
         try:
             return ALLOWED_GLOBALS[(module, name)]
+        except KeyError:
+            pass
+        try:
+            return FACTORY_NAMES[(module, name)]
         except KeyError:
             raise RefusedGlobal(f"{module}.{name}") from None
 

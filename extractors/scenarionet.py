@@ -1,7 +1,8 @@
 """ScenarioNet scenario descriptions (.pkl, one scenario each) as frames.
 
 Input: a ScenarioNet database directory (dataset_summary.pkl + dataset_mapping.pkl, as ScenarioNet writes
-them), any directory of scenario .pkl files, or one .pkl file. Every pickle goes through the restricted
+them: a converter's output, its per-worker sub-databases, or a merged database whose mapping points into other
+database folders), any directory of scenario .pkl files, or one .pkl file. Every pickle goes through the restricted
 unpickler. Ego = the track named by metadata.sdc_id. nuScenes-derived scenarios are 10 Hz interpolations of
 the 2 Hz keyframes: step 5k holds nuScenes sample k unchanged, so one frame per keyframe, frame_id
 `<scene>/<k>`. Other datasets (Waymo, nuPlan, Lyft, Argoverse) give a frame per step. `--every K` keeps every
@@ -10,6 +11,7 @@ K-th of those frames.
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -30,24 +32,43 @@ def scenario_files(path: Path) -> list[Path]:
     if path.is_file():
         return [path]
     if (path / SUMMARY).is_file():
-        summary = load_pickle(path / SUMMARY)
-        mapping = load_pickle(path / MAPPING) if (path / MAPPING).is_file() else {}
-        if not isinstance(summary, dict) or not isinstance(mapping, dict):
-            raise ExtractError(f"{path}: {SUMMARY} / {MAPPING} are not ScenarioNet summaries (dicts)")
-        files = []
-        for name in summary:
-            rel = mapping.get(name, "")
-            if not isinstance(name, str) or not isinstance(rel, str) or os.path.isabs(rel) or ".." in Path(rel).parts:
-                raise ExtractError(f"{path}: {MAPPING} names a file outside the database: {rel!r}/{name!r}")
-            files.append(path / rel / name)
-        missing = [f for f in files if not f.is_file()]
-        if missing:
-            raise ExtractError(f"{path}: the summary lists {missing[0].name}, which is not in the database")
-        return files
+        return database_files(path)
     found = sorted(p for p in path.rglob("*.pkl") if p.name not in (SUMMARY, MAPPING))
     if not found:
         raise ExtractError(f"{path} holds no ScenarioNet .pkl files")
     return found
+
+
+def database_files(db: Path) -> list[Path]:
+    """Where each scenario of a ScenarioNet database lives, as metadrive's read_dataset_summary finds it:
+    db / mapping[name] / name. A converter's own database maps every name to "" (the same folder); the top
+    database of a converter run with --num_workers maps them to its per-worker sub-databases ("db_0", ...);
+    `scenarionet.merge` maps them to os.path.relpath(source database, merged database), e.g. "../waymo_0".
+    All of these are followed; each target must be an existing file (a symlink loop is not)."""
+    summary = load_pickle(db / SUMMARY)
+    # Without a mapping, ScenarioNet takes every scenario to be in the database folder itself.
+    mapping = load_pickle(db / MAPPING) if (db / MAPPING).is_file() else None
+    if not isinstance(summary, dict) or not isinstance(mapping, (dict, type(None))):
+        raise ExtractError(f"{db}: {SUMMARY} / {MAPPING} are not ScenarioNet summaries (dicts)")
+    mapping = mapping or None  # an empty mapping, too, means "all here" to read_dataset_summary
+    files = []
+    for name in summary:
+        if not isinstance(name, str) or not name.endswith(".pkl") or Path(name).name != name:
+            raise ExtractError(f"{db}: {SUMMARY} entry {name!r} is not the file name of a scenario (.pkl)")
+        rel = "" if mapping is None else mapping.get(name)
+        if not isinstance(rel, str):
+            raise ExtractError(f"{db}: {SUMMARY} entry {name!r} has no folder in {MAPPING} (it maps to {rel!r})")
+        target = db / rel / name
+        try:
+            # strict: a missing file or a symlink loop (ELOOP) raises instead of resolving forever
+            is_file = Path(os.path.realpath(target, strict=True)).is_file()
+        except (OSError, RuntimeError, ValueError) as exc:
+            why = "is a symlink loop" if getattr(exc, "errno", None) == errno.ELOOP else "does not exist"
+            raise ExtractError(f"{db}: {SUMMARY} entry {name!r} maps to {target}, which {why}") from None
+        if not is_file:
+            raise ExtractError(f"{db}: {SUMMARY} entry {name!r} maps to {target}, which is not a file")
+        files.append(target)
+    return files
 
 
 def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:

@@ -105,12 +105,24 @@ def test_bad_scenarionet_files_exit_2(tmp_path, capsys, case):
                    out, expect)
 
 
-def test_database_summary_cannot_point_outside(tmp_path, capsys):
+def test_database_mapping_may_point_outside_only_to_scenario_files(tmp_path, capsys):
+    # merged databases map to ../<db> (issue 13): followed, but only to an existing file that is a scenario
     db = tmp_path / "db"
     shutil.copytree(EXCERPT / "scenarionet", db)
     (db / "dataset_mapping.pkl").write_bytes(pickle.dumps({SCENARIO.name: "../../etc"}))
     out = tmp_path / "out" / "frames.parquet"
-    assert_refused(r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out)), out, "outside the database")
+    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused(res, out, "entry 'sd_nuscenes_v1.0-mini_scene-0103.pkl' has no folder in dataset_mapping.pkl")
+    mapping = {name: "../../etc" for name in load_pickle(db / "dataset_summary.pkl")}
+    (db / "dataset_mapping.pkl").write_bytes(pickle.dumps(mapping))
+    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused(res, out, "/../../etc/sd_nuscenes_v1.0-mini_scene-0103.pkl, which does not exist")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "sd_nuscenes_v1.0-mini_scene-0103.pkl").write_bytes(pickle.dumps({"not": "one"}))
+    (db / "dataset_mapping.pkl").write_bytes(
+        pickle.dumps({**dict.fromkeys(mapping, ""), "sd_nuscenes_v1.0-mini_scene-0103.pkl": "../elsewhere"}))
+    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused(res, out, "elsewhere/sd_nuscenes_v1.0-mini_scene-0103.pkl is not a ScenarioNet scenario")
 
 
 def test_existing_output_survives_a_failed_extraction(tmp_path, capsys):
