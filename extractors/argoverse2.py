@@ -21,6 +21,7 @@ from extractors.base import (
     Box,
     ExtractError,
     ExtractOptions,
+    ExtractTally,
     FrameBuilder,
     quaternion_yaw,
     require_path,
@@ -28,6 +29,7 @@ from extractors.base import (
 )
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
+TAXONOMY = "argoverse2"
 NAMES = ("annotations.feather", "annotations_with_ego.feather")
 COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "qw", "qx", "qy", "qz", "tx_m", "ty_m")
 EGO_CATEGORY = "EGO_VEHICLE"
@@ -61,8 +63,8 @@ def read_annotations(path: Path) -> dict[str, np.ndarray]:
     return cols
 
 
-def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
-    builder = FrameBuilder("argoverse2", "argoverse2", options)
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+    builder = FrameBuilder("argoverse2", TAXONOMY, options, tally)
     for f in annotation_files(require_path(input_path, "Argoverse 2 input")):
         yield from log_frames(f, read_annotations(f), builder)
 

@@ -1,23 +1,28 @@
 """The one small interface every source module implements, and what they share.
 
-A source module (nuscenes, scenarionet, argoverse2, mcap, rosbag) has `DESCRIPTION` and
-`extract(input_path, options) -> Iterator[list[row dict]]`, one list of frames rows per frame, built with
-`FrameBuilder.frame(...)` so that the ego-frame transform, category selection, radius and entity cap are the
-same for all sources. Problems with the input raise ExtractError (a FramesError: one line, exit 2).
+A source module (nuscenes, scenarionet, argoverse2, mcap, rosbag) has `DESCRIPTION`, `TAXONOMY` (the
+extractors.categories taxonomy its raw categories belong to) and
+`extract(input_path, options, tally=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built
+with `FrameBuilder.frame(...)` so that the ego-frame transform, category selection, radius and entity cap are
+the same for all sources. What a run leaves out (a duplicate scenario, an object of a type no map knows) is
+counted in the ExtractTally, whose summary is the last line of `r2s extract`. Problems with the input raise
+ExtractError (a FramesError: one line, exit 2).
 """
 
 from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+import sys
+from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from extractors.categories import VEHICLES, CategorySelection
+from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, scenic_class
 from extractors.frames import FramesError, _dim, frame_rows
 from synth.scene import DEFAULT_MAX_ENTITIES
 
@@ -55,7 +60,10 @@ class ExtractOptions:
 
 @dataclass(frozen=True)
 class Box:
-    """One recorded object in the ego frame (+x right, +y forward, heading degrees CCW from +y)."""
+    """One recorded object in the ego frame (+x right, +y forward, heading degrees CCW from +y).
+
+    `fallback` is a coarser type to classify by when the taxonomy does not know `category` (ScenarioNet tracks
+    carry a dataset's own type in metadata.type and MetaDrive's VEHICLE / PEDESTRIAN / ... in type)."""
 
     track_id: str
     category: str
@@ -64,6 +72,64 @@ class Box:
     heading: float
     length: float | None = None
     width: float | None = None
+    fallback: str | None = None
+
+
+def _stderr_line(message: str) -> None:
+    sys.stderr.write(message + "\n")
+
+
+# Distinct category names a tally keeps apart; more are summed under "..." (a corrupt file must not grow it).
+MAX_NAMES = 20
+
+
+@dataclass
+class ExtractTally:
+    """What an extraction read and what it left out, for the summary line at its end. Mutable on purpose: the
+    source modules and FrameBuilder count into it while the frames stream; `warn` prints a line at once."""
+
+    warn: Callable[[str], None] = field(default=_stderr_line, repr=False, compare=False)
+    scenarios: int = 0  # scenarios (scenes, logs, files) that gave frames
+    skipped: Counter = field(default_factory=Counter)  # why -> scenarios left out
+    by_fallback: Counter = field(default_factory=Counter)  # "raw as FALLBACK" -> objects
+    unknown_kept: Counter = field(default_factory=Counter)  # raw -> objects typed UNKNOWN_CLASS
+    unknown_left_out: Counter = field(default_factory=Counter)  # raw -> objects left out
+    _scene: str | None = field(default=None, repr=False, compare=False)
+
+    def frame_of(self, scene: str) -> None:
+        # the frames of a scenario come together, so a change of scene is a new scenario
+        if scene != self._scene:
+            self.scenarios += 1
+            self._scene = scene
+
+    def skip(self, why: str, warning: str | None = None) -> None:
+        self.skipped[why] += 1
+        if warning:
+            self.warn(warning)
+
+    @staticmethod
+    def count(counter: Counter, name: str) -> None:
+        counter[name if name in counter or len(counter) < MAX_NAMES else "..."] += 1
+
+    @property
+    def scenarios_read(self) -> int:
+        return self.scenarios + sum(self.skipped.values())
+
+    def notes(self) -> str:
+        """What was skipped and why, and how objects of unknown type were typed ("" when nothing was)."""
+        parts = []
+        if self.skipped:
+            parts.append(f"skipped {sum(self.skipped.values())} scenarios ({_listing(self.skipped)})")
+        unknown = [(self.by_fallback, "typed by their MetaDrive type"), (self.unknown_kept, f"typed {UNKNOWN_CLASS}"),
+                   (self.unknown_left_out, "left out")]
+        if any(c for c, _ in unknown):
+            parts.append("objects of unknown type: " + ", ".join(
+                f"{sum(c.values())} {what} ({_listing(c)})" for c, what in unknown if c))
+        return "; ".join(parts)
+
+
+def _listing(counter: Counter) -> str:
+    return ", ".join(f"{name} x{n}" for name, n in sorted(counter.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
 def global_to_ego(
@@ -102,6 +168,24 @@ class FrameBuilder:
     source: str
     taxonomy: str
     options: ExtractOptions
+    tally: ExtractTally | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.tally is None:
+            object.__setattr__(self, "tally", ExtractTally())
+
+    def classify(self, b: Box) -> str | None:
+        """The Scenic class of a box under --categories, or None to leave it out; a category no map knows is
+        classified by the box's fallback if that is known, else as UNKNOWN_CLASS, and counted either way."""
+        select = self.options.categories.select
+        if scenic_class(self.taxonomy, b.category) is not None:
+            return select(self.taxonomy, b.category)
+        if b.fallback is not None and scenic_class(self.taxonomy, b.fallback) is not None:
+            ExtractTally.count(self.tally.by_fallback, f"{b.category} as {b.fallback}")
+            return select(self.taxonomy, b.fallback)
+        cls = select(self.taxonomy, b.category)
+        ExtractTally.count(self.tally.unknown_kept if cls is not None else self.tally.unknown_left_out, b.category)
+        return cls
 
     def frame(
         self,
@@ -120,10 +204,7 @@ class FrameBuilder:
                 raise ExtractError(f"frame {fid}: object {b.track_id} has a non-finite position or heading")
             if math.hypot(b.x, b.y) > opts.radius:
                 continue
-            try:
-                cls = opts.categories.select(self.taxonomy, b.category)
-            except LookupError as exc:
-                raise ExtractError(f"frame {fid}: {exc}") from None
+            cls = self.classify(b)
             if cls is not None:
                 kept.append(_as_entity(b, cls))
         if len(kept) + 1 > opts.max_entities:
@@ -131,6 +212,7 @@ class FrameBuilder:
                 f"frame {fid} has {len(kept) + 1} entities, more than the cap of {opts.max_entities} "
                 "(raise --max-entities, or lower --radius)"
             )
+        self.tally.frame_of(scene)
         return frame_rows(self.source, scene, frame_index, timestamp_us, _as_entity(ego, "Car"), kept, fid)
 
 

@@ -15,10 +15,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from extractors.base import ExtractError, ExtractOptions, files_with_suffix, require_path
+from extractors import messages
+from extractors.base import ExtractError, ExtractOptions, ExtractTally, files_with_suffix, require_path
 from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples
 
 DESCRIPTION = "MCAP files with foxglove.SceneUpdate (protobuf / JSON) or ROS 2 Detection3DArray / MarkerArray"
+TAXONOMY = messages.TAXONOMY
 
 
 def _bounded_decompress(compression: str, data: bytes, limit: int) -> int:
@@ -106,11 +108,11 @@ def _messages(path: Path, topics: list[str], schema_of: dict[str, str]) -> Itera
         raise ExtractError(f"{path}: cannot decode its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     for f in files_with_suffix(require_path(input_path, "MCAP input"), [".mcap"], "MCAP files"):
         topics = check_mcap(f, options.max_chunk_bytes)
         wanted = choose_annotation_topics(topics, options, str(f))
         pose_topics = choose_pose_topics(topics, options, str(f))
         poses = PoseTrack(p for schema, t, msg in _messages(f, pose_topics, topics)
                           for p in pose_samples(msg, schema, options, t))
-        yield from message_frames("mcap", f.stem, _messages(f, wanted, topics), poses, options, str(f))
+        yield from message_frames("mcap", f.stem, _messages(f, wanted, topics), poses, options, str(f), tally)

@@ -25,12 +25,14 @@ from extractors.base import (
     Box,
     ExtractError,
     ExtractOptions,
+    ExtractTally,
     FrameBuilder,
     global_to_ego,
     quaternion_yaw,
     vehicle_to_ego,
 )
 
+TAXONOMY = "logs"
 SCENE_UPDATE = ("foxglove.SceneUpdate", "foxglove_msgs/msg/SceneUpdate", "foxglove_msgs/SceneUpdate")
 DETECTIONS = ("vision_msgs/msg/Detection3DArray", "vision_msgs/Detection3DArray")
 MARKERS = ("visualization_msgs/msg/MarkerArray", "visualization_msgs/MarkerArray")
@@ -239,10 +241,10 @@ def choose_pose_topics(available: dict[str, str], options: ExtractOptions, where
 
 def message_frames(
     source: str, scene: str, messages: Iterable[tuple[str, int, Any]], poses: PoseTrack, options: ExtractOptions,
-    where: str,
+    where: str, tally: ExtractTally | None = None,
 ) -> Iterator[list[dict[str, Any]]]:
     """One frame per annotation message (schema, log time ns, decoded message), frame_id `<scene>/<index>`."""
-    builder = FrameBuilder(source, "logs", options)
+    builder = FrameBuilder(source, TAXONOMY, options, tally)
     for index, (schema, log_ns, msg) in enumerate(messages):
         if index % options.every:
             continue

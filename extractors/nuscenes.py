@@ -14,9 +14,19 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from extractors.base import Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, quaternion_yaw, require_path
+from extractors.base import (
+    Box,
+    ExtractError,
+    ExtractOptions,
+    ExtractTally,
+    FrameBuilder,
+    global_to_ego,
+    quaternion_yaw,
+    require_path,
+)
 
 DESCRIPTION = "nuScenes dataroot (JSON tables of --version) through nuscenes-devkit"
+TAXONOMY = "nuscenes"
 EGO_CATEGORY = "vehicle.ego"
 
 
@@ -55,7 +65,7 @@ def load(dataroot: Path, version: str) -> Any:
         devkit.MapMask = original
 
 
-def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     nusc = load(require_path(input_path, "nuScenes dataroot"), options.version)
     scenes = list(nusc.scene)
     if options.scenes:
@@ -64,7 +74,7 @@ def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str,
         if unknown:
             raise ExtractError(f"{input_path} {options.version} has no scene {unknown[0]!r}")
         scenes = [s for s in scenes if s["name"] in options.scenes]
-    builder = FrameBuilder("nuscenes", "nuscenes", options)
+    builder = FrameBuilder("nuscenes", TAXONOMY, options, tally)
     for scene in scenes:
         try:
             yield from _scene_frames(nusc, scene, builder, options)

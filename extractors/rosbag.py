@@ -14,10 +14,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from extractors.base import ExtractError, ExtractOptions, require_path
+from extractors import messages
+from extractors.base import ExtractError, ExtractOptions, ExtractTally, require_path
 from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples
 
 DESCRIPTION = "ROS 1 .bag or ROS 2 bag directory (sqlite3 / mcap storage) through rosbags"
+TAXONOMY = messages.TAXONOMY
 
 # vision_msgs (ROS 2 Humble), which the rosbags typestores do not carry.
 VISION_MSGS = {
@@ -116,7 +118,7 @@ def _messages(reader: Any, bag: Path, topics: list[str]) -> Iterator[tuple[str, 
         raise ExtractError(f"{bag}: cannot read its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     for bag, ros1 in bag_paths(require_path(input_path, "bag")):
         try:
             reader = _open(bag, ros1, options)
@@ -130,6 +132,7 @@ def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str,
             pose_topics = choose_pose_topics(topics, options, str(bag))
             poses = PoseTrack(p for schema, t, msg in _messages(reader, bag, pose_topics)
                               for p in pose_samples(msg, schema, options, t))
-            yield from message_frames("rosbag", bag.stem, _messages(reader, bag, wanted), poses, options, str(bag))
+            yield from message_frames("rosbag", bag.stem, _messages(reader, bag, wanted), poses, options, str(bag),
+                                      tally)
         finally:
             reader.close()

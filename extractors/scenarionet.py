@@ -6,7 +6,8 @@ database folders), any directory of scenario .pkl files, or one .pkl file. Every
 unpickler. Ego = the track named by metadata.sdc_id. nuScenes-derived scenarios are 10 Hz interpolations of
 the 2 Hz keyframes: step 5k holds nuScenes sample k unchanged, so one frame per keyframe, frame_id
 `<scene>/<k>`. Other datasets (Waymo, nuPlan, Lyft, Argoverse) give a frame per step. `--every K` keeps every
-K-th of those frames.
+K-th of those frames. An object is classified by its dataset's own type (metadata.type) if the "scenarionet"
+taxonomy knows it, else by its MetaDrive type (the track's type); see extractors.base.FrameBuilder.classify.
 """
 
 from __future__ import annotations
@@ -19,10 +20,19 @@ from typing import Any
 
 import numpy as np
 
-from extractors.base import Box, ExtractError, ExtractOptions, FrameBuilder, global_to_ego, require_path
+from extractors.base import (
+    Box,
+    ExtractError,
+    ExtractOptions,
+    ExtractTally,
+    FrameBuilder,
+    global_to_ego,
+    require_path,
+)
 from extractors.safe_pickle import load_pickle
 
 DESCRIPTION = "ScenarioNet database directory or .pkl scenario files (nuScenes, Waymo, nuPlan, Lyft, Argoverse)"
+TAXONOMY = "scenarionet"
 SUMMARY, MAPPING = "dataset_summary.pkl", "dataset_mapping.pkl"
 NUSCENES_KEYFRAME_STEP = 5
 
@@ -71,9 +81,36 @@ def database_files(db: Path) -> list[Path]:
     return files
 
 
-def extract(input_path: str, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
-    for f in scenario_files(require_path(input_path, "ScenarioNet input")):
-        yield from scenario_frames(f, load_pickle(f), options)
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+    """Every scenario's frames, in the database's order. A scenario id met again (ScenarioNet's merge only warns
+    about repeats; the same scene converted twice, under two versions, has two files) is skipped with a warning
+    naming both files, since its frame ids would clash with the first one's."""
+    tally = tally if tally is not None else ExtractTally()
+    files = scenario_files(require_path(input_path, "ScenarioNet input"))
+    first: dict[str, int] = {}  # scenario id -> index in files of the file that gave it
+    for i, f in enumerate(files):
+        sd = load_pickle(f)
+        scene = scenario_id(f, sd)
+        if scene in first:
+            tally.skip("duplicate scenario id",
+                       f"r2s extract: skipping {f}: scenario {scene!r} was already read from {files[first[scene]]}")
+            continue
+        first[scene] = i
+        n = 0
+        for rows in scenario_frames(f, sd, options, tally):
+            n += 1
+            yield rows
+        if n == 0:
+            tally.skip("no step with a valid ego")
+
+
+def scenario_id(path: Path, sd: Any) -> str:
+    """The scene name frames are named after: metadata.scenario_id (every converter writes it), else an id."""
+    try:
+        meta = sd["metadata"]
+        return str(meta.get("scenario_id") or meta.get("id") or sd.get("id") or path.stem)
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {exc})") from None
 
 
 def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int | None = None) -> np.ndarray:
@@ -90,32 +127,38 @@ def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int 
     return a
 
 
-def scenario_frames(path: Path, sd: Any, options: ExtractOptions) -> Iterator[list[dict[str, Any]]]:
+def scenario_frames(
+    path: Path, sd: Any, options: ExtractOptions, tally: ExtractTally | None = None
+) -> Iterator[list[dict[str, Any]]]:
     try:
         meta, tracks, steps = sd["metadata"], sd["tracks"], int(sd["length"])
         sdc = meta["sdc_id"]
         dataset = str(meta.get("dataset", "")).lower()
-        scene = str(meta.get("scenario_id") or meta.get("id") or sd.get("id") or path.stem)
+        scene = scenario_id(path, sd)
         ts = meta.get("ts")
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {exc})") from None
-    if not isinstance(tracks, dict) or sdc not in tracks:
+    # Converters write string ids (Waymo: str(obj.id)); older and hand-made files have ints: compare as text.
+    if not isinstance(tracks, dict) or [str(t) for t in tracks].count(str(sdc)) != 1:
         raise ExtractError(f"{path}: the ego track (metadata.sdc_id = {sdc!r}) is not among the tracks")
     if steps < 1 or steps > 10**6:
         raise ExtractError(f"{path}: implausible scenario length {steps}")
 
     nuscenes = dataset == "nuscenes"
-    builder = FrameBuilder("scenarionet", "nuscenes" if nuscenes else "scenarionet", options)
-    ids, cats, pos, yaw, valid, length, width = [], [], [], [], [], [], []
+    builder = FrameBuilder("scenarionet", TAXONOMY, options, tally)
+    ids, cats, coarse, pos, yaw, valid, length, width = [], [], [], [], [], [], [], []
     for tid, tr in tracks.items():
         try:
             state, tmeta = tr["state"], tr.get("metadata") or {}
-            # nuScenes tracks keep the fine nuScenes category in metadata.type; others have the coarse type.
-            cat = str(tmeta.get("type") if nuscenes and tmeta.get("type") else tr.get("type", "UNSET"))
+            # metadata.type holds the dataset's own type where the converter keeps one (nuScenes, Lyft), else
+            # the MetaDrive type again; `type` is the MetaDrive type (None for the nuScenes converter's animals).
+            own, kind = tmeta.get("type"), tr.get("type")
         except (TypeError, AttributeError, KeyError):
             raise ExtractError(f"{path}: track {tid!r} is not a ScenarioNet track") from None
+        kind = str(kind) if isinstance(kind, str) and kind else None
         ids.append(str(tid))
-        cats.append(cat)
+        cats.append(str(own) if isinstance(own, str) and own else kind or "UNSET")
+        coarse.append(kind if kind != cats[-1] else None)
         pos.append(_series(state, "position", steps, path, tid, width=2)[:, :2])
         yaw.append(_series(state, "heading", steps, path, tid))
         valid.append(_series(state, "valid", steps, path, tid) > 0)
@@ -135,8 +178,8 @@ def scenario_frames(path: Path, sd: Any, options: ExtractOptions) -> Iterator[li
         others = [i for i in np.flatnonzero(valid[:, step]) if i != ego_i]
         x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
                                 yaw[others, step])
-        boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step])
-                 for k, i in enumerate(others)]
+        boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step],
+                     coarse[i]) for k, i in enumerate(others)]
         # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
         # than it is long, so the ego's box is read with its sides in order.
         ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)

@@ -43,29 +43,40 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from extractors.base import ExtractOptions
+    from extractors.base import ExtractOptions, ExtractTally
     from extractors.categories import CategorySelection
+    from extractors.frames import FramesError
     from extractors.registry import source_module
+    from extractors.sniff import wrong_source_hint
     from extractors.writer import frames_writer
     from pipeline.errors import UserError
 
+    module = source_module(args.source)
     try:
         options = ExtractOptions(
-            radius=args.radius, categories=CategorySelection.parse(args.categories), every=args.every,
-            max_entities=args.max_entities, version=args.version, scenes=args.scenes,
+            radius=args.radius, categories=CategorySelection.parse(args.categories, module.TAXONOMY),
+            every=args.every, max_entities=args.max_entities, version=args.version, scenes=args.scenes,
             min_visibility=args.min_visibility, min_lidar_pts=args.min_lidar_pts, topics=args.topics,
             pose_topic=args.pose_topic, fixed_frame=args.fixed_frame, ego_frame=args.ego_frame,
             max_chunk_bytes=int(args.max_chunk_mb * 2**20),
         )
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    module = source_module(args.source)
+    tally = ExtractTally(warn=lambda line: tqdm.write(line, file=sys.stderr))
     with frames_writer(args.out) as out:
-        bar = tqdm(module.extract(args.input, options), desc=f"extract {args.source}", unit=" frames",
+        bar = tqdm(module.extract(args.input, options, tally), desc=f"extract {args.source}", unit=" frames",
                    file=sys.stderr, disable=None, leave=False)
-        for rows in bar:
-            out.write_frame(rows)
-        if out.frames == 0:
-            raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
-    sys.stderr.write(f"r2s extract: {out.frames} frames, {out.rows} rows -> {args.out}\n")
+        try:
+            for rows in bar:
+                out.write_frame(rows)
+            if out.frames == 0:
+                raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
+        except (FramesError, UserError):
+            # a source that found nothing to read may have been given another source's input: say which
+            if out.frames == 0 and (hint := wrong_source_hint(args.source, args.input)):
+                raise UserError(hint) from None
+            raise
+    notes = tally.notes()
+    sys.stderr.write(f"r2s extract: {tally.scenarios_read} scenarios, {out.frames} frames, {out.rows} rows -> "
+                     f"{args.out}{'; ' + notes if notes else ''}\n")
     return 0

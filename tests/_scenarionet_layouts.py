@@ -234,6 +234,41 @@ def as_nuplan(sd: dict) -> dict:
             "map_features": {}, "metadata": meta}
 
 
+# scenarionet/converter/argoverse2/utils.py: the estimated box sizes it writes for every step, by type
+AV2_SIZES = {"VEHICLE": (4.0, 2.0), "CYCLIST": (2.0, 0.7), "PEDESTRIAN": (0.5, 0.5)}
+
+
+def as_av2(sd: dict) -> dict:
+    """scenarionet/converter/argoverse2/utils.py extract_tracks / convert_av2_scenario: float32 arrays, bool valid,
+    types from type.py get_traffic_obj_type (VEHICLE / PEDESTRIAN / CYCLIST, anything else OTHER), the constant
+    estimated length and width (1 x 1 for OTHER), position z = 0, the ego track "AV", dataset "av2", ts = steps / 10."""
+    steps = int(sd["length"])
+    tracks = {}
+    for tid, tr in sd["tracks"].items():
+        st = tr["state"]
+        kind = tr["type"] if tr["type"] in AV2_SIZES else "OTHER"
+        oid = "AV" if tid == sd["metadata"]["sdc_id"] else str(tid)
+        length, width = AV2_SIZES.get(kind, (1.0, 1.0))
+        pos = np.zeros((steps, 3), dtype=np.float32)
+        pos[:, :2] = np.asarray(st["position"]).reshape(steps, -1)[:, :2]
+        tracks[oid] = {
+            "type": kind,
+            "state": {"position": pos, "length": np.full(steps, length, dtype=np.float32),
+                      "width": np.full(steps, width, dtype=np.float32), "height": np.ones(steps, dtype=np.float32),
+                      "heading": np.asarray(st["heading"], dtype=np.float32).reshape(steps),
+                      "velocity": np.asarray(st["velocity"], dtype=np.float32).reshape(steps, 2),
+                      "valid": np.asarray(st["valid"]).reshape(steps) > 0},
+            "metadata": {"track_length": steps, "type": kind, "object_id": oid, "dataset": "av2"},
+        }
+    sid = f"av{sd['id'].replace('-', '')}"
+    meta = {"id": sid, "coordinate": "waymo", "ts": np.array(list(range(steps))) / 10, "metadrive_processed": False,
+            "sdc_id": "AV", "dataset": "av2", "scenario_id": sid, "source_file": sid, "track_length": steps,
+            "current_time_index": 49, "sdc_track_index": list(tracks).index("AV"), "objects_of_interest": [],
+            "tracks_to_predict": {}}
+    return {"id": sid, "version": "av2", "length": steps, "tracks": tracks, "dynamic_map_states": {},
+            "map_features": {}, "metadata": meta}
+
+
 def load_real(path: Path) -> dict:
     """A ScenarioNet pickle through the plain unpickler (the test's own files)."""
     with open(path, "rb") as fh:

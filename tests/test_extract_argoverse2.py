@@ -74,7 +74,7 @@ def test_shared_logs(shared_dir):
         _check_log(path, radius=50.0)
 
 
-def test_unknown_category_and_foreign_files_exit_2(tmp_path, capsys):
+def test_unknown_category_is_typed_object_and_counted_and_foreign_files_exit_2(tmp_path, capsys):
     src = EXCERPT / "7fab2350-7eaf-3b7e-a39d-6937a4c1bede" / "annotations.feather"
     t = ipc.open_file(pa.memory_map(str(src))).read_all()
     cats = t.column("category").to_pylist()
@@ -84,14 +84,20 @@ def test_unknown_category_and_foreign_files_exit_2(tmp_path, capsys):
     with ipc.new_file(str(bad), t.schema) as w:
         w.write_table(t.set_column(t.column_names.index("category"), "category", pa.array(cats)))
     out = tmp_path / "out" / "frames.parquet"
-    assert_refused(r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out), "--categories", "all"),
-                   out, "HOVERCRAFT")
-    # an explicit list decides instead of failing
-    assert r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out),
-               "--categories", "Car,HOVERCRAFT").returncode == 0
-    got = pd.read_parquet(out)
-    assert set(got[~got.is_ego].type) == {"Car", "Object"}
-    out.unlink()
+    # a category no map knows is the generic Object under "all", left out under "vehicles", and counted by name
+    for categories, typed, note in [("all", "Object", "1 typed Object (HOVERCRAFT x1)"),
+                                    ("Car,Object", "Object", "1 typed Object (HOVERCRAFT x1)"),
+                                    ("vehicles", None, "1 left out (HOVERCRAFT x1)")]:
+        res = r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out), "--radius", "1000",
+                  "--categories", categories)
+        assert res.returncode == 0, res.stderr
+        assert res.stderr.strip().endswith(f"objects of unknown type: {note}"), res.stderr
+        got = pd.read_parquet(out)
+        assert list(got[got.category == "HOVERCRAFT"].type) == ([typed] if typed else [])
+        out.unlink()
+    # naming it in --categories is a typo as far as anyone can tell
+    res = r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out), "--categories", "Car,HOVERCRAFT")
+    assert_refused(res, out, "unknown category 'HOVERCRAFT' in --categories")
 
     bad.write_bytes(b"ARROW1 but not really")
     assert_refused(r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out)), out, "not a readable")

@@ -49,7 +49,7 @@ def expected_rows(sd: dict) -> pd.DataFrame:
     steps = int(sd["length"])
     stride = 5 if meta["dataset"] == "nuscenes" else 1
     scene = meta["scenario_id"]
-    sdc = meta["sdc_id"]
+    sdc = next(t for t in tracks if str(t) == str(meta["sdc_id"]))
     ego = tracks[sdc]["state"]
     out = []
     for step in range(0, steps, stride):

@@ -77,15 +77,14 @@ def test_numpy_data_in_every_protocol_loads(tmp_path):
         assert back["by"] == b"\x00\x01" and back["z"] == complex(1, 2)
 
 
-@pytest.mark.parametrize("case", ["truncated", "text", "not-a-scenario", "unknown-category", "bad-shape"])
+@pytest.mark.parametrize("case", ["truncated", "text", "not-a-scenario", "bad-shape"])
 def test_bad_scenarionet_files_exit_2(tmp_path, capsys, case):
     db = tmp_path / "db"
     db.mkdir()
     path = db / SCENARIO.name
     data = SCENARIO.read_bytes()
     expect = {"truncated": "not a readable pickle", "text": "not a pickle file",
-              "not-a-scenario": "not a ScenarioNet scenario", "unknown-category": "hovercraft",
-              "bad-shape": "not 11 steps"}[case]
+              "not-a-scenario": "not a ScenarioNet scenario", "bad-shape": "not 11 steps"}[case]
     if case == "truncated":
         path.write_bytes(data[: len(data) // 3])
     elif case == "text":
@@ -95,10 +94,7 @@ def test_bad_scenarionet_files_exit_2(tmp_path, capsys, case):
     else:
         sd = load_pickle(SCENARIO)
         track = next(t for k, t in sd["tracks"].items() if k != sd["metadata"]["sdc_id"])
-        if case == "unknown-category":
-            track["metadata"]["type"] = "vehicle.hovercraft"
-        else:
-            track["state"]["heading"] = track["state"]["heading"][:-3]
+        track["state"]["heading"] = track["state"]["heading"][:-3]
         path.write_bytes(pickle.dumps(sd, protocol=4))
     out = tmp_path / "out" / "frames.parquet"
     assert_refused(r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out), "--categories", "all"),
