@@ -161,8 +161,7 @@ def test_a_mapping_to_a_missing_file_names_the_entry_and_the_path(tmp_path, caps
     (nus / name).unlink()
     out = tmp_path / "out" / "frames.parquet"
     res = r2s(capsys, "extract", "scenarionet", str(merged), "--out", str(out))
-    assert_refused(res, out, "does not exist")
-    assert repr(name) in res.stderr and os.path.join("merged", "..", "nuscenes", name) in res.stderr
+    assert_refused(res, out, f"{MAPPING} entry {name!r} maps to {merged / '..' / 'nuscenes' / name}, which does not exist")
 
 
 def test_a_mapping_into_a_symlink_loop_is_refused_not_followed(tmp_path, capsys):
@@ -174,14 +173,26 @@ def test_a_mapping_into_a_symlink_loop_is_refused_not_followed(tmp_path, capsys)
     assert_refused(r2s(capsys, "extract", "scenarionet", str(merged), "--out", str(out)), out, "symlink loop")
 
 
-def test_summary_entries_must_be_scenario_file_names(tmp_path, capsys):
-    _, merged = _merged(tmp_path)
-    summary = load_real(merged / SUMMARY)
-    summary["../escape.pkl"] = {}
-    (merged / SUMMARY).write_bytes(pickle.dumps(summary))
+@pytest.mark.parametrize("index", [MAPPING, SUMMARY])
+def test_entries_must_be_scenario_file_names(tmp_path, capsys, index):
+    nus, merged = _merged(tmp_path)
+    if index == SUMMARY:  # the summary is the index only without a mapping (scenarios beside it)
+        (nus / MAPPING).unlink()
+        merged = nus
+    entries = load_real(merged / index)
+    entries["../escape.pkl"] = "" if index == MAPPING else {}
+    (merged / index).write_bytes(pickle.dumps(entries))
     out = tmp_path / "out" / "frames.parquet"
     assert_refused(r2s(capsys, "extract", "scenarionet", str(merged), "--out", str(out)), out,
-                   "'../escape.pkl' is not the file name of a scenario")
+                   f"{index} entry '../escape.pkl' is not the file name of a scenario")
+
+
+def test_the_mapping_is_the_index_and_the_summary_is_not_loaded(tmp_path):
+    # the summary holds every scenario's metadata (gigabytes for a full Waymo conversion): with a mapping, it is
+    # never read, as a summary that is not even a pickle shows
+    nus, merged = _merged(tmp_path)
+    (merged / SUMMARY).write_bytes(b"not read")
+    pd.testing.assert_frame_equal(_all(merged), _all(nus))
 
 
 def test_a_database_without_mapping_file_has_its_scenarios_beside_the_summary(tmp_path):
@@ -213,7 +224,7 @@ def _handmade_build(factory_global: bytes) -> bytes:
             + b"N}X\x0f\x00\x00\x00default_factory" + factory_global + b"s\x86b.")
 
 
-@pytest.mark.parametrize("where", ["summary", "scenario"])
+@pytest.mark.parametrize("where", ["summary", "mapping", "scenario"])
 @pytest.mark.parametrize("factory, refused", [
     (os.system, "posix.system"),
     (eval, "builtins.eval"),
@@ -225,9 +236,17 @@ def test_evil_defaultdict_factories_are_refused_and_never_run(tmp_path, capsys, 
     marker = tmp_path / "pwned"
     nus = tmp_path / "nuscenes"
     write_single_worker(real_scenarios(), nus, "nuscenes", "v1.0-mini")
-    target = nus / (SUMMARY if where == "summary" else sorted(load_real(nus / SUMMARY))[0])
+    if where == "summary":
+        (nus / MAPPING).unlink()  # so that the summary is what lists the scenarios
+    elif where == "mapping":  # the mapping itself a defaultdict(str), its evil twin beside it
+        data = load_real(nus / MAPPING)
+        (nus / MAPPING).write_bytes(pickle.dumps(collections.defaultdict(str, data), protocol=4))
+        assert len(_all(nus)) > 0
+    target = nus / {"summary": SUMMARY, "mapping": MAPPING, "scenario": sorted(load_real(nus / SUMMARY))[0]}[where]
     data = load_real(target)
-    meta = next(iter(data.values())) if where == "summary" else data["metadata"]
+    if where == "mapping":  # the evil defaultdict is one more (ignored) value of the mapping
+        data["extra"] = {"number_summary": {}}
+    meta = next(iter(data.values())) if where == "summary" else data["extra"] if where == "mapping" else data["metadata"]
     if factory == "build":
         evil = pickle.loads(_handmade_build(b"ccollections\nOrderedDict\n"))  # what the plain unpickler builds
         assert evil.default_factory is collections.OrderedDict

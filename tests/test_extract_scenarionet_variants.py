@@ -12,7 +12,15 @@ import copy
 import pandas as pd
 import pytest
 from _extract_util import frames_of, r2s
-from _scenarionet_layouts import as_av2, as_nuplan, as_waymo, merge_database, write_single_worker
+from _scenarionet_layouts import (
+    as_av2,
+    as_nuplan,
+    as_waymo,
+    load_real,
+    merge_database,
+    write_single_worker,
+    write_to_directory,
+)
 from test_extract_scenarionet_databases import assert_rows_match, real_scenarios
 
 from extractors.base import ExtractOptions, ExtractTally
@@ -31,9 +39,16 @@ def _int_sdc_str_tracks(sd: dict) -> dict:
     return sd
 
 
+def _int_ids_int_valid(sd: dict) -> dict:
+    sd = as_waymo(sd, ids_as_int=True)
+    for tr in sd["tracks"].values():
+        tr["state"]["valid"] = tr["state"]["valid"].astype(int)
+    return sd
+
+
 LAYOUTS = {
     "waymo": as_waymo,
-    "waymo-int-ids": lambda sd: as_waymo(sd, ids_as_int=True),
+    "waymo-int-ids-int-valid": _int_ids_int_valid,
     "waymo-int-sdc-str-tracks": _int_sdc_str_tracks,
     "nuplan": as_nuplan,
     "av2": as_av2,
@@ -136,3 +151,19 @@ def test_a_scenario_whose_ego_is_never_valid_is_counted_as_skipped(tmp_path):
     frames = list(extract(str(db), ExtractOptions(categories=VEHICLES), tally))
     assert {f[0]["scene"] for f in frames} == {sd["metadata"]["scenario_id"] for sd in sds[1:]}
     assert tally.scenarios == 2 and tally.skipped == {"no step with a valid ego": 1} and tally.scenarios_read == 3
+
+
+def test_the_six_shared_scenes_through_workers_and_a_merge(shared_dir, tmp_path):
+    """The full shared nuScenes-mini conversions, as a 4-worker database merged with a 2-worker one (in pickle
+    protocol 5), extract to exactly the rows of the plain folder (which test_extract_scenarionet checks against
+    the nuScenes keyframes)."""
+    plain = shared_dir / "data" / "nuscenes-mini" / "scenarionet"
+    files = sorted(plain.glob("sd_*.pkl"))
+    sds = [load_real(f) for f in files]
+    write_to_directory(sds[:4], tmp_path / "first", "nuscenes", "v1.0-mini", num_workers=4, protocol=5)
+    write_to_directory(sds[4:], tmp_path / "second", "nuscenes", "v1.0-mini", num_workers=2, protocol=5)
+    merged = tmp_path / "merged"
+    _, mapping = merge_database(merged, tmp_path / "first", tmp_path / "second", protocol=5)
+    assert len(set(mapping.values())) == 6 and all(v.startswith("../") for v in mapping.values())
+    got = frames_of(extract, merged, categories=ALL)
+    pd.testing.assert_frame_equal(got, frames_of(extract, plain, categories=ALL))

@@ -105,12 +105,9 @@ def test_database_mapping_may_point_outside_only_to_scenario_files(tmp_path, cap
     # merged databases map to ../<db> (issue 13): followed, but only to an existing file that is a scenario
     db = tmp_path / "db"
     shutil.copytree(EXCERPT / "scenarionet", db)
-    (db / "dataset_mapping.pkl").write_bytes(pickle.dumps({SCENARIO.name: "../../etc"}))
-    out = tmp_path / "out" / "frames.parquet"
-    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
-    assert_refused(res, out, "entry 'sd_nuscenes_v1.0-mini_scene-0103.pkl' has no folder in dataset_mapping.pkl")
-    mapping = {name: "../../etc" for name in load_pickle(db / "dataset_summary.pkl")}
+    mapping = {name: "../../etc" for name in load_pickle(db / "dataset_mapping.pkl")}
     (db / "dataset_mapping.pkl").write_bytes(pickle.dumps(mapping))
+    out = tmp_path / "out" / "frames.parquet"
     res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
     assert_refused(res, out, "/../../etc/sd_nuscenes_v1.0-mini_scene-0103.pkl, which does not exist")
     (tmp_path / "elsewhere").mkdir()
@@ -119,6 +116,9 @@ def test_database_mapping_may_point_outside_only_to_scenario_files(tmp_path, cap
         pickle.dumps({**dict.fromkeys(mapping, ""), "sd_nuscenes_v1.0-mini_scene-0103.pkl": "../elsewhere"}))
     res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
     assert_refused(res, out, "elsewhere/sd_nuscenes_v1.0-mini_scene-0103.pkl is not a ScenarioNet scenario")
+    (db / "dataset_mapping.pkl").write_bytes(pickle.dumps({"sd_nuscenes_v1.0-mini_scene-0103.pkl": 3}))
+    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused(res, out, "entry 'sd_nuscenes_v1.0-mini_scene-0103.pkl' maps to 3, not a folder")
 
 
 def test_existing_output_survives_a_failed_extraction(tmp_path, capsys):
