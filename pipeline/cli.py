@@ -2,7 +2,9 @@
 
 Each verb lives in its own module with `add_arguments(parser)` and `run(args) -> int`, imported only when
 that verb runs, so `r2s synth` never pays for pandas, Scenic or the dataset readers.
-Exit codes: 0 done; 2 bad input or usage (one line on stderr, nothing written); 1 internal error.
+Exit codes: 0 done; 2 bad input or usage (one line on stderr, nothing written); 1 internal error; 3 from r2s check
+(the program does not contain the scene); 4 from r2s sample and render (no variant found: the one-line error's
+class carries `exit_code`).
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(module.run(args) or 0)
     except user_error_types() as exc:
         sys.stderr.write(f"r2s {verb}: {exc}\n")
-        return 2
+        return getattr(exc, "exit_code", 2)
     except KeyboardInterrupt:
         sys.stderr.write(f"r2s {verb}: interrupted\n")
         return 130

@@ -1,23 +1,24 @@
 """`r2s render SCENE.json [--program P.dsl] [--samples K] --out bev.png`: a bird's-eye view of a scene.
 
 Oriented boxes with heading arrows and ids in ego's frame, ego in red; with --program, an arrow from each
-reference to the entity it places or orients, coloured by relation kind; with --samples K, K scenes sampled by
-Scenic from the program's emitted text, overlaid translucently under the recorded one.
-Exit codes: 0 written; 2 bad input (one line, nothing written), including no sample within the budget; 1 bug.
+reference to the entity it places or orients, coloured by relation kind; with --samples K, K variants sampled
+from the program as `r2s sample` draws them (same sampler and options), overlaid translucently under the
+recorded one.
+Exit codes: 0 written; 2 bad input (one line, nothing written); 4 no variant found (as `r2s sample`); 1 bug.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from pipeline.cmd_sample import add_sampling_arguments, bounded_int
+from pipeline.cmd_sample import add_sampling_arguments, bounded_int, sample_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene JSON file")
     p.add_argument("--program", metavar="P.dsl", help="DSL program of the scene: draw its references")
     p.add_argument("--samples", type=bounded_int(0, 1000), default=0, metavar="K",
-                   help="overlay K scenes sampled by Scenic from the program (needs --program)")
+                   help="overlay K variants sampled from the program (needs --program)")
     p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2)")
     p.add_argument("--out", required=True, metavar="F", help="image file: .png, .svg or .pdf")
     add_sampling_arguments(p)
@@ -51,12 +52,15 @@ def run(args: argparse.Namespace) -> int:
         subtitle = f"program cost {program.cost}, " + (
             "contains the scene" if result.ok else f"does NOT contain the scene ({len(result.violations)} violations)")
         if args.samples:
-            from pipeline.sample import SampleOptions, sample_program
+            from pipeline.sample import ProgressReport, sample_program
 
-            options = SampleOptions(n=args.samples, seed=args.seed, max_iterations=args.max_iterations,
-                                    allow_collisions=args.allow_collisions)
-            samples = sample_program(program, scene, config, options).scenes
-            subtitle += f"; {len(samples)} Scenic samples (seed {args.seed})"
+            progress = ProgressReport("r2s render")
+            try:
+                drawn = sample_program(program, scene, config, sample_options(args, args.samples), progress)
+            finally:
+                progress.close()
+            samples = drawn.scenes
+            subtitle += f"; {len(samples)} variants ({drawn.sampler}, seed {args.seed})"
     save(draw(View(scene, program, samples, subtitle)), args.out)
     print(f"wrote {args.out}")
     return 0

@@ -1,20 +1,27 @@
-"""`r2s sample PROGRAM.scenic --n K --seed S --out DIR`: K scenes sampled by the Scenic compiler, as scene JSON.
+"""`r2s sample PROGRAM.scenic --n K --seed S --out DIR`: K variants of a recorded scene, as scene JSON.
 
 Writes DIR/sample_000.json ... (same entity ids as the program, ego included, types from the classes, headings
-in degrees [0, 360)). The same program and seed give byte-identical files; sample k does not depend on K.
-Or `--program P.dsl --scene S.json`: the Scenic text is regenerated from the DSL program (never run from a file)
-and every sample is checked against the DSL semantics.
+in degrees [0, 360), each entity's length and width). The same program, seed and sampler give byte-identical
+files; sample k does not depend on K. Or `--program P.dsl --scene S.json`: the DSL program and the scene it
+describes. Every variant is checked against the DSL semantics, and in every variant two boxes overlap only if
+they overlap in the recorded scene (the collision rule the emitted text states).
 
-Exit codes: 0 written; 2 bad input, a Scenic text that does not compile, or no scene found within the
-rejection-sampling budget (one line: raise --max-iterations or pass --allow-collisions; nothing is written,
-since all K scenes are drawn before the first file); 1 internal error.
+Samplers (`--sampler`, see pipeline.sample): `gibbs` (default) is r2sgen's Metropolis-within-Gibbs chain over the
+program's Ranges, started at the recording (`--burn-in`, `--thin` in sweeps); `scenic` is the Scenic compiler's
+rejection sampler over whole scenes (`--max-iterations` per scene): the same distribution, exact, but only for
+small scenes. A hand-edited file (`--trusted`) can only be sampled by Scenic.
+
+Exit codes: 0 written; 2 bad input (a file that is not r2sgen's, does not compile, bad options; one line, nothing
+written); 4 sampling failed: no variant satisfies the program and the collision rule within the budget (one
+line naming the pairs of entities that collide; nothing written, since all K scenes are drawn before the first
+file); 1 internal error.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from pipeline.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED
+from pipeline.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS, SAMPLING_FAILED_EXIT
 
 
 def bounded_int(lo: int, hi: int):
@@ -32,24 +39,46 @@ def bounded_int(lo: int, hi: int):
 
 def add_sampling_arguments(p: argparse.ArgumentParser) -> None:
     """The options every verb that samples shares (sample, render)."""
+    from synth.gibbs import DEFAULT_BURN_IN, DEFAULT_THIN
+
     p.add_argument("--seed", type=bounded_int(0, MAX_SEED), default=0, help="random seed (default 0)")
+    p.add_argument("--sampler", choices=SAMPLERS, default=None,
+                   help="gibbs: r2sgen's chain, any scene size (default); scenic: Scenic's rejection sampler, small "
+                        "scenes only (the default for a --trusted edited file)")
+    p.add_argument("--burn-in", type=bounded_int(0, 10**6), default=None, metavar="S",
+                   help=f"gibbs: sweeps from the recorded scene to the first variant (default {DEFAULT_BURN_IN})")
+    p.add_argument("--thin", type=bounded_int(1, 10**6), default=None, metavar="S",
+                   help=f"gibbs: sweeps between variants (default {DEFAULT_THIN})")
     p.add_argument("--max-iterations", type=bounded_int(1, 10**7), default=DEFAULT_MAX_ITERATIONS, metavar="M",
-                   help=f"rejection-sampling iterations per scene (default {DEFAULT_MAX_ITERATIONS})")
+                   help=f"scenic: rejection-sampling iterations per scene (default {DEFAULT_MAX_ITERATIONS})")
     p.add_argument("--allow-collisions", action="store_true",
-                   help="drop Scenic's requirement that objects do not intersect (on by default)")
+                   help="drop the collision rule (by default two boxes may overlap only if they overlap in the "
+                        "recorded scene)")
+
+
+def sample_options(args: argparse.Namespace, n: int):
+    from pipeline.sample import SampleOptions
+
+    return SampleOptions(n=n, seed=args.seed, max_iterations=args.max_iterations,
+                         allow_collisions=args.allow_collisions, sampler=args.sampler, burn_in=args.burn_in,
+                         thin=args.thin)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenic_file", nargs="?", metavar="PROGRAM.scenic",
                    help="Scenic program written by r2sgen, unedited (anything else is refused: compiling runs it)")
     p.add_argument("--trusted", action="store_true",
-                   help="compile a hand-written or edited Scenic file too (it runs as Python: only files you checked)")
+                   help="sample a hand-written or edited Scenic file too, with Scenic (it runs as Python: only "
+                        "files you checked)")
     p.add_argument("--program", dest="dsl_file", metavar="P.dsl", help="sample from a DSL program instead (with --scene)")
     p.add_argument("--scene", metavar="S.json", help="the scene the DSL program was synthesized for (ego, sizes)")
     p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2) for the DSL route")
     p.add_argument("--n", type=bounded_int(1, 100_000), default=1, metavar="K", help="number of scenes (default 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for sample_000.json ...")
     add_sampling_arguments(p)
+    p.epilog = (f"exit codes: 0 written; 2 bad input (nothing written); {SAMPLING_FAILED_EXIT} sampling failed: no "
+                "variant satisfies the program and the collision rule within the budget (the message names the "
+                "colliding entities; nothing written); 1 internal error")
 
 
 def read_dsl_program(path: str):
@@ -70,25 +99,33 @@ def run(args: argparse.Namespace) -> int:
     from extractors.atomic import write_text_atomic
     from pipeline.errors import UserError
     from pipeline.inputs import load_config, read_scene, read_text_file
-    from pipeline.sample import SampleOptions, sample_program, sample_scenic
+    from pipeline.sample import ProgressReport, sample_program, sample_scenic
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {args.out} exists and is not a directory")
-    options = SampleOptions(n=args.n, seed=args.seed, max_iterations=args.max_iterations,
-                            allow_collisions=args.allow_collisions)
+    options = sample_options(args, args.n)
     if (args.scenic_file is None) == (args.dsl_file is None):
         raise UserError("give either PROGRAM.scenic or --program P.dsl --scene S.json")
     if args.dsl_file is not None:
         if args.scene is None:
             raise UserError("--program needs --scene (the scene it was synthesized for)")
         config = load_config(args.config)
-        samples = sample_program(read_dsl_program(args.dsl_file), read_scene(args.scene), config, options)
+        program, scene = read_dsl_program(args.dsl_file), read_scene(args.scene)
+        progress = ProgressReport("r2s sample")
+        try:
+            samples = sample_program(program, scene, config, options, progress)
+        finally:
+            progress.close()
     else:
         if args.scene is not None or args.config is not None:
             raise UserError("--scene and --config belong to the --program route, not to a Scenic file")
-        samples = sample_scenic(read_text_file(args.scenic_file, "program"), options, filename=args.scenic_file,
-                                trusted=args.trusted)
+        text = read_text_file(args.scenic_file, "program")
+        progress = ProgressReport("r2s sample")
+        try:
+            samples = sample_scenic(text, options, filename=args.scenic_file, trusted=args.trusted, progress=progress)
+        finally:
+            progress.close()
     width = max(3, len(str(args.n - 1)))
     written = {out / f"sample_{k:0{width}d}.json" for k in range(len(samples.scenes))}
     for k, scene in enumerate(samples.scenes):
@@ -97,5 +134,5 @@ def run(args: argparse.Namespace) -> int:
     for stale in sorted(set(out.glob("sample_*.json")) - written):
         if re.fullmatch(r"sample_\d{3,}\.json", stale.name):  # only names this verb writes
             stale.unlink()
-    print(f"wrote {len(samples.scenes)} scenes to {out} (seed {args.seed}, {samples.iterations} iterations)")
+    print(f"wrote {len(samples.scenes)} scenes to {out} (seed {args.seed}, {samples.describe()})")
     return 0

@@ -1,22 +1,35 @@
-"""Sampling scenes from a Scenic program with the official compiler (scenic 3.1.1), read back as scene JSON.
+"""Sampling variants of a program, read back as scene JSON: r2sgen's chain or Scenic's own rejection sampler.
 
-Shared by `r2s sample` and `r2s render --samples`. Scenic is imported here, lazily (≈ 1 s), never at module
-import. Scenic draws from Python's `random` and numpy's global generators; both are seeded for a run and
-restored afterwards, so the same text and seed give the same scenes in any process, and a caller's own random
-state is left as it was.
+Shared by `r2s sample` and `r2s render --samples`. Both samplers draw from one distribution: the program's
+Ranges as Scenic draws them, conditioned on the collision rule (two boxes may overlap only if they overlap in the
+recording; synth.collision_rule), which the emitted text states as requirements.
+
+- `gibbs` (the default): Metropolis-within-Gibbs over the program's parameters (synth.gibbs), started at the
+  recorded scene. Pure Python and numpy, no Scenic import; 5 variants of every shipped keyframe (up to 141
+  entities) in seconds. It reads the program, the scene and the tolerances from the text's `# r2s-source`
+  record, after checking that the text is exactly what the emitter writes from that record.
+- `scenic`: the official compiler (scenic 3.1.1) compiles the text and rejection-samples whole scenes. Exact and
+  independent, but its acceptance falls exponentially with the number of entities: the reference for small
+  scenes (tests/test_variants.py compares the two), and the only sampler for a hand-edited text (--trusted).
+
+Scenic draws from Python's `random` and numpy's global generators; both are seeded for a run and restored
+afterwards, so the same text and seed give the same scenes in any process, and a caller's own random state is
+left as it was. The chain has its own generator, seeded by the seed.
 
 Text given by a user is a program: compiling it runs it (Scenic is Python). So a Scenic file is compiled only
 if the emitter renders it again byte for byte from its own `# r2s-source` record (synth.emit_scenic): an edited
 or foreign file is refused before anything runs, unless the caller says it is trusted (`r2s sample --trusted`).
-The DSL route (`sample_program`) regenerates the text from a validated DSL program and scene instead, and
-checks every sample against the DSL.
+The DSL route (`sample_program`) takes a validated DSL program and scene instead. Every variant, from either
+sampler, is checked against the DSL semantics before it is returned.
 """
 
 from __future__ import annotations
 
 import math
 import random
-from collections.abc import Iterator
+import sys
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -28,6 +41,7 @@ from synth.emit_scenic import (
     FRAME_PARAM,
     MIN_DISTANCE,
     NotGenerated,
+    read_source,
     rebuild_from_source,
     render_scenic,
 )
@@ -37,6 +51,8 @@ from synth.semantics import check
 
 DEFAULT_MAX_ITERATIONS = 2000  # Scenic's own default for one scene
 MAX_SEED = 2**32 - 1  # numpy's seed range
+SAMPLERS = ("gibbs", "scenic")
+SAMPLING_FAILED_EXIT = 4
 
 
 class ScenicProgramError(UserError):
@@ -44,27 +60,84 @@ class ScenicProgramError(UserError):
 
 
 class SamplingFailed(UserError):
-    """Rejection sampling found no scene within its iteration budget. One line, with what to try."""
+    """No variant satisfies the program and the collision rule within the budget: exit 4 (not bad input: the
+    program and scene are valid, the sampler could not find a variant). One line naming the pairs that block."""
+
+    exit_code = SAMPLING_FAILED_EXIT
 
 
 @dataclass(frozen=True)
 class SampleOptions:
     n: int = 1
     seed: int = 0
-    max_iterations: int = DEFAULT_MAX_ITERATIONS  # per scene
+    max_iterations: int = DEFAULT_MAX_ITERATIONS  # per scene (scenic)
     allow_collisions: bool = False
+    sampler: str | None = None  # None: gibbs for r2sgen's own text, scenic for a trusted hand-edited one
+    burn_in: int | None = None  # sweeps (gibbs); None: synth.gibbs's default
+    thin: int | None = None
 
     def __post_init__(self) -> None:
         if self.n < 1 or self.max_iterations < 1:
             raise UserError("the number of scenes and the iteration budget must be at least 1")
         if not 0 <= self.seed <= MAX_SEED:
             raise UserError(f"the seed must be in [0, {MAX_SEED}], got {self.seed}")
+        if self.sampler is not None and self.sampler not in SAMPLERS:
+            raise UserError(f"unknown sampler {self.sampler!r} (choose from {', '.join(SAMPLERS)})")
+        if (self.burn_in is not None and self.burn_in < 0) or (self.thin is not None and self.thin < 1):
+            raise UserError("--burn-in must be at least 0 and --thin at least 1")
+
+    def chain_settings(self):
+        from synth.gibbs import ChainSettings
+
+        default = ChainSettings()
+        return ChainSettings(burn_in=default.burn_in if self.burn_in is None else self.burn_in,
+                             thin=default.thin if self.thin is None else self.thin)
 
 
 @dataclass(frozen=True)
 class Samples:
     scenes: tuple[Scene, ...]
-    iterations: int  # rejection-sampling iterations over all scenes (n when nothing was rejected)
+    sampler: str
+    iterations: int = 0  # scenic: rejection-sampling iterations over all scenes (n when nothing was rejected)
+    sweeps: int = 0  # gibbs: sweeps of the chain (after finding a start)
+    acceptance: float = 1.0  # gibbs: accepted draws / draws
+
+    def describe(self) -> str:
+        if self.sampler == "scenic":
+            return f"scenic: {self.iterations} iterations"
+        return f"gibbs: {self.sweeps} sweeps, {self.acceptance:.0%} of draws accepted"
+
+
+Progress = Callable[[int, int], None]
+
+
+class ProgressReport:
+    """Progress of a long sampling run on stderr: a bar on a terminal, else a log line every few seconds."""
+
+    def __init__(self, what: str, every_s: float = 5.0):
+        self.what, self.every_s = what, every_s
+        self.started = self.last = time.monotonic()
+        self.bar = None
+        self.tty = sys.stderr.isatty()
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.monotonic()
+        if self.tty:
+            if self.bar is None and now - self.started > 1.0:
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=total, desc=self.what, unit=" sweeps", file=sys.stderr, leave=False)
+            if self.bar is not None:
+                self.bar.total = total
+                self.bar.n = done
+                self.bar.refresh()
+        elif now - self.last >= self.every_s:
+            self.last = now
+            sys.stderr.write(f"{self.what}: {done}/{total} ({now - self.started:.0f} s)\n")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _first_line(exc: BaseException) -> str:
@@ -133,7 +206,8 @@ def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>") -> Sc
         raise ScenicProgramError(f"{filename}: a sampled scene is not a valid scene: {exc}") from None
 
 
-def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>") -> Samples:
+def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>",
+                progress: Progress | None = None) -> Samples:
     """options.n scenes of a compiled scenario, seeded: compiling draws nothing, sampling starts from the seed."""
     from scenic.core.distributions import RejectionException
 
@@ -143,17 +217,16 @@ def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>") -
             try:
                 sampled, iterations = scenario.generate(maxIterations=options.max_iterations)
             except RejectionException:
-                hint = "" if options.allow_collisions else " or pass --allow-collisions"
-                raise SamplingFailed(
-                    f"{filename}: no scene {'satisfies the requirements' if options.allow_collisions else 'without collisions'} "
-                    f"found in {options.max_iterations} iterations (scene {k + 1} of {options.n}); "
-                    f"raise --max-iterations{hint}"
-                ) from None
+                rule = "the requirements" if options.allow_collisions else "the program and the collision rule"
+                raise SamplingFailed(f"{filename}: Scenic found no scene that satisfies {rule} in "
+                                     f"{options.max_iterations} iterations (scene {k + 1} of {options.n})") from None
             except Exception as exc:
                 raise ScenicProgramError(f"{filename}: Scenic fails while sampling: {_first_line(exc)}") from None
             total += iterations
             scenes.append(scene_from_scenic(sampled, _frame_id(scenario, k), filename))
-    return Samples(tuple(scenes), total)
+            if progress is not None:
+                progress(k + 1, options.n)
+    return Samples(tuple(scenes), "scenic", iterations=total)
 
 
 def ensure_generated(text: str, filename: str = "<program>") -> None:
@@ -170,41 +243,62 @@ def ensure_generated(text: str, filename: str = "<program>") -> None:
                                  f"{hint}")
 
 
-def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>", trusted: bool = False) -> Samples:
-    """Compile Scenic text and draw options.n scenes from it; untrusted text must be r2sgen's own, unedited."""
-    if not trusted:
+def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>", trusted: bool = False,
+                  progress: Progress | None = None) -> Samples:
+    """options.n variants of a Scenic text; untrusted text must be r2sgen's own, unedited.
+
+    r2sgen's own text is sampled from its record (program, scene, tolerances) by the chosen sampler, and every
+    variant is checked against the program; a hand-edited text (trusted) only by Scenic, as it stands.
+    """
+    generated = True
+    try:
         ensure_generated(text, filename)
-    return draw_scenes(compile_scenic(text, options, filename), options, filename)
+    except ScenicProgramError:
+        if not trusted:
+            raise
+        generated = False
+    sampler = options.sampler or ("gibbs" if generated else "scenic")
+    if not generated:
+        if sampler != "scenic":
+            raise UserError(f"{filename} is not r2sgen's own text (edited?): only --sampler scenic samples it as it "
+                            "stands")
+        return draw_scenes(compile_scenic(text, options, filename), options, filename, progress)
+    src = read_source(text)
+    return _sample(src.program, src.scene, src.config, options, sampler, text, filename, progress)
 
 
-def recorded_overlaps(scene: Scene) -> list[tuple[str, str]]:
-    """Pairs of entities whose boxes overlap in the scene: why collision-free sampling may find nothing."""
-    from shapely.geometry import Polygon  # a dependency of scenic
-
-    from pipeline.render import ego_frame
-
-    boxes = [(b.id, Polygon(b.corners())) for b in ego_frame(scene).values()]
-    return [(a, b) for i, (a, pa) in enumerate(boxes) for b, pb in boxes[i + 1:] if pa.intersection(pb).area > 0]
-
-
-def sample_program(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions) -> Samples:
-    """The DSL route: Scenic text regenerated from a validated program and scene; every sample is checked."""
+def sample_program(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions,
+                   progress: Progress | None = None) -> Samples:
+    """The DSL route: a validated program and the scene it describes (the Scenic text is regenerated)."""
     ids = {e.id for e in scene.others}
     unknown = [s.id for s in program.statements if s.id not in ids]
     if unknown:
         raise UserError(f"the program declares {unknown[0]!r}, which is not an entity of scene {scene.frame_id}")
-    text = render_scenic(program, scene, config)
-    try:
-        samples = sample_scenic(text, options, filename="<emitted Scenic>", trusted=True)
-    except SamplingFailed as exc:
-        pairs = recorded_overlaps(scene)
-        if not pairs or options.allow_collisions:
-            raise
-        a, b = pairs[0]
-        raise SamplingFailed(f"{exc}; the recorded scene itself has {len(pairs)} overlapping "
-                             f"pair{'s' if len(pairs) > 1 else ''} of boxes (e.g. {a} and {b})") from None
-    except ScenicProgramError as exc:  # our own text failing is a bug, not bad input
-        raise RuntimeError(str(exc)) from None
+    return _sample(program, scene, config, options, options.sampler or "gibbs", None, "<emitted Scenic>", progress)
+
+
+def _sample(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions, sampler: str,
+            text: str | None, filename: str, progress: Progress | None) -> Samples:
+    if sampler == "gibbs":
+        from synth.gibbs import NoVariant, sample_variants
+
+        try:
+            v = sample_variants(program, scene, config, options.n, options.seed, options.chain_settings(),
+                                options.allow_collisions, progress)
+        except NoVariant as exc:
+            raise SamplingFailed(f"{filename}: {exc}") from None
+        samples = Samples(v.scenes, "gibbs", sweeps=v.stats.sweeps, acceptance=v.stats.acceptance)
+    else:
+        text = text if text is not None else render_scenic(program, scene, config)
+        try:
+            samples = draw_scenes(compile_scenic(text, options, filename), options, filename, progress)
+        except SamplingFailed as exc:
+            if options.allow_collisions:
+                raise
+            raise SamplingFailed(f"{exc}; {blockers(program, scene, config, options.seed)}; the default sampler "
+                                 "(--sampler gibbs) does not reject whole scenes") from None
+        except ScenicProgramError as exc:  # our own text failing is a bug, not bad input
+            raise RuntimeError(str(exc)) from None
     for k, s in enumerate(samples.scenes):
         result = check(program, s, config)
         if not result.ok:
@@ -214,3 +308,13 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
                             "the program has a statement no sampled scene satisfies, e.g. a distance Range under "
                             f"{MIN_DISTANCE} m or an entity placed on the reference it faces")
     return samples
+
+
+def blockers(program: Program, scene: Scene, config: SynthConfig, seed: int, draws: int = 200) -> str:
+    """Why whole-scene rejection fails: how often independent draws satisfy the rule, and the pairs that collide."""
+    from synth.gibbs import rejection_odds
+
+    odds = rejection_odds(program, scene, config, seed, draws)
+    top = ", ".join(f"{a} and {b} ({share:.0%})" for (a, b), share in odds.pairs[:3])
+    return (f"{odds.clear}/{draws} independent draws from the program satisfy the collision rule"
+            + (f"; most often colliding: {top}" if top else ""))

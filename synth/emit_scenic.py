@@ -26,20 +26,30 @@ and runs every sampled scene through synth.semantics.check):
   recorded scene occupies. Every sample stays inside the semantics; only that sliver is never drawn.
 - Each object carries `name` = its entity id and its class is its type, which is how `r2s sample` writes the
   sampled scene back as scene JSON (ids re-validated there). `param r2s_frame_id` names the recorded frame.
-- The last line, `# r2s-source: {json}`, records what the text was rendered from (program, frame id, ego, boxes,
-  tolerances, header). Compiling Scenic runs it as Python, so `r2s sample` only compiles text that
+- The last line, `# r2s-source: {json}`, records what the text was rendered from (program, frame id, the
+  recorded entities with their boxes, tolerances, header). Compiling Scenic runs it as Python, so `r2s sample` only compiles text that
   `rebuild_from_source` renders again byte for byte from that record: an edited or foreign file is refused
   (unless the user says --trusted), while the record itself can only ever yield what this emitter writes from
   validated ids, closed-set types and finite numbers.
-- Scenic's non-intersection requirement stays on unless the global parameter r2s_allow_collisions is overridden
-  (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).
+- Collisions follow the recording (synth.collision_rule): two boxes may overlap only if they overlap in the
+  recorded scene. Scenic's own rule (no object meets any other) is switched off in the classes
+  (allowCollisions: True), and the text ends with one requirement per entity, `require dsl__apart(e, 'a b')`:
+  e's box meets none of the named earlier entities' boxes (`intersects`, which for planar boxes is shapely's
+  footprint test in scenic 3.1.1, as in synth.overlap). Only pairs that do not overlap in the recording and can
+  meet at all (Part.reach) are named; the partners are one string rather than a tuple of names because Scenic's
+  parser takes ~1 ms per name token, which for the 9,560 pairs of a 141-entity frame would be 8 s of
+  compiling (one string per entity: 0.2 s). The requirements stay off when the global parameter
+  r2s_allow_collisions is overridden (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).
 """
 
 from __future__ import annotations
 
 import json
+import textwrap
+from dataclasses import dataclass
 from typing import Any
 
+from synth.collision_rule import collision_rule
 from synth.config import SynthConfig
 from synth.dsl import (
     DIRECTIONS,
@@ -54,12 +64,13 @@ from synth.dsl import (
     fmt_number,
     parse_program,
 )
+from synth.parameters import MIN_DISTANCE, sampled_distance
 from synth.scene import ENTITY_TYPES, Entity, Scene, scene_from_dict
 
 FRAME_PARAM = "r2s_frame_id"
 COLLISIONS_PARAM = "r2s_allow_collisions"
 POSITION_SUFFIX = "__at"
-MIN_DISTANCE = 0.05  # metres; see the module docstring
+OBJECTS = "dsl__objects"
 SOURCE_PREFIX = "# r2s-source: "
 
 PRELUDE = '''\
@@ -98,6 +109,11 @@ def dsl__facing_toward(ref, p):
 
 def dsl__facing_away_from(ref, p):
     return dsl__bearing(ref.position, p) + Range(-dsl__DELTA2, dsl__DELTA2)
+
+def dsl__apart(obj, others):
+    """obj's box meets none of the boxes of the entities named in `others` (ids separated by spaces)."""
+    by_name = {{o.name: o for o in dsl__objects}}
+    return not any(obj intersects by_name[name] for name in others.split())
 '''
 
 
@@ -107,11 +123,10 @@ def _range(r: Range) -> str:
 
 def _distance(r: Range) -> str:
     """A sector's distance Range, kept off 0 where the bearing vanishes (see the module docstring)."""
-    if r.lo >= MIN_DISTANCE:
+    lo, hi = sampled_distance(r)
+    if lo == r.lo:
         return _range(r)
-    if r.hi >= MIN_DISTANCE:
-        return f"Range(dsl__MIN_DISTANCE, {fmt_number(r.hi)})"
-    return f"Range({fmt_number(r.hi)}, {fmt_number(r.hi)})"  # all of it under the floor: its top only
+    return f"Range({'dsl__MIN_DISTANCE' if lo == MIN_DISTANCE else fmt_number(lo)}, {fmt_number(hi)})"
 
 
 def _position(pos) -> str:
@@ -148,7 +163,7 @@ def _classes(types: list[str]) -> list[str]:
     for t in types:
         length, width = ENTITY_TYPES[t]
         lines += [f"class {t}:", f"    length: {fmt_number(length)}", f"    width: {fmt_number(width)}",
-                  "    requireVisible: False", f"    allowCollisions: globalParameters.{COLLISIONS_PARAM}", ""]
+                  "    requireVisible: False", "    allowCollisions: True  # the recording's rule instead: see the end", ""]
     return lines
 
 
@@ -178,8 +193,32 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
             lines.append(f"{at} = {where}")
             where = at
         lines.append(f"{st.id} = new {st.type} at {where}, facing {_heading(st.heading, where)}{_props(by_id[st.id])}")
+    lines += _collision_rule(program, scene, config)
     lines.append(SOURCE_PREFIX + json.dumps(_source_record(program, scene, config, header), separators=(",", ":")))
     return "\n".join(lines) + "\n"
+
+
+def _collision_rule(program: Program, scene: Scene, config: SynthConfig) -> list[str]:
+    """The recording's collision rule (see the module docstring and synth.collision_rule)."""
+    rule = collision_rule(program, scene, config)
+    partners: dict[int, list[str]] = {}
+    for i, j in rule.apart:
+        partners.setdefault(j, []).append(rule.ids[i])
+    recorded = [f"{a}-{b}" for a, b in rule.named(rule.recorded)]
+    lines = ["", "# Collisions as in the recording: two boxes may overlap only if they overlap there. Each entity",
+             "# stays clear of every earlier one it does not overlap in the recording and can reach at all."]
+    lines += textwrap.wrap(", ".join(recorded) or "none", width=116, break_on_hyphens=False, break_long_words=False,
+                           initial_indent="# Overlapping in the recording (free to overlap): ", subsequent_indent="#   ")
+    lines += textwrap.wrap(", ".join(rule.ids) + "]", width=116, initial_indent=f"{OBJECTS} = [", subsequent_indent="    ")
+    if partners:
+        lines.append(f"if not globalParameters.{COLLISIONS_PARAM}:")
+    for j, names in sorted(partners.items()):
+        # Adjacent string literals, one per line, join into one string (a space ends every piece but the last).
+        pieces = textwrap.wrap(" ".join(names), width=90, break_on_hyphens=False, break_long_words=False)
+        first = f"    require dsl__apart({rule.ids[j]}, "
+        lines += [(first if k == 0 else " " * len(first)) + repr(piece + (" " if k < len(pieces) - 1 else ""))
+                  + (")" if k == len(pieces) - 1 else "") for k, piece in enumerate(pieces)]
+    return lines
 
 
 def _entity_record(e: Entity) -> dict[str, Any]:
@@ -188,10 +227,10 @@ def _entity_record(e: Entity) -> dict[str, Any]:
 
 
 def _source_record(program: Program, scene: Scene, config: SynthConfig, header: str) -> dict[str, Any]:
-    """Exactly what render_scenic reads: ego in full, the declared entities' boxes (their positions are not
-    printed, so they are recorded as 0), the two tolerances, the header and the program."""
+    """Exactly what render_scenic reads: ego and the declared entities as recorded (where the boxes overlap is
+    the collision rule), the two tolerances, the header and the program."""
     by_id = scene.by_id()
-    others = [{**_entity_record(by_id[st.id]), "x": 0.0, "y": 0.0, "heading": 0.0} for st in program.statements]
+    others = [_entity_record(by_id[st.id]) for st in program.statements]
     return {"frame_id": scene.frame_id, "header": header, "delta1": config.delta1, "delta2": config.delta2,
             "entities": [_entity_record(scene.ego), *others], "program": str(program)}
 
@@ -200,11 +239,21 @@ class NotGenerated(ValueError):
     """Scenic text that this emitter did not write (or that was edited since). One line."""
 
 
-def rebuild_from_source(text: str) -> str:
-    """The text render_scenic writes from the record on the last line of `text`; NotGenerated if there is none.
+@dataclass(frozen=True)
+class Source:
+    """What a text was rendered from, read back from its record (validated as any scene and program)."""
 
-    The caller compares it with `text`: equal means every line is this emitter's, whatever the record says,
-    because the record passes the same validation as any scene and program (ids, types, finite numbers).
+    program: Program
+    scene: Scene
+    config: SynthConfig
+    header: str
+
+
+def read_source(text: str) -> Source:
+    """The record on the last line of `text`; NotGenerated if there is none or it is not valid.
+
+    Only the record is read, nothing else of the text: compare rebuild_from_source(text) with the text before
+    trusting that the text says what the record does.
     """
     lines = text.splitlines()
     if not lines or not lines[-1].startswith(SOURCE_PREFIX):
@@ -220,6 +269,19 @@ def rebuild_from_source(text: str) -> str:
         header = rec["header"]
         if not isinstance(header, str):
             raise ValueError("the header is not a string")
-        return render_scenic(program, scene, config, header)
+        return Source(program, scene, config, header)
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:  # Scene/Dsl/ConfigError, JSON
+        raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None
+
+
+def rebuild_from_source(text: str) -> str:
+    """The text render_scenic writes from the record on the last line of `text`; NotGenerated if there is none.
+
+    The caller compares it with `text`: equal means every line is this emitter's, whatever the record says,
+    because the record passes the same validation as any scene and program (ids, types, finite numbers).
+    """
+    src = read_source(text)
+    try:
+        return render_scenic(src.program, src.scene, src.config, src.header)
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
         raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None

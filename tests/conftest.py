@@ -29,6 +29,29 @@ def shipped_frames() -> list[Scene]:
     return [scene_from_dict(d) for d in json.loads((DATA / "nuscenes_mini_frames.json").read_text())]
 
 
+def all_relation_kinds():
+    """(scene, program, config): every position and heading form of the DSL (a real frame's optimum rarely needs
+    the absolute and relative ones), under non-default tolerances, with a program that contains the scene."""
+    from synth.config import SynthConfig
+    from synth.dsl import parse_program
+
+    scene = scene_from_dict({"frame_id": "kinds", "entities": [
+        {"id": "ego", "type": "Car", "x": 3.5, "y": -2.0, "heading": 200.0},
+        {"id": "car1", "type": "Car", "x": 0.0, "y": 12.0, "heading": 359.0},
+        {"id": "ped1", "type": "Pedestrian", "x": -12.0, "y": 12.3, "heading": 90.0},
+        {"id": "cone1", "type": "TrafficCone", "x": -7.0, "y": -20.0, "heading": 10.0},
+        {"id": "bus1", "type": "Bus", "x": 20.0, "y": 30.0, "heading": 330.0, "length": 12.5, "width": 3.0},
+        {"id": "bike1", "type": "Bicycle", "x": -4.54, "y": -19.57, "heading": 100.0},
+    ]})
+    program = parse_program(
+        "car1 = new Car on Range(-4, 1) @ Range(-17, -12) relative to ego, facing Range(356.5, 361.5) deg\n"
+        "ped1 = new Pedestrian left of car1 by Range(9.5, 14.5), facing Range(-271.5, -266.5) deg relative to car1\n"
+        "cone1 = new TrafficCone on Range(-9, -4) @ Range(-22, -17), facing toward ped1\n"
+        "bus1 = new Bus on Range(18, 23) @ Range(28, 33), facing away from cone1\n"
+        "bike1 = new Bicycle right of cone1 by Range(0, 4), facing Range(87, 92) deg relative to cone1\n")
+    return scene, program, SynthConfig(delta1=4.0, delta2=2.0, oracle="closed-form")
+
+
 @pytest.fixture(scope="session")
 def real_frames() -> list[Scene]:
     return shipped_frames()

@@ -1,19 +1,22 @@
-"""The emitted Scenic text under the official compiler (scenic 3.1.1): it compiles, and every scene it samples
-is inside the DSL program's semantics (synth.semantics.check). Plus `r2s sample` as a user runs it."""
+"""The emitted Scenic text under the official compiler (scenic 3.1.1): it compiles, every scene it samples is
+inside the DSL program's semantics (synth.semantics.check), and its requirements keep every pair of boxes apart
+that is apart in the recording. Plus `r2s sample` as a user runs it. (The default sampler, the chain of
+synth.gibbs, and its agreement with Scenic: tests/test_variants.py.)"""
 
 from __future__ import annotations
 
+import ast
 import itertools
 import json
 import random
 
 import pytest
-from conftest import assert_one_line_error, run_r2s
+from conftest import all_relation_kinds, assert_one_line_error, run_r2s
 
 pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: the Scenic tests need the compiler")
 
 from pipeline.render import ego_frame  # noqa: E402
-from pipeline.sample import SampleOptions, SamplingFailed, ScenicProgramError, sample_program, sample_scenic  # noqa: E402
+from pipeline.sample import SampleOptions, ScenicProgramError, sample_program, sample_scenic  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
 from synth.dsl import parse_program  # noqa: E402
 from synth.scene import scene_from_dict  # noqa: E402
@@ -23,10 +26,11 @@ from synth.synthesize import synthesize  # noqa: E402
 # Vehicles-only frames (one with a Trailer, the densest ones) and all-category frames up to the largest (141).
 FRAMES = ["scene-0061/0#vehicles", "scene-0061/28#vehicles", "scene-0553/35#vehicles", "scene-0757/0",
           "scene-0061/2", "scene-0061/18"]
-# Collision-free samples need a sparse enough scene: in the two crowded frames (barrier rows, groups of
-# pedestrians, boxes that touch in the recording) 2000 rejection iterations find none, so they are sampled
-# with collisions allowed (their collision failure is tested below).
+# Scenic's whole-scene rejection needs a sparse enough scene: in the two crowded frames (barrier rows, groups of
+# pedestrians) 2000 iterations find no scene that keeps the recording's gaps, so Scenic samples them with
+# collisions allowed (its failure there is tested below; the chain samples them with the rule).
 CROWDED = {"scene-0061/2", "scene-0061/18"}
+SCENIC = {"sampler": "scenic"}
 
 
 @pytest.fixture(scope="module")
@@ -50,25 +54,28 @@ def _assert_inside(program, recorded, sampled, config=None):
 def test_every_sampled_scene_is_inside_the_program(synthesized, frame):
     recorded, result = synthesized[frame]
     assert check(result.program, recorded).ok
-    samples = sample_scenic(result.scenic, SampleOptions(n=5, seed=3, allow_collisions=frame in CROWDED))
+    samples = sample_scenic(result.scenic, SampleOptions(n=5, seed=3, allow_collisions=frame in CROWDED, **SCENIC))
     assert len(samples.scenes) == 5 and samples.iterations >= 5
     for s in samples.scenes:
         _assert_inside(result.program, recorded, s)
     assert len({s.entities[-1].x for s in samples.scenes}) == 5  # variants, not copies
 
 
-def _overlap(a, b) -> bool:
+def overlapping(scene) -> set[frozenset[str]]:
+    """Pairs of ids whose boxes meet, by shapely (what Scenic's `intersects` uses for planar boxes)."""
     from shapely.geometry import Polygon
 
-    return Polygon(a.corners()).intersection(Polygon(b.corners())).area > 1e-9
+    boxes = list(ego_frame(scene).values())
+    return {frozenset((a.id, b.id)) for a, b in itertools.combinations(boxes, 2)
+            if Polygon(a.corners()).intersects(Polygon(b.corners()))}
 
 
 @pytest.mark.parametrize("frame", ["scene-0061/28#vehicles", "scene-0757/0"])
-def test_default_samples_are_collision_free(synthesized, frame):
+def test_scenic_keeps_apart_what_the_recording_keeps_apart(synthesized, frame):
     recorded, result = synthesized[frame]
-    for s in sample_scenic(result.scenic, SampleOptions(n=5, seed=11)).scenes:
-        boxes = list(ego_frame(s).values())
-        assert not any(_overlap(a, b) for a, b in itertools.combinations(boxes, 2))
+    allowed = overlapping(recorded)
+    for s in sample_scenic(result.scenic, SampleOptions(n=5, seed=11, **SCENIC)).scenes:
+        assert overlapping(s) <= allowed
 
 
 @pytest.fixture
@@ -83,29 +90,17 @@ def test_samples_at_the_printed_bounds_are_still_inside(synthesized, frame, rang
     # The extreme case for float rounding: distances, sector angles, facing tolerances and heading Ranges all
     # at their bounds at once. The checker's 1e-9 slack must absorb whatever Scenic's arithmetic adds.
     recorded, result = synthesized[frame]
-    for s in sample_scenic(result.scenic, SampleOptions(n=8, seed=1, allow_collisions=True)).scenes:
+    for s in sample_scenic(result.scenic, SampleOptions(n=8, seed=1, allow_collisions=True, **SCENIC)).scenes:
         _assert_inside(result.program, recorded, s)
 
 
-def test_every_relation_kind_and_tolerance_config(real_frames):
-    # Absolute and relative positions and headings too (a real frame's optimum rarely needs them), under
-    # non-default tolerances: the prelude's DELTA1 / DELTA2 follow the config.
-    config = SynthConfig(delta1=4.0, delta2=2.0, oracle="closed-form")
-    scene = scene_from_dict({"frame_id": "kinds", "entities": [
-        {"id": "ego", "type": "Car", "x": 3.5, "y": -2.0, "heading": 200.0},
-        {"id": "car1", "type": "Car", "x": 0.0, "y": 12.0, "heading": 359.0},
-        {"id": "ped1", "type": "Pedestrian", "x": -12.0, "y": 12.3, "heading": 90.0},
-        {"id": "cone1", "type": "TrafficCone", "x": -7.0, "y": -20.0, "heading": 10.0},
-        {"id": "bus1", "type": "Bus", "x": 20.0, "y": 30.0, "heading": 330.0, "length": 12.5, "width": 3.0},
-    ]})
-    program = parse_program(
-        "car1 = new Car on Range(-4, 1) @ Range(-17, -12) relative to ego, facing Range(356.5, 361.5) deg\n"
-        "ped1 = new Pedestrian left of car1 by Range(9.5, 14.5), facing Range(-271.5, -266.5) deg relative to car1\n"
-        "cone1 = new TrafficCone on Range(-9, -4) @ Range(-22, -17), facing toward ped1\n"
-        "bus1 = new Bus on Range(18, 23) @ Range(28, 33), facing away from cone1\n"
-    )
+@pytest.mark.parametrize("sampler", ["scenic", "gibbs"])
+def test_every_relation_kind_and_tolerance_config(sampler):
+    # Every relation kind under non-default tolerances: the prelude's DELTA1 / DELTA2 follow the config.
+    scene, program, config = all_relation_kinds()
     assert check(program, scene, config).ok, check(program, scene, config).violations
-    samples = sample_program(program, scene, config, SampleOptions(n=10, seed=2, allow_collisions=True))
+    samples = sample_program(program, scene, config, SampleOptions(n=10, seed=2, allow_collisions=True,
+                                                                   sampler=sampler))
     for s in samples.scenes:
         _assert_inside(program, scene, s, config)
     bus = samples.scenes[0].by_id()["bus1"]
@@ -121,7 +116,7 @@ def test_ids_that_look_like_the_prelude_cannot_shadow_it():
         for i, n in enumerate(names)]}
     scene = scene_from_dict(doc)
     result = synthesize(scene, SynthConfig(oracle="closed-form"))
-    samples = sample_scenic(result.scenic, SampleOptions(n=3, seed=0))
+    samples = sample_scenic(result.scenic, SampleOptions(n=3, seed=0, **SCENIC))
     for s in samples.scenes:
         _assert_inside(result.program, scene, s)
 
@@ -137,9 +132,9 @@ def test_every_scenic_keyword_is_a_reserved_id():
 
 def test_same_seed_same_scenes_and_sample_k_does_not_depend_on_n(synthesized):
     _, result = synthesized["scene-0061/28#vehicles"]
-    a = sample_scenic(result.scenic, SampleOptions(n=4, seed=9)).scenes
-    b = sample_scenic(result.scenic, SampleOptions(n=2, seed=9)).scenes
-    c = sample_scenic(result.scenic, SampleOptions(n=2, seed=10)).scenes
+    a = sample_scenic(result.scenic, SampleOptions(n=4, seed=9, **SCENIC)).scenes
+    b = sample_scenic(result.scenic, SampleOptions(n=2, seed=9, **SCENIC)).scenes
+    c = sample_scenic(result.scenic, SampleOptions(n=2, seed=10, **SCENIC)).scenes
     assert [s.to_json() for s in a[:2]] == [s.to_json() for s in b]
     assert a[0].to_json() != c[0].to_json()
 
@@ -149,21 +144,43 @@ def test_the_callers_random_state_is_left_alone(synthesized):
     random.seed(123)
     expected = random.random()
     random.seed(123)
-    sample_scenic(result.scenic, SampleOptions(n=1, seed=4))
+    sample_scenic(result.scenic, SampleOptions(n=1, seed=4, **SCENIC))
     assert random.random() == expected
 
 
-def test_collisions_refused_by_default_allowed_with_the_flag():
-    # car1's centre is within 1.5 m of ego's: it always overlaps ego.
+TWO_CARS = "car1 = new Car ahead of ego by Range(0.5, 7.5), facing Range(-2.5, 2.5) deg\n"
+
+
+@pytest.mark.parametrize("recorded_y, overlap_allowed", [(6.0, False), (1.0, True)])
+def test_collisions_follow_the_recording(recorded_y, overlap_allowed):
+    # car1 may be 0.5 to 7.5 m ahead of ego: it overlaps ego in about half of the program's scenes. Recorded 6 m
+    # ahead (apart), it must stay apart in every sample; recorded 1 m ahead (overlapping), it may overlap.
     scene = scene_from_dict({"frame_id": "overlap", "entities": [
         {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
-        {"id": "car1", "type": "Car", "x": 0, "y": 1.0, "heading": 0}]})
-    program = parse_program("car1 = new Car ahead of ego by Range(0.5, 1.5), facing Range(-2.5, 2.5) deg\n")
-    with pytest.raises(SamplingFailed, match="without collisions found in 50 iterations.*--allow-collisions.*"
-                                             "recorded scene itself has 1 overlapping pair of boxes .e.g. ego and car1"):
-        sample_program(program, scene, SynthConfig(), SampleOptions(n=1, max_iterations=50))
-    samples = sample_program(program, scene, SynthConfig(), SampleOptions(n=3, allow_collisions=True))
-    assert all(check(program, s).ok for s in samples.scenes)
+        {"id": "car1", "type": "Car", "x": 0, "y": recorded_y, "heading": 0}]})
+    program = parse_program(TWO_CARS)
+    samples = sample_program(program, scene, SynthConfig(), SampleOptions(n=40, seed=1, **SCENIC)).scenes
+    meet = sum(bool(overlapping(s)) for s in samples)
+    assert (meet > 5) if overlap_allowed else (meet == 0)
+    free = sample_program(program, scene, SynthConfig(), SampleOptions(n=40, seed=1, allow_collisions=True, **SCENIC))
+    assert sum(bool(overlapping(s)) for s in free.scenes) > 5
+    assert all(check(program, s).ok for s in samples + free.scenes)
+
+
+def test_the_requirements_name_exactly_the_pairs_that_can_meet(synthesized):
+    from synth.collision_rule import collision_rule
+    from synth.emit_scenic import read_source
+
+    recorded, result = synthesized["scene-0061/2"]
+    rule = collision_rule(result.program, recorded, SynthConfig())
+    text = result.scenic.split("dsl__objects = [", 1)[1]
+    stated = set()
+    for req in text.split("require dsl__apart(")[1:]:
+        obj, names = req.split(")", 1)[0].split(", ", 1)
+        stated |= {frozenset((obj, other)) for other in ast.literal_eval(f"({names})").split()}  # adjacent literals
+    assert stated == {frozenset(p) for p in rule.named(rule.apart)} and len(stated) > 100
+    assert not stated & {frozenset(p) for p in rule.named(rule.recorded)}
+    assert read_source(result.scenic).scene.by_id() == recorded.by_id()  # the rule is re-derived from the record
 
 
 # ------------------------------------------------------------------------------------------ r2s sample (CLI)
@@ -182,39 +199,44 @@ def files(synthesized, tmp_path_factory):
     return out
 
 
-def test_cli_writes_scene_json_byte_identical_for_a_seed(files, tmp_path, monkeypatch):
+@pytest.mark.parametrize("sampler", ["gibbs", "scenic"])
+def test_cli_writes_scene_json_byte_identical_for_a_seed(files, tmp_path, monkeypatch, sampler):
     scenic_file, dsl, scene = files["small"]
-    proc = run_r2s("sample", str(scenic_file), "--n", "3", "--seed", "5", "--out", str(tmp_path / "a"))
+    proc = run_r2s("sample", str(scenic_file), "--n", "3", "--seed", "5", "--sampler", sampler,
+                   "--out", str(tmp_path / "a"))
     assert proc.returncode == 0, proc.stderr
-    assert "wrote 3 scenes" in proc.stdout
+    assert "wrote 3 scenes" in proc.stdout and sampler in proc.stdout
     written = sorted(p.name for p in (tmp_path / "a").iterdir())
     assert written == ["sample_000.json", "sample_001.json", "sample_002.json"]
     program = parse_program(dsl.read_text())
+    recorded = scene_from_dict(json.loads(scene.read_text()))
     for name in written:
         doc = json.loads((tmp_path / "a" / name).read_text())
         assert doc["frame_id"].startswith("scene-0061/28#vehicles#sample")
+        assert all("length" in e and "width" in e for e in doc["entities"])
         assert check(program, scene_from_dict(doc)).ok
-    # Another process, another hash seed, and the DSL route (text regenerated from program + scene): same bytes.
+        assert overlapping(scene_from_dict(doc)) <= overlapping(recorded)
+    # Another process, another hash seed, and the DSL route (program + scene instead of the record): same bytes.
     monkeypatch.setenv("PYTHONHASHSEED", "77")
     proc = run_r2s("sample", "--program", str(dsl), "--scene", str(scene), "--n", "3", "--seed", "5",
-                   "--out", str(tmp_path / "b"))
+                   "--sampler", sampler, "--out", str(tmp_path / "b"))
     assert proc.returncode == 0, proc.stderr
     for name in written:
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
 
-def test_cli_budget_exhausted_is_one_line_exit_2_nothing_written(files, tmp_path):
+def test_cli_scenic_budget_exhausted_is_exit_4_naming_the_pairs_nothing_written(files, tmp_path):
     scenic_file, dsl, scene = files["crowded"]
     out = tmp_path / "none"
-    proc = run_r2s("sample", str(scenic_file), "--n", "2", "--max-iterations", "3", "--out", str(out))
-    assert_one_line_error(proc, 2, contains="no scene without collisions found in 3 iterations")
-    assert "--allow-collisions" in proc.stderr and "--max-iterations" in proc.stderr
+    proc = run_r2s("sample", str(scenic_file), "--n", "2", "--sampler", "scenic", "--max-iterations", "3",
+                   "--out", str(out))
+    assert_one_line_error(proc, 4, contains="Scenic found no scene that satisfies the program and the collision "
+                                            "rule in 3 iterations")
+    assert "independent draws from the program satisfy the collision rule" in proc.stderr
+    assert "most often colliding: " in proc.stderr and "--sampler gibbs" in proc.stderr
     assert not out.exists()
-    # From the DSL program and its scene, the message also says why: the recording's own boxes overlap.
-    proc = run_r2s("sample", "--program", str(dsl), "--scene", str(scene), "--max-iterations", "3", "--out", str(out))
-    assert_one_line_error(proc, 2, contains="the recorded scene itself has 8 overlapping pairs of boxes")
-    assert not out.exists()
-    proc = run_r2s("sample", str(scenic_file), "--n", "2", "--allow-collisions", "--out", str(out))
+    # The chain (the default) samples it.
+    proc = run_r2s("sample", str(scenic_file), "--n", "2", "--burn-in", "2", "--thin", "2", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     assert len(list(out.glob("sample_*.json"))) == 2
 
@@ -248,6 +270,9 @@ def test_allow_collisions_on_a_program_that_ignores_it_is_refused():
 
 @pytest.mark.parametrize("args, message", [
     ((), "either PROGRAM.scenic or --program"),
+    (("SCENIC", "--sampler", "metropolis"), "--sampler"),
+    (("SCENIC", "--thin", "0"), "--thin"),
+    (("EDITED", "--trusted", "--sampler", "gibbs"), "only --sampler scenic samples it"),
     (("--program", "P.dsl"), "needs --scene"),
     (("missing.scenic",), "does not exist"),
     (("BROKEN", "--trusted"), "cannot compile"),
@@ -260,7 +285,9 @@ def test_allow_collisions_on_a_program_that_ignores_it_is_refused():
 def test_cli_bad_usage_is_one_line_exit_2(files, tmp_path, args, message):
     broken = tmp_path / "broken.scenic"
     broken.write_text("ego = new\n")
-    subst = {"SCENIC": str(files["small"][0]), "BROKEN": str(broken)}
+    edited = tmp_path / "edited.scenic"
+    edited.write_text(files["small"][0].read_text().replace("requireVisible: False", "requireVisible: False  # ", 1))
+    subst = {"SCENIC": str(files["small"][0]), "BROKEN": str(broken), "EDITED": str(edited)}
     out = tmp_path / "out"
     proc = run_r2s("sample", *(subst.get(a, a) for a in args), "--out", str(out))
     assert_one_line_error(proc, 2, contains=message)

@@ -1,0 +1,343 @@
+"""Variants: the program's parameters (synth.parameters), the collision rule, and the chain of synth.gibbs.
+
+What the chain must give: every variant inside its program (the semantics checker) and no overlap between two
+boxes that do not overlap in the recording (shapely, as Scenic tests it), for real frames of every size; the
+distribution Scenic's own rejection sampler gives (two-sample Kolmogorov-Smirnov tests on every parameter and
+every pairwise distance, with negative controls that show the tests' power); determinism.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from conftest import all_relation_kinds, assert_one_line_error, run_r2s
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+from pipeline.render import Box, ego_frame
+from synth.config import SynthConfig
+from synth.dsl import parse_program
+from synth.geometry import angular_difference
+from synth.gibbs import Chain, ChainSettings, NoVariant, autocorrelation_time, sample_variants
+from synth.overlap import boxes_overlap, scene_overlaps
+from synth.parameters import Pose, parameterise
+from synth.scene import scene_from_dict
+from synth.semantics import check
+from synth.synthesize import synthesize
+
+shapely = pytest.importorskip("shapely.geometry", reason="shapely (a dependency of scenic) is not installed")
+
+
+def overlapping(scene) -> set[frozenset[str]]:
+    """Pairs of ids whose boxes meet, by shapely: Scenic's `intersects` for planar boxes."""
+    boxes = list(ego_frame(scene).values())
+    polys = {b.id: shapely.Polygon(b.corners()) for b in boxes}
+    return {frozenset((a, b)) for a, b in itertools.combinations(polys, 2) if polys[a].intersects(polys[b])}
+
+
+# ------------------------------------------------------------------------------------------ boxes
+
+box = st.tuples(st.floats(-6, 6), st.floats(-6, 6), st.floats(0, 360), st.floats(0.2, 8), st.floats(0.2, 3))
+
+
+@given(box, box)
+def test_separating_axes_agree_with_shapely(a, b):
+    pa, pb = (shapely.Polygon(Box("a", "Car", *v).corners()) for v in (a, b))
+    assume(pa.distance(pb) > 1e-7 or pa.intersection(pb).area > 1e-7)  # not a float tie at the boundary
+    assert bool(boxes_overlap(*a, *b)) == pa.intersects(pb)
+
+
+def test_touching_boxes_overlap_as_in_scenic():
+    # Scenic's `intersects` is shapely's, closed: boxes sharing an edge meet.
+    assert boxes_overlap(0, 0, 0, 4, 2, 2, 0, 0, 4, 2) and not boxes_overlap(0, 0, 0, 4, 2, 2.001, 0, 0, 4, 2)
+
+
+# ------------------------------------------------------------------------------------------ parameters
+
+KINDS, KINDS_PROGRAM, KINDS_CONFIG = all_relation_kinds()
+
+
+@pytest.fixture(scope="module")
+def programs(real_frames):
+    """(scene, program, config) for every shipped frame and the all-kinds program."""
+    return [(s, synthesize(s).program, SynthConfig()) for s in real_frames] + [(KINDS, KINDS_PROGRAM, KINDS_CONFIG)]
+
+
+def test_the_kinds_program_contains_its_scene():
+    assert check(KINDS_PROGRAM, KINDS, KINDS_CONFIG).ok, check(KINDS_PROGRAM, KINDS, KINDS_CONFIG).violations
+
+
+def test_the_start_is_the_recorded_scene(programs):
+    # The chain starts at the recording: its parameters read back exactly, inside their boxes.
+    for scene, program, config in programs:
+        p = parameterise(program, scene, config)
+        poses, params = p.start(scene)
+        by_id = scene.by_id()
+        for name, pose, row, parts in zip(p.ids, poses, params, p.parts):
+            e = by_id[name]
+            assert math.hypot(pose.x - e.x, pose.y - e.y) < 1e-9, (scene.frame_id, name)
+            assert angular_difference(pose.heading, e.heading) < 1e-9, (scene.frame_id, name)
+            for part, values in zip(parts, row):
+                assert all(lo <= v <= hi for lo, v, hi in zip(part.lo, values, part.hi))
+
+
+def _draws(chain: Chain, n: int):
+    for _ in range(n):
+        chain.draw_from_prior()
+        yield chain
+
+
+def test_parts_invert_what_they_evaluate(programs):
+    for scene, program, config in programs:
+        chain = Chain(program, scene, config, seed=3)
+        p = chain.params_of
+        for c in _draws(chain, 20):
+            poses = [Pose(q.x, q.y, q.heading) for q in c.poses]
+            for k in range(1, len(p.ids)):
+                for part, r, values in zip(p.parts[k], p.refs[k], c.params[k]):
+                    back = part.invert(poses[k], None if r is None else poses[r])
+                    assert np.allclose(back, values, atol=1e-7), (scene.frame_id, p.ids[k], part)
+
+
+def test_every_draw_is_inside_the_program_and_its_reach(programs):
+    # The reach bound is sound (the rule leaves out only pairs that can never meet): every drawn centre lies in its
+    # disc, every heading in its arc, and every pair that meets in a draw is either recorded or stated apart.
+    for scene, program, config in programs:
+        chain = Chain(program, scene, config, seed=5)
+        reach = chain.params_of.reaches()
+        rule = chain.rule
+        stated = {frozenset(p) for p in rule.named(rule.apart + rule.recorded)}
+        for c in _draws(chain, 40):
+            drawn = c.scene("draw")
+            assert check(program, drawn, config).ok, check(program, drawn, config).violations[:3]
+            for q, r in zip(c.poses, reach):
+                assert math.hypot(q.x - r.x, q.y - r.y) <= r.r
+                assert angular_difference(q.heading, r.heading.mid) <= r.heading.half
+            assert overlapping(drawn) <= stated
+
+
+# ------------------------------------------------------------------------------------------ the chain
+
+def _assert_variants(program, recorded, scenes, config=None):
+    allowed = overlapping(recorded)
+    for s in scenes:
+        result = check(program, s, config)
+        assert result.ok, [str(v) for v in result.violations[:3]]
+        assert overlapping(s) <= allowed, overlapping(s) - allowed
+        assert [e.id for e in s.entities] == ["ego"] + [st.id for st in program.statements]
+        by_id = recorded.by_id()
+        assert all((e.type, e.length, e.width) == (by_id[e.id].type, *by_id[e.id].dimensions()) for e in s.entities)
+
+
+@pytest.mark.parametrize("frame", ["scene-0061/0#vehicles", "scene-0553/35#vehicles", "scene-0757/0",
+                                   "scene-0796/31", "scene-0061/2", "scene-0061/18"])
+def test_variants_are_inside_the_program_and_keep_the_recordings_gaps(real_frames, frame):
+    recorded = next(s for s in real_frames if s.frame_id == frame)
+    program = synthesize(recorded).program
+    # The two crowded frames (56 and 141 entities, barrier rows and pedestrian groups) with a short chain: every
+    # state of the chain must satisfy both, whatever the burn-in (the defaults run on all 242 keyframes in
+    # bench/bench_variants.py).
+    settings = ChainSettings(burn_in=2, thin=2) if len(recorded.others) > 50 else ChainSettings()
+    v = sample_variants(program, recorded, SynthConfig(), 5, seed=0, settings=settings)
+    assert len(v.scenes) == 5 and v.stats.start_sweeps == 0
+    _assert_variants(program, recorded, v.scenes)
+    assert len({s.entities[-1].x for s in v.scenes}) == 5  # variants, not copies
+    assert overlapping(recorded) == {frozenset(p) for p in scene_overlaps(recorded)}
+
+
+def test_the_same_seed_gives_the_same_variants_and_variant_k_does_not_depend_on_n(real_frames):
+    recorded = next(s for s in real_frames if s.frame_id == "scene-0757/0")
+    program = synthesize(recorded).program
+    a = sample_variants(program, recorded, SynthConfig(), 4, seed=9).scenes
+    b = sample_variants(program, recorded, SynthConfig(), 2, seed=9).scenes
+    c = sample_variants(program, recorded, SynthConfig(), 2, seed=10).scenes
+    assert [s.to_json() for s in a[:2]] == [s.to_json() for s in b]
+    assert a[0].to_json() != c[0].to_json()
+    assert [s.frame_id for s in a] == [f"scene-0757/0#sample{k}" for k in range(4)]
+
+
+def test_without_the_rule_every_draw_is_accepted():
+    v = sample_variants(KINDS_PROGRAM, KINDS, KINDS_CONFIG, 3, seed=1, allow_collisions=True)
+    assert v.stats.acceptance == 1.0 and v.stats.proposals == v.stats.sweeps * 2 * len(KINDS.others)
+    assert all(check(KINDS_PROGRAM, s, KINDS_CONFIG).ok for s in v.scenes)
+
+
+TWO_CARS = scene_from_dict({"frame_id": "two", "entities": [
+    {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+    {"id": "car1", "type": "Car", "x": 0, "y": 9.0, "heading": 0}]})
+
+
+def test_a_program_that_always_collides_is_no_variant_naming_the_pair():
+    # The program puts car1 within 2 m of ego (it does not contain the recording, where car1 is 9 m ahead): every
+    # scene of it overlaps two boxes that are apart in the recording.
+    program = parse_program("car1 = new Car ahead of ego by Range(0.5, 2), facing Range(-2.5, 2.5) deg\n")
+    with pytest.raises(NoVariant, match="1 pair of boxes .* always collide .ego and car1.") as info:
+        sample_variants(program, TWO_CARS, SynthConfig(), 2, seed=0, settings=ChainSettings(start_sweeps=20))
+    assert info.value.pairs == (("ego", "car1"),)
+
+
+def test_a_start_outside_the_program_is_found_by_descent():
+    # car1 recorded 9 m ahead, program says 2 to 12 m: the start is clipped, then the chain finds valid states.
+    program = parse_program("car1 = new Car ahead of ego by Range(2, 12), facing Range(30, 35) deg\n")
+    v = sample_variants(program, TWO_CARS, SynthConfig(), 3, seed=0)
+    assert all(check(program, s).ok for s in v.scenes)
+    assert not any(overlapping(s) for s in v.scenes)
+
+
+def test_cli_no_variant_is_exit_4_one_line_nothing_written(tmp_path):
+    scene = tmp_path / "s.json"
+    scene.write_text(TWO_CARS.to_json())
+    program = tmp_path / "p.dsl"
+    program.write_text("car1 = new Car ahead of ego by Range(0.5, 2), facing Range(-2.5, 2.5) deg\n")
+    out = tmp_path / "out"
+    proc = run_r2s("sample", "--program", str(program), "--scene", str(scene), "--n", "2", "--out", str(out))
+    assert_one_line_error(proc, 4, contains="always collide (ego and car1)")
+    assert not out.exists()
+    proc = run_r2s("render", str(scene), "--program", str(program), "--samples", "2", "--out", str(tmp_path / "a.png"))
+    assert_one_line_error(proc, 4, contains="always collide")
+    help_text = run_r2s("sample", "--help").stdout
+    assert "4 sampling failed" in " ".join(help_text.split())
+
+
+def test_progress_is_logged_when_not_a_terminal(real_frames, capsys):
+    from pipeline.sample import ProgressReport, SampleOptions, sample_scenic
+
+    recorded = next(s for s in real_frames if s.frame_id == "scene-0061/2")
+    report = ProgressReport("r2s sample", every_s=0.0)
+    samples = sample_scenic(synthesize(recorded).scenic, SampleOptions(n=2, thin=3), progress=report)
+    report.close()
+    lines = capsys.readouterr().err.splitlines()
+    assert len(samples.scenes) == 2 and len(lines) == 20 + 3 + 1  # one line per sweep at every_s = 0
+    assert lines[-1].startswith("r2s sample: 24/24 (")
+
+
+# ------------------------------------------------------------------------------------------ same distribution
+
+def test_autocorrelation_time_of_known_processes():
+    rng = np.random.default_rng(0)
+    assert autocorrelation_time(rng.random(20000)) == pytest.approx(1.0, abs=0.1)
+    x = np.zeros(40000)
+    for t, e in enumerate(rng.normal(size=40000)[1:], start=1):
+        x[t] = 0.8 * x[t - 1] + e
+    assert autocorrelation_time(x) == pytest.approx((1 + 0.8) / (1 - 0.8), rel=0.15)  # AR(1): (1 + phi) / (1 - phi)
+
+
+# Two-sample Kolmogorov-Smirnov tests, every Range parameter and every pairwise centre distance, n draws a side,
+# familywise level ALPHA (Bonferroni over the m marginals of a frame). Power: with n = 400 a side and m <= 70 the
+# test rejects as soon as one marginal's CDFs differ by more than D_crit ~ 0.15 (asymptotic Kolmogorov critical
+# value, asserted below); the negative controls show two plausible bugs are caught: a sector half-width read as
+# half of what the program says, and a chain that ignores the collision rule where it binds.
+N_DRAWS = 400
+ALPHA = 0.01
+SMALL_FRAMES = ["scene-0103/1#vehicles", "scene-0061/0#vehicles", "scene-0061/7#vehicles"]  # N = 4, 6, 8
+
+# Pedestrians in a cluster around ped1 and a car across its path: about half of the program's scenes overlap two
+# boxes that are apart in the recording, so the rule shapes the distribution (Scenic accepts ~1 in 3 draws).
+TIGHT = scene_from_dict({"frame_id": "tight", "entities": [
+    {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+    {"id": "ped1", "type": "Pedestrian", "x": 0, "y": 6, "heading": 0},
+    {"id": "ped2", "type": "Pedestrian", "x": -1.5, "y": 6, "heading": 270},
+    {"id": "ped3", "type": "Pedestrian", "x": 1.5, "y": 6, "heading": 270},
+    {"id": "ped4", "type": "Pedestrian", "x": -3, "y": 6, "heading": 270},
+    {"id": "car1", "type": "Car", "x": 0, "y": 10, "heading": 90}]})
+TIGHT_PROGRAM = parse_program(
+    "ped1 = new Pedestrian ahead of ego by Range(4, 9), facing Range(-10, 10) deg relative to ego\n"
+    "ped2 = new Pedestrian left of ped1 by Range(0, 2.5), facing toward ped1\n"
+    "ped3 = new Pedestrian right of ped1 by Range(0, 2.5), facing away from ped1\n"
+    "ped4 = new Pedestrian behind ped2 by Range(0, 2.5), facing Range(-5, 5) deg relative to ped2\n"
+    "car1 = new Car ahead of ped1 by Range(1, 6), facing Range(85, 95) deg relative to ego\n")
+
+
+def _ks_critical(n: int, alpha: float) -> float:
+    from scipy.special import kolmogi
+
+    return float(kolmogi(alpha) * math.sqrt(2.0 / n))
+
+
+def _marginals(program, scenes, config) -> np.ndarray:
+    """Per scene: every Range parameter (read back from the placed scene) and every pairwise centre distance."""
+    p = parameterise(program, scenes[0], config)
+    rows = []
+    for s in scenes:
+        _, params = p.start(s)
+        pts = [(e.x, e.y) for e in s.entities]
+        dists = [math.dist(a, b) for a, b in itertools.combinations(pts, 2)]
+        rows.append([v for row in params for part in row for v in part] + dists)
+    return np.array(rows)
+
+
+def _thin_for(program, scene, config) -> int:
+    """Twice the largest integrated autocorrelation time of a pilot run: near-independent draws."""
+    chain = Chain(program, scene, config, seed=99)
+    trace = []
+    for _ in range(300):
+        chain.sweep()
+        trace.append(chain.parameters())
+    trace = np.array(trace)[30:]
+    taus = [t for t in (autocorrelation_time(trace[:, j]) for j in range(trace.shape[1])) if not math.isnan(t)]
+    return max(1, math.ceil(2 * max(taus)))
+
+
+def _scenic_draws(program, scene, config):
+    from pipeline.sample import SampleOptions, sample_program
+
+    return sample_program(program, scene, config, SampleOptions(n=N_DRAWS, seed=1, sampler="scenic")).scenes
+
+
+def _pvalues(program, scene, config, reference, chain_config=None, allow_collisions=False):
+    from scipy.stats import ks_2samp
+
+    chain_config = chain_config or config
+    thin = _thin_for(program, scene, chain_config)
+    ours = sample_variants(program, scene, chain_config, N_DRAWS, seed=2, allow_collisions=allow_collisions,
+                           settings=ChainSettings(burn_in=max(20, 5 * thin), thin=thin)).scenes
+    a, b = _marginals(program, reference, config), _marginals(program, ours, config)
+    return np.array([ks_2samp(a[:, j], b[:, j]).pvalue for j in range(a.shape[1])])
+
+
+@pytest.fixture(scope="module")
+def scenic_installed():
+    pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: the reference sampler is Scenic")
+
+
+@pytest.fixture(scope="module")
+def tight_reference(scenic_installed):
+    return _scenic_draws(TIGHT_PROGRAM, TIGHT, SynthConfig())
+
+
+def test_the_ks_tests_have_the_stated_power():
+    m = 3 * 8 + 9 * 8 // 2  # the largest frame compared: 8 entities (24 parameters, 36 distances)
+    assert _ks_critical(N_DRAWS, ALPHA / m) < 0.16
+
+
+@pytest.mark.parametrize("frame", SMALL_FRAMES)
+def test_the_chain_draws_scenics_distribution_on_real_frames(real_frames, scenic_installed, frame):
+    recorded = next(s for s in real_frames if s.frame_id == frame)
+    program = synthesize(recorded).program
+    p = _pvalues(program, recorded, SynthConfig(), _scenic_draws(program, recorded, SynthConfig()))
+    assert p.min() > ALPHA / len(p), (p.argmin(), p.min())
+
+
+def test_the_chain_draws_scenics_distribution_where_the_rule_binds(tight_reference):
+    assert check(TIGHT_PROGRAM, TIGHT).ok and not overlapping(TIGHT)
+    meets = sum(bool(overlapping(s)) for s in _draws_of(TIGHT_PROGRAM, TIGHT, 200))
+    assert 0.3 < meets / 200 < 0.9  # the rule binds: it turns away this share of the program's own scenes
+    p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference)
+    assert p.min() > ALPHA / len(p), (p.argmin(), p.min())
+
+
+def _draws_of(program, scene, n):
+    chain = Chain(program, scene, SynthConfig(), seed=4)
+    return [c.scene("draw") for c in _draws(chain, n)]
+
+
+@pytest.mark.parametrize("bug", ["half the sector width", "rule ignored"])
+def test_the_comparison_catches_a_wrong_distribution(tight_reference, bug):
+    if bug == "rule ignored":
+        p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, allow_collisions=True)
+    else:
+        p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, chain_config=SynthConfig(delta1=5.0))
+    assert p.min() < ALPHA / len(p) / 100
