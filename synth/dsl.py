@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from typing import Union
 
@@ -203,8 +203,10 @@ class _Line:
         self.i = 0
         self.lineno = lineno
 
-    def _where(self) -> str:
-        col = self.toks[self.i].col if self.i < len(self.toks) else (self.toks[-1].col + 1 if self.toks else 1)
+    def _where(self, back: int = 0) -> str:
+        """Where the next token is (back=1: the token just taken)."""
+        i = self.i - back
+        col = self.toks[i].col if i < len(self.toks) else (self.toks[-1].col + len(self.toks[-1].text) if self.toks else 1)
         return f"line {self.lineno} column {col}"
 
     def peek(self) -> str | None:
@@ -232,6 +234,7 @@ class _Line:
         return v
 
     def range_(self) -> Range:
+        start = self._where()
         self.take(text="Range")
         self.take(text="(")
         lo = self.number()
@@ -239,7 +242,7 @@ class _Line:
         hi = self.number()
         self.take(text=")")
         if lo > hi:
-            raise DslError(f"line {self.lineno}: Range({fmt_number(lo)}, {fmt_number(hi)}) is empty")
+            raise DslError(f"{start}: Range({fmt_number(lo)}, {fmt_number(hi)}) is empty")
         return Range(lo, hi)
 
     def end(self) -> None:
@@ -252,40 +255,46 @@ def parse_program(text: str) -> Program:
 
     Scoping is part of the grammar: a reference is ego or an entity declared on an earlier line.
     """
+    return Program(parse_statements(text, ENTITY_TYPES))
+
+
+def parse_statements(text: str, types: Collection[str]) -> tuple[Statement, ...]:
+    """The statements of DSL text whose TYPEs are drawn from `types` (programs: the entity types; patterns,
+    synth.pattern, add their type classes). Errors name the line and column."""
     declared: set[str] = set()
     statements = []
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0]
         if not line.strip():
             continue
-        st = _statement(_Line(line, lineno), declared)
+        st = _statement(_Line(line, lineno), declared, types)
         declared.add(st.id)
         statements.append(st)
-    return Program(tuple(statements))
+    return tuple(statements)
 
 
 def _ref(ln: _Line, declared: set[str]) -> str:
     name = ln.take("word")
     if name != EGO_ID and name not in declared:
-        raise DslError(f"line {ln.lineno}: reference {name!r} is neither ego nor declared earlier")
+        raise DslError(f"{ln._where(back=1)}: reference {name!r} is neither ego nor declared earlier")
     return name
 
 
-def _statement(ln: _Line, declared: set[str]) -> Statement:
+def _statement(ln: _Line, declared: set[str], types: Collection[str]) -> Statement:
     name = ln.take("word")
     try:
         check_identifier(name)
     except SceneError as exc:
-        raise DslError(f"line {ln.lineno}: {exc}") from None
+        raise DslError(f"{ln._where(back=1)}: {exc}") from None
     if name == EGO_ID:
-        raise DslError(f"line {ln.lineno}: ego is given by the scene and is never declared")
+        raise DslError(f"{ln._where(back=1)}: ego is given by the scene and is never declared")
     if name in declared:
-        raise DslError(f"line {ln.lineno}: {name!r} is declared twice")
+        raise DslError(f"{ln._where(back=1)}: {name!r} is declared twice")
     ln.take(text="=")
     ln.take(text="new")
     etype = ln.take("word")
-    if etype not in ENTITY_TYPES:
-        raise DslError(f"line {ln.lineno}: unknown type {etype!r}")
+    if etype not in types:
+        raise DslError(f"{ln._where(back=1)}: unknown type {etype!r}")
     position = _position(ln, declared)
     ln.take(text=",")
     heading = _heading(ln, declared)
