@@ -28,12 +28,8 @@ import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from synth.scene import ENTITY_TYPES
-
-# --categories vehicles keeps these classes.
-VEHICLE_CLASSES = frozenset(
-    {"Car", "Truck", "Bus", "Motorcycle", "Bicycle", "Trailer", "ConstructionVehicle", "EmergencyVehicle"}
-)
+# --categories vehicles keeps VEHICLE_CLASSES (defined beside the entity types, since patterns use them too).
+from synth.scene import ENTITY_TYPES, VEHICLE_CLASSES
 
 NUSCENES: Mapping[str, str] = {
     "animal": "Animal",

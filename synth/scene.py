@@ -36,6 +36,11 @@ ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
     "Object": (1.0, 1.0),
 }
 
+# The classes `--categories vehicles` keeps, and what the pattern type `Vehicle` matches (synth.pattern).
+VEHICLE_CLASSES = frozenset(
+    {"Car", "Truck", "Bus", "Motorcycle", "Bicycle", "Trailer", "ConstructionVehicle", "EmergencyVehicle"}
+)
+
 EGO_ID = "ego"
 MAX_ID_LENGTH = 64
 DEFAULT_MAX_ENTITIES = 1000
