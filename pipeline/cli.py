@@ -21,6 +21,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "extract": ("pipeline.cmd_extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
     "scene": ("pipeline.cmd_scene", "print one frame of a frames.parquet as scene JSON"),
     "run": ("pipeline.cmd_run", "one program per frame of a frames.parquet, in parallel, with limits and resume"),
+    "query": ("pipeline.cmd_query", "every frame of a frames dataset that matches a DSL pattern (scenario mining)"),
     "report": ("pipeline.cmd_report", "report.md / report.html with plots from a programs.parquet"),
     "render": ("pipeline.cmd_render", "bird's-eye view of a scene, its program's references and sampled variants"),
     "sample": ("pipeline.cmd_sample", "sample scenes from a generated Scenic program with the Scenic compiler"),

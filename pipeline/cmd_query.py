@@ -1,0 +1,43 @@
+"""`r2s query FRAMES PATTERN.dsl --out matches.parquet`: every frame that matches a pattern (scenario mining).
+
+PATTERN is a DSL program whose names are variables (types may be `Vehicle` or `Object`; Ranges of any width);
+a match is an injective binding of its names to a frame's non-ego entities under which every statement holds by
+the semantics `r2s check` uses. One row per matching frame (or per binding with --all); a summary line on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("frames", help="frames Parquet file or dataset directory (from r2s extract)")
+    p.add_argument("pattern", help="pattern file: DSL statements whose names are variables")
+    p.add_argument("--out", required=True, metavar="F", help="matches Parquet file (written atomically)")
+    p.add_argument("--all", action="store_true", dest="all_bindings",
+                   help="one row per binding instead of one per frame (with the first binding)")
+    p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2)")
+    p.add_argument("--threads", type=int, metavar="N", help="DuckDB threads (default: every core)")
+    p.add_argument("--memory-limit", type=int, metavar="MB",
+                   help="DuckDB memory limit; beyond it the join spills beside --out (default: DuckDB's, 80%% of RAM)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipeline.errors import UserError
+    from pipeline.inputs import load_config, read_text_file
+    from pipeline.query import query_frames
+    from synth.dsl import DslError
+    from synth.pattern import parse_pattern
+
+    for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):
+        if value is not None and value < 1:
+            raise UserError(f"{flag} must be at least 1, got {value}")
+    config = load_config(args.config)
+    try:
+        pattern = parse_pattern(read_text_file(args.pattern, "pattern"))
+    except DslError as exc:
+        raise UserError(f"{args.pattern}: {exc}") from None
+    summary = query_frames(args.frames, pattern, args.out, all_bindings=args.all_bindings, config=config,
+                           threads=args.threads, memory_limit_mb=args.memory_limit)
+    print(f"r2s query: {summary.line()} -> {args.out}")
+    return 0

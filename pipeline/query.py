@@ -1,0 +1,221 @@
+"""Scenario mining: every frame of a frames dataset that matches a pattern (synth.pattern), through DuckDB.
+
+The pattern becomes one query (pipeline.query_sql); this module owns the I/O around it: the input files, the
+streaming validation of the rows, the DuckDB session (threads, memory limit, a spill directory), the exact
+re-check of near-boundary bindings in Python, and the atomic, streaming write of matches.parquet.
+
+matches.parquet: frame_id, scene, timestamp_us, n_matches (distinct bindings in the frame), binding; one row per
+matching frame (binding: the first, in lexicographic order of the entities' input rows, i.e. the nearest for
+extracted frames), or with all_bindings one row per binding. `binding` is a struct with one string field per pattern
+name, in declaration order: its keys are the same on every row, so a struct is the typed form of the name -> entity
+map (pandas gives a dict, DuckDB `binding.ped`, polars `.struct.field("ped")`) where a Parquet MAP reads back as a
+list of pairs and a JSON string needs parsing.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from extractors.frames import FRAMES_COLUMNS, FramesError
+from pipeline.query_sql import EXACT_UDF, MACROS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
+from synth.config import SynthConfig
+from synth.pattern import Pattern, binding_holds
+from synth.scene import EGO_ID, ENTITY_TYPES, Entity
+
+BATCH_ROWS = 65536
+LOG_EVERY_S = 30.0
+
+
+@dataclass(frozen=True)
+class QuerySummary:
+    frames_scanned: int
+    frames_matched: int
+    bindings: int
+    checked_exactly: int  # candidate bindings near a boundary, decided by synth.semantics in Python
+    seconds: float
+
+    def line(self) -> str:
+        return (f"{self.frames_scanned} frames scanned, {self.frames_matched} matched ({self.bindings} bindings), "
+                f"{self.seconds:.2f} s")
+
+
+def frames_files(path: str | os.PathLike) -> list[str]:
+    """The Parquet files of a frames file or dataset directory (sorted; hidden and _-prefixed names skipped, as
+    pyarrow.dataset does), each checked to be Parquet with the frames columns."""
+    p = Path(path)
+    if not p.exists():
+        raise FramesError(f"{path} does not exist")
+    if p.is_dir():
+        files = sorted(str(f) for f in p.rglob("*.parquet") if f.is_file()
+                       and not any(part.startswith((".", "_")) for part in f.relative_to(p).parts))
+        if not files:
+            raise FramesError(f"{path} is a directory without Parquet files")
+    else:
+        files = [str(p)]
+    for f in files:
+        _check_columns(f)
+    return files
+
+
+def _check_columns(path: str) -> None:
+    """A Parquet file with the frames columns (its footer only: the rows are validated by one DuckDB pass)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        names = set(pq.ParquetFile(path).schema_arrow.names)
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    missing = [c for c in FRAMES_COLUMNS if c not in names]
+    if missing:
+        raise FramesError(f"{path} is not a frames file: it lacks column(s) {', '.join(missing)}")
+
+
+def _sql_list(files: Sequence[str]) -> str:
+    return "[" + ", ".join("'" + f.replace("'", "''") + "'" for f in files) + "]"
+
+
+def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None, spill_dir: str):
+    import duckdb
+
+    con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
+                                 **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
+    # Row ordinal: file number, then row number in the file; it orders frames and bindings deterministically.
+    con.execute(
+        f"CREATE TEMP VIEW {ROWS} AS SELECT frame_id, scene, timestamp_us, entity_id, type, x, y, heading, is_ego, "
+        f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, "
+        f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
+        f"FROM read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)")
+    for macro in MACROS:
+        con.execute(macro)
+    return con
+
+
+def _validate(con, where: str) -> int:
+    """The frames contract, checked in two streaming aggregates; returns the number of frames."""
+    known = ", ".join(repr(t) for t in sorted(ENTITY_TYPES))
+    bad_num, bad_null, ego_named, unknown = con.execute(
+        f"SELECT any_value(frame_id) FILTER (WHERE NOT coalesce(isfinite(x) AND isfinite(y) AND isfinite(heading), FALSE)), "
+        f"count(*) FILTER (WHERE frame_id IS NULL OR entity_id IS NULL OR type IS NULL OR is_ego IS NULL), "
+        f"any_value(frame_id) FILTER (WHERE (entity_id = '{EGO_ID}') <> is_ego), "
+        f"any_value(type) FILTER (WHERE type NOT IN ({known})) FROM {ROWS}").fetchall()[0]
+    if bad_null:
+        raise FramesError(f"{where}: {bad_null} row(s) lack a frame_id, entity_id, type or is_ego")
+    if bad_num is not None:
+        raise FramesError(f"{where}: column x, y or heading has a missing or non-finite value (frame {bad_num})")
+    if unknown is not None:
+        raise FramesError(f"{where}: unknown entity type {unknown!r}")
+    if ego_named is not None:
+        raise FramesError(f"{where}: frame {ego_named!r}: the id 'ego' belongs to the ego row only")
+    n_frames, no_ego, dup = con.execute(
+        f"SELECT count(*), any_value(frame_id) FILTER (WHERE n_ego <> 1), any_value(frame_id) FILTER (WHERE n <> nd) "
+        f"FROM (SELECT frame_id, count(*) FILTER (WHERE is_ego) AS n_ego, count(*) AS n, "
+        f"count(DISTINCT entity_id) AS nd FROM {ROWS} GROUP BY frame_id)").fetchall()[0]
+    if no_ego is not None:
+        raise FramesError(f"{where}: frame {no_ego!r} does not have exactly one ego row")
+    if dup is not None:
+        raise FramesError(f"{where}: frame {dup!r} has an entity id twice")
+    return int(n_frames)
+
+
+class _ExactCheck:
+    """The Python UDF: is a candidate binding a match by synth.semantics? Its arguments: the numbers (ego x, y,
+    heading, then x, y, heading per name) and the types (per name), as two lists."""
+
+    def __init__(self, pattern: Pattern, config: SynthConfig):
+        self.pattern, self.config, self.calls = pattern, config, 0
+
+    def __call__(self, numbers, types):
+        import pyarrow as pa
+
+        names = self.pattern.names
+        out = []
+        for v, t in zip(numbers.to_pylist(), types.to_pylist()):
+            ego = Entity(EGO_ID, "Car", v[0], v[1], v[2])
+            binding = {n: Entity(n, t[i], v[3 + 3 * i], v[4 + 3 * i], v[5 + 3 * i]) for i, n in enumerate(names)}
+            out.append(binding_holds(self.pattern, ego, binding, self.config))
+        self.calls += len(out)
+        return pa.array(out, pa.bool_())
+
+
+class _Progress:
+    """DuckDB's own progress of the running query: a tqdm bar on a terminal, else a log line every LOG_EVERY_S."""
+
+    def __init__(self, con, log: Callable[[str], None]):
+        self.con, self.log, self.stop = con, log, threading.Event()
+        self.thread = threading.Thread(target=self._poll, daemon=True)
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.thread.join()
+
+    def _poll(self) -> None:
+        from tqdm import tqdm
+
+        tty = sys.stderr.isatty()
+        bar = tqdm(total=100, desc="r2s query", unit="%", file=sys.stderr, disable=not tty, leave=False)
+        t0 = last = time.monotonic()
+        while not self.stop.wait(0.5):
+            pct = self.con.query_progress()
+            if pct < 0:
+                continue
+            bar.n = int(pct)
+            bar.refresh()
+            if not tty and time.monotonic() - last >= LOG_EVERY_S:
+                last = time.monotonic()
+                self.log(f"r2s query: {pct:.0f}% after {last - t0:.0f} s")
+        bar.close()
+
+
+def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.PathLike, *, all_bindings: bool = False,
+                 config: SynthConfig | None = None, threads: int | None = None, memory_limit_mb: int | None = None,
+                 log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
+    """Write matches.parquet (atomically) for `pattern` over a frames file or dataset; bad input is a FramesError."""
+    import duckdb
+    import pyarrow.parquet as pq
+
+    from extractors.atomic import atomic_path
+
+    t0 = time.monotonic()
+    config = config or SynthConfig()
+    files = frames_files(frames)
+    sql = compile_pattern(pattern, config, all_bindings)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
+        con = _open(files, threads, memory_limit_mb, spill)
+        check = _ExactCheck(pattern, config)
+        try:
+            con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
+            try:
+                n_frames = _validate(con, str(frames))
+                with _Progress(con, log):
+                    reader = con.sql(sql).to_arrow_reader(BATCH_ROWS)
+                    frames_matched = bindings = 0
+                    seen_last = None
+                    with atomic_path(out) as tmp, pq.ParquetWriter(tmp, reader.schema, compression="zstd") as writer:
+                        for batch in reader:
+                            writer.write_batch(batch)
+                            fids = batch.column("frame_id").to_pylist()
+                            counts = batch.column("n_matches").to_pylist()
+                            for fid, n in zip(fids, counts):
+                                if fid != seen_last:
+                                    frames_matched += 1
+                                    bindings += n
+                                    seen_last = fid
+            except (duckdb.IOException, duckdb.InvalidInputException, duckdb.ConversionException) as exc:
+                raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
+        finally:
+            con.close()
+    return QuerySummary(n_frames, frames_matched, bindings, check.calls, time.monotonic() - t0)
