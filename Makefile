@@ -29,7 +29,7 @@ $(STAMP): requirements.lock pyproject.toml
 	touch $(STAMP)
 
 # The whole pipeline on data shipped in the repo: extract (a ScenarioNet excerpt) -> run -> report on the 242
-# shipped nuScenes-mini keyframes, then one scene end to end: program, Scenic, sampled variants, picture.
+# shipped nuScenes-mini keyframes, a query for a situation, then one scene end to end: program, Scenic, sampled variants, picture.
 DEMO_FRAMES := data/nuscenes-mini-keyframes/frames.parquet
 DEMO_FRAME  := scene-0103/0
 
@@ -38,6 +38,7 @@ demo: setup
 	$(R2S) extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out $(DEMO)/excerpt-frames.parquet
 	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs.parquet --jobs $(JOBS)
 	$(R2S) report $(DEMO)/programs.parquet --out $(DEMO)/report
+	$(R2S) query $(DEMO_FRAMES) data/patterns/queue-of-three.dsl --out $(DEMO)/matches.parquet
 	$(R2S) scene $(DEMO_FRAMES) $(DEMO_FRAME) --out $(DEMO)/scene.json
 	$(R2S) synth $(DEMO)/scene.json --out $(DEMO)/scene.dsl
 	$(R2S) synth $(DEMO)/scene.json --format scenic --out $(DEMO)/scene.scenic
@@ -46,6 +47,7 @@ demo: setup
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
+	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet"
 
 test: setup
 	$(PY) -m pytest
