@@ -23,7 +23,7 @@ from _scenarionet_layouts import (
 )
 from test_extract_scenarionet_databases import assert_rows_match, real_scenarios
 
-from extractors.base import ExtractOptions, ExtractTally
+from extractors.base import MAX_NAMES, ExtractOptions, ExtractTally
 from extractors.categories import ALL, VEHICLES
 from extractors.frames import read_frames
 from extractors.scenarionet import extract
@@ -167,3 +167,19 @@ def test_the_six_shared_scenes_through_workers_and_a_merge(shared_dir, tmp_path)
     assert len(set(mapping.values())) == 6 and all(v.startswith("../") for v in mapping.values())
     got = frames_of(extract, merged, categories=ALL)
     pd.testing.assert_frame_equal(got, frames_of(extract, plain, categories=ALL))
+
+
+def test_a_file_of_endless_unknown_types_does_not_grow_the_tally(tmp_path):
+    # every track a different unknown type: the counts stay exact, the names kept apart stay bounded
+    sd = as_waymo(real_scenarios()[0])
+    sdc = sd["metadata"]["sdc_id"]
+    for i, (tid, tr) in enumerate(sd["tracks"].items()):
+        if tid != sdc:
+            tr["type"] = tr["metadata"]["type"] = f"KIND_{i}"
+    db = write_single_worker([sd], tmp_path / "db", "waymo", "v1")
+    tally = ExtractTally()
+    got = pd.DataFrame([r for f in extract(str(db), ExtractOptions(categories=ALL, radius=1e9), tally) for r in f])
+    others = got[~got.is_ego]
+    assert (others.type == "Object").all() and others.category.nunique() > 2 * MAX_NAMES
+    assert sum(tally.unknown_kept.values()) == len(others) and len(tally.unknown_kept) == MAX_NAMES + 1
+    assert tally.unknown_kept["..."] == len(others[~others.category.isin(set(tally.unknown_kept))])
