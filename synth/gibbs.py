@@ -116,6 +116,10 @@ class Chain:
         for k in range(n - 1, 0, -1):  # a reference comes before its dependants: theirs are complete here
             for r in {r for r in p.refs[k] if r is not None}:
                 self.dependants[r] = sorted(set(self.dependants[r]) | {k} | set(self.dependants[k]))
+        # moves[k][part]: the entities a redraw of that part changes, k first (a heading move leaves alone those
+        # that only face k, a position move those that only turn with k).
+        self.moves = [[np.array(p.moved_by(k, j, self.dependants[k])) for j in range(len(p.parts[k]))]
+                      for k in range(n)]
         self.proposals = self.accepted = 0
         self.moved = np.zeros(n, dtype=bool)
         self.moved[0] = True
@@ -153,22 +157,23 @@ class Chain:
         p = self.params_of
         lo, hi = list(p.parts[k][part].lo), list(p.parts[k][part].hi)
         now = self.params[k][part]
-        moved = [k, *self.dependants[k]]
-        idx = np.array(moved)
+        idx = self.moves[k][part]
+        moved = idx.tolist()
         before = self._violations(idx, self.x, self.y, self.h) if descend else 0
         for _ in range(1 if descend else MAX_DRAWS):
             new = tuple(a + (b - a) * t for a, b, t in zip(lo, hi, self.rng.random(len(lo))))
-            trial = list(self.poses)
             row = list(self.params[k])
             row[part] = new
-            for m in moved:
-                trial[m] = Pose()
-                p.evaluate_into(m, row if m == k else self.params[m], trial)
+            trial = list(self.poses)
+            trial[k] = Pose()
+            p.evaluate_into(k, row, trial)
             x, y, h = self.x.copy(), self.y.copy(), self.h.copy()
-            x[idx] = [trial[m].x for m in moved]
-            y[idx] = [trial[m].y for m in moved]
-            h[idx] = [trial[m].heading for m in moved]
+            x[k], y[k], h[k] = trial[k].x, trial[k].y, trial[k].heading
             self.proposals += 1
+            for m in moved[1:]:
+                trial[m] = Pose()
+                p.evaluate_into(m, self.params[m], trial)
+                x[m], y[m], h[m] = trial[m].x, trial[m].y, trial[m].heading
             after = self._violations(idx, x, y, h)
             if not after or (descend and after <= before):
                 self.accepted += 1

@@ -90,12 +90,22 @@ class Reach:
     heading: Arc
 
 
+POSITION, HEADING = "position", "heading"  # the fields of an entity that parts write and read
+
+
 class Part(Protocol):
-    """One part of a statement: the parameters Scenic draws for it and what they make of the entity."""
+    """One part of a statement: the parameters Scenic draws for it and what they make of the entity.
+
+    `writes` is the field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
+    entity (set by an earlier part of the statement): what a sampler must re-evaluate when something moves.
+    """
 
     ref: str | None
     lo: tuple[float, ...]
     hi: tuple[float, ...]
+    writes: str
+    reads: tuple[str, ...]
+    reads_own: tuple[str, ...]
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None: ...
 
@@ -145,6 +155,9 @@ class SectorPart:
     phi: float
     lo: tuple[float, ...]
     hi: tuple[float, ...]
+    writes = POSITION
+    reads = (POSITION, HEADING)
+    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         dx, dy = _offset(ref.heading + self.phi + p[1], 0.0, p[0])
@@ -168,6 +181,9 @@ class RelativeXYPart:
     ref: str
     lo: tuple[float, ...]
     hi: tuple[float, ...]
+    writes = POSITION
+    reads = (POSITION, HEADING)
+    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         dx, dy = _offset(ref.heading, p[0], p[1])
@@ -195,6 +211,9 @@ class AbsoluteXYPart:
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     ref = None
+    writes = POSITION
+    reads = ()
+    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.x, own.y = p[0], p[1]
@@ -217,6 +236,9 @@ class FacingPart:
     toward: bool
     lo: tuple[float, ...]
     hi: tuple[float, ...]
+    writes = HEADING
+    reads = (POSITION,)
+    reads_own = (POSITION,)
 
     def _target(self, own: Pose, ref: Pose) -> float:
         if self.toward:
@@ -246,6 +268,9 @@ class RelativeHeadingPart:
     ref: str
     lo: tuple[float, ...]
     hi: tuple[float, ...]
+    writes = HEADING
+    reads = (HEADING,)
+    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.heading = normalize(ref.heading + p[0])
@@ -266,6 +291,9 @@ class AbsoluteHeadingPart:
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     ref = None
+    writes = HEADING
+    reads = ()
+    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.heading = normalize(p[0])
@@ -339,6 +367,23 @@ class Parameterisation:
         """Entity k's pose from its parameters and its references' poses (written into poses[k])."""
         for part, r, p in zip(self.parts[k], self.refs[k], params):
             part.evaluate(p, poses[k], None if r is None else poses[r])
+
+    def moved_by(self, k: int, part: int, dependants: list[int]) -> list[int]:
+        """Every entity whose value changes when part `part` of entity k is redrawn (k first, then in order), of
+        k's dependants (the entities that refer to k through any chain of references, in order)."""
+        changed = {(k, self.parts[k][part].writes)}
+        moved = [k]
+        for m in [k, *dependants]:
+            hit = False
+            for j, (p, r) in enumerate(zip(self.parts[m], self.refs[m])):
+                if m == k and j <= part:
+                    continue
+                if any((r, f) in changed for f in p.reads) or any((m, f) in changed for f in p.reads_own):
+                    changed.add((m, p.writes))
+                    hit = True
+            if hit and m != k:
+                moved.append(m)
+        return moved
 
     def reaches(self) -> list[Reach]:
         ego = self.ego

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from _distribution import ALPHA, N_DRAWS, TIGHT, TIGHT_PROGRAM, compare, ks_critical, scenic_draws
 from conftest import all_relation_kinds, assert_one_line_error, run_r2s
 from hypothesis import assume, given
 from hypothesis import strategies as st
@@ -102,6 +103,30 @@ def test_parts_invert_what_they_evaluate(programs):
                     assert np.allclose(back, values, atol=1e-7), (scene.frame_id, p.ids[k], part)
 
 
+def _placed(p, params) -> list[Pose]:
+    poses = [Pose(p.ego.x, p.ego.y, p.ego.heading)] + [Pose() for _ in p.ids[1:]]
+    for k in range(1, len(p.ids)):
+        p.evaluate_into(k, params[k], poses)
+    return poses
+
+
+def test_a_move_re_places_every_entity_it_changes(programs):
+    # What the chain re-evaluates after redrawing one part (Parameterisation.moved_by) against a brute force:
+    # every entity placed afresh from all parameters, before and after the redraw.
+    rng = np.random.default_rng(0)
+    for scene, program, config in programs[::4] + programs[-3:]:
+        chain = Chain(program, scene, config, seed=1)
+        p = chain.params_of
+        before = _placed(p, chain.params)
+        for k in range(1, len(p.ids)):
+            for j, part in enumerate(p.parts[k]):
+                params = [list(row) for row in chain.params]
+                params[k][j] = tuple(a + (b - a) * t for a, b, t in zip(part.lo, part.hi, rng.random(len(part.lo))))
+                after = _placed(p, params)
+                changed = {m for m, (u, v) in enumerate(zip(before, after)) if (u.x, u.y, u.heading) != (v.x, v.y, v.heading)}
+                assert changed <= set(chain.moves[k][j].tolist()), (scene.frame_id, p.ids[k], j)
+
+
 def test_every_draw_is_inside_the_program_and_its_reach(programs):
     # The reach bound is sound (the rule leaves out only pairs that can never meet): every drawn centre lies in its
     # disc, every heading in its arc, and every pair that meets in a draw is either recorded or stated apart.
@@ -110,7 +135,7 @@ def test_every_draw_is_inside_the_program_and_its_reach(programs):
         reach = chain.params_of.reaches()
         rule = chain.rule
         stated = {frozenset(p) for p in rule.named(rule.apart + rule.recorded)}
-        for c in _draws(chain, 40):
+        for c in _draws(chain, 40 if len(scene.others) < 50 else 6):  # shapely's pairs are slow at 141 entities
             drawn = c.scene("draw")
             assert check(program, drawn, config).ok, check(program, drawn, config).violations[:3]
             for q, r in zip(c.poses, reach):
@@ -225,77 +250,8 @@ def test_autocorrelation_time_of_known_processes():
     assert autocorrelation_time(x) == pytest.approx((1 + 0.8) / (1 - 0.8), rel=0.15)  # AR(1): (1 + phi) / (1 - phi)
 
 
-# Two-sample Kolmogorov-Smirnov tests, every Range parameter and every pairwise centre distance, n draws a side,
-# familywise level ALPHA (Bonferroni over the m marginals of a frame). Power: with n = 400 a side and m <= 70 the
-# test rejects as soon as one marginal's CDFs differ by more than D_crit ~ 0.15 (asymptotic Kolmogorov critical
-# value, asserted below); the negative controls show two plausible bugs are caught: a sector half-width read as
-# half of what the program says, and a chain that ignores the collision rule where it binds.
-N_DRAWS = 400
-ALPHA = 0.01
+# Same distribution: tests/_distribution.py (shared with bench/bench_variants.py) says how, and with what power.
 SMALL_FRAMES = ["scene-0103/1#vehicles", "scene-0061/0#vehicles", "scene-0061/7#vehicles"]  # N = 4, 6, 8
-
-# Pedestrians in a cluster around ped1 and a car across its path: about half of the program's scenes overlap two
-# boxes that are apart in the recording, so the rule shapes the distribution (Scenic accepts ~1 in 3 draws).
-TIGHT = scene_from_dict({"frame_id": "tight", "entities": [
-    {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
-    {"id": "ped1", "type": "Pedestrian", "x": 0, "y": 6, "heading": 0},
-    {"id": "ped2", "type": "Pedestrian", "x": -1.5, "y": 6, "heading": 270},
-    {"id": "ped3", "type": "Pedestrian", "x": 1.5, "y": 6, "heading": 270},
-    {"id": "ped4", "type": "Pedestrian", "x": -3, "y": 6, "heading": 270},
-    {"id": "car1", "type": "Car", "x": 0, "y": 10, "heading": 90}]})
-TIGHT_PROGRAM = parse_program(
-    "ped1 = new Pedestrian ahead of ego by Range(4, 9), facing Range(-10, 10) deg relative to ego\n"
-    "ped2 = new Pedestrian left of ped1 by Range(0, 2.5), facing toward ped1\n"
-    "ped3 = new Pedestrian right of ped1 by Range(0, 2.5), facing away from ped1\n"
-    "ped4 = new Pedestrian behind ped2 by Range(0, 2.5), facing Range(-5, 5) deg relative to ped2\n"
-    "car1 = new Car ahead of ped1 by Range(1, 6), facing Range(85, 95) deg relative to ego\n")
-
-
-def _ks_critical(n: int, alpha: float) -> float:
-    from scipy.special import kolmogi
-
-    return float(kolmogi(alpha) * math.sqrt(2.0 / n))
-
-
-def _marginals(program, scenes, config) -> np.ndarray:
-    """Per scene: every Range parameter (read back from the placed scene) and every pairwise centre distance."""
-    p = parameterise(program, scenes[0], config)
-    rows = []
-    for s in scenes:
-        _, params = p.start(s)
-        pts = [(e.x, e.y) for e in s.entities]
-        dists = [math.dist(a, b) for a, b in itertools.combinations(pts, 2)]
-        rows.append([v for row in params for part in row for v in part] + dists)
-    return np.array(rows)
-
-
-def _thin_for(program, scene, config) -> int:
-    """Twice the largest integrated autocorrelation time of a pilot run: near-independent draws."""
-    chain = Chain(program, scene, config, seed=99)
-    trace = []
-    for _ in range(300):
-        chain.sweep()
-        trace.append(chain.parameters())
-    trace = np.array(trace)[30:]
-    taus = [t for t in (autocorrelation_time(trace[:, j]) for j in range(trace.shape[1])) if not math.isnan(t)]
-    return max(1, math.ceil(2 * max(taus)))
-
-
-def _scenic_draws(program, scene, config):
-    from pipeline.sample import SampleOptions, sample_program
-
-    return sample_program(program, scene, config, SampleOptions(n=N_DRAWS, seed=1, sampler="scenic")).scenes
-
-
-def _pvalues(program, scene, config, reference, chain_config=None, allow_collisions=False):
-    from scipy.stats import ks_2samp
-
-    chain_config = chain_config or config
-    thin = _thin_for(program, scene, chain_config)
-    ours = sample_variants(program, scene, chain_config, N_DRAWS, seed=2, allow_collisions=allow_collisions,
-                           settings=ChainSettings(burn_in=max(20, 5 * thin), thin=thin)).scenes
-    a, b = _marginals(program, reference, config), _marginals(program, ours, config)
-    return np.array([ks_2samp(a[:, j], b[:, j]).pvalue for j in range(a.shape[1])])
 
 
 @pytest.fixture(scope="module")
@@ -305,39 +261,35 @@ def scenic_installed():
 
 @pytest.fixture(scope="module")
 def tight_reference(scenic_installed):
-    return _scenic_draws(TIGHT_PROGRAM, TIGHT, SynthConfig())
+    return scenic_draws(TIGHT_PROGRAM, TIGHT, SynthConfig())[0]
 
 
 def test_the_ks_tests_have_the_stated_power():
     m = 3 * 8 + 9 * 8 // 2  # the largest frame compared: 8 entities (24 parameters, 36 distances)
-    assert _ks_critical(N_DRAWS, ALPHA / m) < 0.16
+    assert ks_critical(N_DRAWS, ALPHA / m) < 0.16
 
 
 @pytest.mark.parametrize("frame", SMALL_FRAMES)
 def test_the_chain_draws_scenics_distribution_on_real_frames(real_frames, scenic_installed, frame):
     recorded = next(s for s in real_frames if s.frame_id == frame)
     program = synthesize(recorded).program
-    p = _pvalues(program, recorded, SynthConfig(), _scenic_draws(program, recorded, SynthConfig()))
-    assert p.min() > ALPHA / len(p), (p.argmin(), p.min())
+    result = compare(program, recorded, SynthConfig(), scenic_draws(program, recorded, SynthConfig())[0])
+    assert result.same, (result.pvalues.argmin(), result.pvalues.min())
 
 
 def test_the_chain_draws_scenics_distribution_where_the_rule_binds(tight_reference):
     assert check(TIGHT_PROGRAM, TIGHT).ok and not overlapping(TIGHT)
-    meets = sum(bool(overlapping(s)) for s in _draws_of(TIGHT_PROGRAM, TIGHT, 200))
+    chain = Chain(TIGHT_PROGRAM, TIGHT, SynthConfig(), seed=4)
+    meets = sum(bool(overlapping(c.scene("draw"))) for c in _draws(chain, 200))
     assert 0.3 < meets / 200 < 0.9  # the rule binds: it turns away this share of the program's own scenes
-    p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference)
-    assert p.min() > ALPHA / len(p), (p.argmin(), p.min())
-
-
-def _draws_of(program, scene, n):
-    chain = Chain(program, scene, SynthConfig(), seed=4)
-    return [c.scene("draw") for c in _draws(chain, n)]
+    result = compare(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference)
+    assert result.same, (result.pvalues.argmin(), result.pvalues.min())
 
 
 @pytest.mark.parametrize("bug", ["half the sector width", "rule ignored"])
 def test_the_comparison_catches_a_wrong_distribution(tight_reference, bug):
     if bug == "rule ignored":
-        p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, allow_collisions=True)
+        result = compare(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, allow_collisions=True)
     else:
-        p = _pvalues(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, chain_config=SynthConfig(delta1=5.0))
-    assert p.min() < ALPHA / len(p) / 100
+        result = compare(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference, chain_config=SynthConfig(delta1=5.0))
+    assert result.pvalues.min() < result.threshold / 100
