@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import time
@@ -21,8 +22,8 @@ sys.path.insert(0, str(HERE))
 
 from common import RESULTS, machine  # noqa: E402
 
-ORDER = ("bench_synth.py", "bench_extract.py", "bench_scenic.py", "bench_robust.py", "bench_pipeline.py",
-         "bench_ablation.py", "bench_costs.py")
+ORDER = ("bench_synth.py", "bench_extract.py", "bench_scenic.py", "bench_variants.py", "bench_robust.py",
+         "bench_pipeline.py", "bench_ablation.py", "bench_costs.py")
 
 
 def scripts(only: list[str] | None, skip: list[str]) -> list[Path]:
@@ -89,13 +90,27 @@ def costs_summary(co: dict) -> list[str]:
             f"for the best baseline (Table 1, tab:rq1_esr). All categories: {a['ours']:.2f} ([costs.md](costs.md))."]
 
 
+def variants_summary(va: dict) -> list[str]:
+    rows = va["frames"]
+    ok = sum(r["ok"] for r in rows)
+    walls = [r["wall_s"] for r in rows]
+    same = sum(r["same"] for r in va["distribution"])
+    return [f"`r2s sample --n {va['n_variants']}` with defaults on {len(rows)} shipped keyframes (N up to "
+            f"{max(r['n'] for r in rows)}): **{ok} of {len(rows)}** give {va['n_variants']} variants inside their "
+            f"program that keep the recording's gaps; wall clock median {statistics.median(walls):.1f} s, slowest "
+            f"{max(walls):.1f} s. Same distribution as Scenic's own sampler on {same} of {len(va['distribution'])} "
+            f"frames compared ([variants.md](variants.md))."]
+
+
 def readme() -> str:
     m = machine()
     md = ["# Benchmark results", "", f"`make bench` (`python bench/run_all.py`) on {m['cpu']} ({m['cores']} cores), "
           f"Python {m['python']}. {m['note']}.", ""]
-    ab, co = _load("ablation"), _load("costs")
+    ab, co, va = _load("ablation"), _load("costs"), _load("variants")
     if co:
         md += ["## Program cost", ""] + costs_summary(co) + [""]
+    if va:
+        md += ["## Variants", ""] + variants_summary(va) + [""]
     if ab:
         md += ["## Search strategies", ""] + ablation_summary(ab) + [""]
     return "\n".join(md + ["## All results", ""] + files_table()) + "\n"

@@ -172,7 +172,7 @@ def draw(view: View):
                 if name in present]
     if view.samples:
         handles.append(Patch(facecolor=FAMILIES["vehicle"].variant, alpha=0.3,
-                             label=f"{len(view.samples)} sampled variants\n(Scenic, translucent)"))
+                             label=f"{len(view.samples)} sampled variants\n(translucent)"))
     if view.program is not None:
         arrows, abs_pos, abs_head = references(view.program)
         for r in arrows:
