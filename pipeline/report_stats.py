@@ -14,14 +14,15 @@ import pandas as pd
 
 from pipeline.programs import STATUSES
 from synth.dsl import AbsoluteHeading, AbsoluteXYPos
+from synth.parts import HEADING, POSITION
 
 # Entity-count buckets (N excludes ego). Later buckets are wide because dense frames are rare and slow.
 BUCKETS: tuple[tuple[int, int | None], ...] = ((0, 0), (1, 5), (6, 10), (11, 20), (21, 40), (41, 80), (81, None))
 # The absolute-coordinate program declares every entity with `on Range @ Range, facing Range deg`: 2 + 2.
 ABSOLUTE_COST_PER_ENTITY = AbsoluteXYPos.cost + AbsoluteHeading.cost
 # Relation kinds in the order the paper's grammar lists them (position first, then heading).
-POSITION_KINDS = ("ahead", "behind", "left", "right", "relative position", "absolute position")
-HEADING_KINDS = ("toward", "away", "relative heading", "absolute heading")
+POSITION_KINDS = POSITION.kinds
+HEADING_KINDS = HEADING.kinds
 RELATION_KINDS = POSITION_KINDS + HEADING_KINDS
 ALL = "all"
 
@@ -131,20 +132,9 @@ def by_bucket(p: Prepared) -> list[GroupStats]:
 
 def relation_kinds(program_text: str) -> Counter:
     """How often each relation kind occurs in one DSL program (parsed with the DSL's own parser)."""
-    from synth.dsl import DirectionPos, FacingRelation, LocalXYPos, RelativeHeading, parse_program
+    from synth.dsl import parse_program
 
-    kinds: Counter = Counter()
-    for s in parse_program(program_text).statements:
-        pos, head = s.position, s.heading
-        if isinstance(pos, DirectionPos):
-            kinds[pos.direction] += 1
-        else:
-            kinds["relative position" if isinstance(pos, LocalXYPos) else "absolute position"] += 1
-        if isinstance(head, FacingRelation):
-            kinds[head.mode] += 1
-        else:
-            kinds["relative heading" if isinstance(head, RelativeHeading) else "absolute heading"] += 1
-    return kinds
+    return Counter(part.kind(clause) for s in parse_program(program_text).statements for part, clause in s.clauses())
 
 
 @dataclass(frozen=True)

@@ -51,21 +51,10 @@ from typing import Any
 
 from synth.collision_rule import collision_rule
 from synth.config import SynthConfig
-from synth.dsl import (
-    DIRECTIONS,
-    AbsoluteHeading,
-    AbsoluteXYPos,
-    DirectionPos,
-    FacingRelation,
-    LocalXYPos,
-    Program,
-    Range,
-    RelativeHeading,
-    fmt_number,
-    parse_program,
-)
-from synth.parameters import MIN_DISTANCE, sampled_distance
+from synth.dsl import Program, Statement, parse_program
+from synth.parts.position import DIRECTIONS, MIN_DISTANCE
 from synth.scene import ENTITY_TYPES, Entity, Scene, scene_from_dict
+from synth.syntax import fmt_number
 
 FRAME_PARAM = "r2s_frame_id"
 COLLISIONS_PARAM = "r2s_allow_collisions"
@@ -117,38 +106,6 @@ def dsl__apart(obj, others):
 '''
 
 
-def _range(r: Range) -> str:
-    return f"Range({fmt_number(r.lo)}, {fmt_number(r.hi)})"
-
-
-def _distance(r: Range) -> str:
-    """A sector's distance Range, kept off 0 where the bearing vanishes (see the module docstring)."""
-    lo, hi = sampled_distance(r)
-    if lo == r.lo:
-        return _range(r)
-    return f"Range({'dsl__MIN_DISTANCE' if lo == MIN_DISTANCE else fmt_number(lo)}, {fmt_number(hi)})"
-
-
-def _position(pos) -> str:
-    if isinstance(pos, DirectionPos):
-        return f"dsl__sector_{pos.direction}({pos.ref}, {_distance(pos.distance)})"
-    if isinstance(pos, LocalXYPos):
-        return f"dsl__relative_xy({pos.ref}, {_range(pos.lateral)}, {_range(pos.forward)})"
-    if isinstance(pos, AbsoluteXYPos):
-        return f"({_range(pos.x)} @ {_range(pos.y)})"
-    raise TypeError(f"not a DSL position: {pos!r}")
-
-
-def _heading(head, at: str) -> str:
-    if isinstance(head, FacingRelation):
-        return f"dsl__facing_{'toward' if head.mode == 'toward' else 'away_from'}({head.ref}, {at})"
-    if isinstance(head, RelativeHeading):
-        return f"{head.ref}.heading + {_range(head.angle)} deg"
-    if isinstance(head, AbsoluteHeading):
-        return f"{_range(head.angle)} deg"
-    raise TypeError(f"not a DSL heading: {head!r}")
-
-
 def _props(e: Entity) -> str:
     """`with name` (the id: how samples are read back) and the recorded box where known (class default else)."""
     out = f", with name '{e.id}'"
@@ -186,16 +143,26 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
     # ego is the recorded one, at full precision: every relation hangs off it.
     lines.append(f"ego = new {ego.type} at ({ego.x!r} @ {ego.y!r}), facing {ego.heading!r} deg{_props(ego)}")
     for st in program.statements:
-        where = _position(st.position)
-        if isinstance(st.heading, FacingRelation):
-            # The heading depends on this entity's own position, which a specifier cannot name (no `self`).
-            at = f"{st.id}{POSITION_SUFFIX}"
-            lines.append(f"{at} = {where}")
-            where = at
-        lines.append(f"{st.id} = new {st.type} at {where}, facing {_heading(st.heading, where)}{_props(by_id[st.id])}")
+        lines += _statement(st, by_id[st.id])
     lines += _collision_rule(program, scene, config)
     lines.append(SOURCE_PREFIX + json.dumps(_source_record(program, scene, config, header), separators=(",", ":")))
     return "\n".join(lines) + "\n"
+
+
+def _statement(st: Statement, e: Entity) -> list[str]:
+    """One object per statement: each part's clause is one specifier (Part.keyword, Part.scenic)."""
+    (position, located), *others = st.clauses()
+    where = position.scenic(located, "")
+    lines = []
+    if any(p.needs_own_position(c) for p, c in others):
+        # A clause depends on this entity's own position, which a specifier cannot name (no `self`).
+        at = f"{st.id}{POSITION_SUFFIX}"
+        lines.append(f"{at} = {where}")
+        where = at
+    specifiers = [f"{position.keyword} {where}"]
+    specifiers += [f"{p.keyword} {p.scenic(c, where)}" for p, c in others]
+    lines.append(f"{st.id} = new {st.type} {', '.join(specifiers)}{_props(e)}")
+    return lines
 
 
 def _collision_rule(program: Program, scene: Scene, config: SynthConfig) -> list[str]:

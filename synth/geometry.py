@@ -65,6 +65,11 @@ def exact_cos_squared(delta: float) -> Fraction:
     return c * c
 
 
+def exact_offset(ref, e) -> tuple[Fraction, Fraction]:
+    """e - ref (anything with x and y) in exact rationals of the floats."""
+    return Fraction(e.x) - Fraction(ref.x), Fraction(e.y) - Fraction(ref.y)
+
+
 def to_local(dx: float, dy: float, ref_heading: float) -> tuple[float, float]:
     """(dx, dy) in a reference's frame: lateral lx (+ = the reference's right), forward ly.
 

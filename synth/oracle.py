@@ -1,9 +1,10 @@
 """Relation oracles: who witnesses whom. `closed-form`, `hybrid` (default) and `smt` (the paper's way).
 
-An oracle answers, for a target e and a reference r (ego or another entity), which direction relation
-(ahead / left / behind / right) and which facing relation (toward / away) hold, if any. Sectors are 2 delta1
-wide and 90 degrees apart, so at most one of each holds. Answers are cached per (relation, target, reference),
-the paper's M_smt.
+An oracle answers, for a target e, a reference r (ego or another entity) and a statement part, which of the
+part's witness relations holds, if any (a part's relations are disjoint: direction sectors are 2 delta1 wide and
+90 degrees apart, facing toward and away from are opposite). Answers are cached per (relation, target,
+reference), the paper's M_smt (relation names are unique across parts). A part whose questions are robust ones
+on this scene (synth.robust) gets the robust table and the robust solver question; the others the plain ones.
 """
 
 from __future__ import annotations
@@ -13,29 +14,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.config import SynthConfig
-from synth.relations import (
-    DIRECTION_NAMES,
-    FACING_NAMES,
-    NONE,
-    UNDECIDED,
-    RelationTable,
-    closed_form_table,
-    settle_exactly,
-)
-from synth.robust import is_robust, robust_closed_form_table, settle_conservatively
+from synth.parts import Part, parts_for
+from synth.perturbation import bounds_of
+from synth.relations import settle_exactly
+from synth.robust import robust_parts, settle_conservatively
 from synth.scene import Entity, Scene
 from synth.smt import make_backend
+from synth.tables import NONE, UNDECIDED, RelationTable, scene_arrays
 
 
 @dataclass
 class RelationOracle:
-    """Answers position / heading questions about one scene, lazily where it asks a solver."""
+    """Answers relation questions about one scene, part by part, lazily where it asks a solver."""
 
     scene: Scene
     config: SynthConfig
     ids: tuple[str, ...] = ()
     table: RelationTable | None = None
     backend: object | None = None
+    parts: tuple[Part, ...] = ()
     # The paper's M_smt: (relation, target index, reference index) -> does the relation hold.
     cache: dict[tuple[str, int, int], bool] = field(default_factory=dict)
 
@@ -51,30 +48,27 @@ class RelationOracle:
             self._entities = tuple(by[i] for i in self.ids)
         return self._entities
 
-    def position(self, r: int, e: int) -> int:
-        """Direction code of e relative to r (index into DIRECTION_NAMES), or NONE."""
+    def relation(self, k: int, r: int, e: int) -> int:
+        """Code of part k's relation of e with reference r (an index into its relations), or NONE."""
         if self.table is not None:
-            return int(self.table.position[r, e])
-        return self._ask("position", r, e)
+            return int(self.table[self.parts[k].name][r, e])
+        return self._ask(self.parts[k], r, e)
+
+    def position(self, r: int, e: int) -> int:
+        return self.relation(0, r, e)
 
     def heading(self, r: int, e: int) -> int:
-        if self.table is not None:
-            return int(self.table.heading[r, e])
-        return self._ask("heading", r, e)
+        return self.relation(1, r, e)
 
-    def _ask(self, kind: str, r: int, e: int) -> int:
+    def _ask(self, part: Part, r: int, e: int) -> int:
         """Ask relation by relation, as Alg. 4 does, through the cache; the first that holds is the answer."""
         if r == e:
             return NONE
         ents = self.entities()
-        if kind == "position":
-            names, solve = DIRECTION_NAMES, self.backend.position_relation
-        else:
-            names, solve = FACING_NAMES, self.backend.heading_relation
-        for code, name in enumerate(names):
-            key = (name, e, r)
+        for code in part.codes_from(r == 0):
+            key = (part.relations[code], e, r)
             if key not in self.cache:
-                self.cache[key] = solve(name, ents[r], ents[e])
+                self.cache[key] = self.backend.relation(part, code, ents[r], ents[e])
             if self.cache[key]:
                 return code
         return NONE
@@ -84,31 +78,44 @@ class RelationOracle:
         if self.table is not None:
             return self.table
         n = len(self.ids)
-        pos = np.array([[self.position(r, e) for e in range(n)] for r in range(n)], dtype=np.int8)
-        head = np.array([[self.heading(r, e) for e in range(n)] for r in range(n)], dtype=np.int8)
-        self.table = RelationTable(self.ids, pos, head)
+        codes = {p.name: np.array([[self.relation(k, r, e) for e in range(n)] for r in range(n)], dtype=np.int8)
+                 for k, p in enumerate(self.parts)}
+        self.table = RelationTable(self.ids, codes)
         return self.table
+
+
+def float_table(scene: Scene, config: SynthConfig, parts: tuple[Part, ...], robust: frozenset[str]) -> RelationTable:
+    """Every part's float decisions: the robust question for the parts in `robust`, the plain one otherwise."""
+    arrays = scene_arrays(scene)
+    bounds = [bounds_of(e, config) for e in (scene.ego,) + scene.others] if robust else []
+    return RelationTable(arrays.ids, {
+        p.name: p.robust_closed_form(arrays, bounds, config) if p.name in robust else p.closed_form(arrays, config)
+        for p in parts})
 
 
 def make_oracle(scene: Scene, config: SynthConfig) -> RelationOracle:
     """The oracle the config names. Index 0 is ego, then the scene's other entities in scene order."""
     ids = (scene.ego.id,) + tuple(e.id for e in scene.others)
-    # Robust synthesis asks a stronger question of every pair (synth.robust); its floats are a pre-filter too.
-    robust = is_robust(scene, config)
+    parts = parts_for(config)
+    robust = robust_parts(scene, config, parts)
     if config.oracle == "closed-form":
-        if robust:
-            return RelationOracle(scene, config, ids, settle_conservatively(robust_closed_form_table(scene, config)))
-        table = settle_exactly(closed_form_table(scene, config), scene, config)
-        return RelationOracle(scene, config, ids, table)
+        table = float_table(scene, config, parts, robust)
+        plain = settle_exactly(table.replaced({n: c for n, c in table.codes.items() if n not in robust}), scene,
+                               config)
+        # Robust pairs the floats cannot settle are not claimed (no solver to decide them): conservative.
+        sure = settle_conservatively(table.replaced({n: c for n, c in table.codes.items() if n in robust}))
+        codes = {p.name: (sure if p.name in robust else plain)[p.name] for p in parts}
+        return RelationOracle(scene, config, ids, table.replaced(codes), parts=parts)
     backend = make_backend(config)
     if config.oracle == "smt":
-        return RelationOracle(scene, config, ids, None, backend)
+        return RelationOracle(scene, config, ids, None, backend, parts)
     # hybrid: floats settle the clear pairs; the solver settles the ones inside the guard band.
-    table = (robust_closed_form_table if robust else closed_form_table)(scene, config)
-    oracle = RelationOracle(scene, config, ids, None, backend)
-    pos, head = table.position.copy(), table.heading.copy()
-    for kind, r, e in table.undecided():
-        (pos if kind == "position" else head)[r, e] = oracle._ask(kind, r, e)
-    assert not (pos == UNDECIDED).any() and not (head == UNDECIDED).any()
-    oracle.table = RelationTable(ids, pos, head)
+    table = float_table(scene, config, parts, robust)
+    oracle = RelationOracle(scene, config, ids, None, backend, parts)
+    codes = {name: c.copy() for name, c in table.codes.items()}
+    by_name = {p.name: p for p in parts}
+    for name, r, e in table.undecided():
+        codes[name][r, e] = oracle._ask(by_name[name], r, e)
+    assert not any((c == UNDECIDED).any() for c in codes.values())
+    oracle.table = table.replaced(codes)
     return oracle

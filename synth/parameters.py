@@ -36,24 +36,14 @@ from synth.dsl import (
     FacingRelation,
     LocalXYPos,
     Program,
-    Range,
     RelativeHeading,
 )
 from synth.geometry import bearing, normalize, signed, to_local
+from synth.parts.position import sampled_distance
 from synth.scene import EGO_ID, Entity, Scene
 
-MIN_DISTANCE = 0.05  # metres: a sector's distance is drawn from here at least (synth.emit_scenic says why)
 # Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
 REACH_SLACK = 1e-6
-
-
-def sampled_distance(r: Range) -> tuple[float, float]:
-    """The distance interval Scenic draws for a sector's Range (kept off 0, where no bearing exists)."""
-    if r.lo >= MIN_DISTANCE:
-        return (r.lo, r.hi)
-    if r.hi >= MIN_DISTANCE:
-        return (MIN_DISTANCE, r.hi)
-    return (r.hi, r.hi)  # all of it under the floor: its top only
 
 
 @dataclass

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 
-from synth.dsl import Range
+from synth.syntax import Range
 
 _CENT = Fraction(1, 100)
 

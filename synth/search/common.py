@@ -31,7 +31,7 @@ def greedy_completion(cm: CostModel, order: tuple[int, ...], declared: int, with
     todo = (cm.all if within is None else within) & ~declared
     out = list(order)
     while todo:
-        best, best_regret = -1, 3
+        best, best_regret = -1, cm.kinds + 1  # above any regret: each part loses at most 1
         for e in bits(todo):
             regret = cm.delta(e, declared) - floors[e]
             if regret < best_regret:
@@ -46,14 +46,14 @@ def greedy_completion(cm: CostModel, order: tuple[int, ...], declared: int, with
 
 def finish(cm: CostModel, order: tuple[int, ...], lower_bound: int, nodes: int, stopped: str | None) -> SearchResult:
     """The anytime answer: optimal when the bound meets the cost; else feasible, or timeout / memout when the
-    best program found is no better than declaring everything by fallback (cost 2 per entity)."""
+    best program found is no better than declaring everything by fallback (cost 1 per part and entity)."""
     cost = cm.order_cost(order)
     lower_bound = min(lower_bound, cost)
     if cost == lower_bound:
         status = "optimal"
     elif stopped == "memout":
         status = "memout"
-    elif stopped and cost >= 2 * cm.n:
+    elif stopped and cost >= cm.kinds * cm.n:
         status = "timeout"
     else:
         status = "feasible"

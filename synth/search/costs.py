@@ -1,9 +1,10 @@
 """c(e, E): the cost of declaring entity e when the set E (plus ego) is already declared.
 
-Position costs 0 when some declared reference is a position witness of e (e is ahead of / behind / left of /
-right of it), else 1 (`on Range @ Range relative to ego`); heading likewise with facing toward / away from.
-c depends only on the set E, never on its order (the paper's Common Prefix Abstraction), and only falls as E
-grows. Sets are Python ints used as bitsets over the entities to declare, numbered 0..n-1 in scene order.
+Each statement part costs 0 when some declared reference is a witness of e for it (for position: e is ahead
+of / behind / left of / right of it; for heading: e faces toward / away from it), else 1 (its fallback relative
+to ego); c(e, E) is the sum over the parts. It depends only on the set E, never on its order (the paper's
+Common Prefix Abstraction), and only falls as E grows. Sets are Python ints used as bitsets over the entities to
+declare, numbered 0..n-1 in scene order.
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ import math
 import numpy as np
 
 from synth.oracle import RelationOracle
-from synth.relations import NONE
+from synth.tables import NONE
 
-POSITION, HEADING = 0, 1
+POSITION, HEADING = 0, 1  # part indices of the paper's two parts (oracle.parts order)
 
 
 class CostModel:
@@ -23,20 +24,22 @@ class CostModel:
         self.oracle = oracle
         self.n = len(oracle.ids) - 1
         self.all = (1 << self.n) - 1
-        n = self.n
+        # Parts per statement: also the cost of an entity no one witnesses (every part at its fallback).
+        self.kinds = len(oracle.parts)
+        n, kinds = self.n, range(self.kinds)
         if oracle.complete:
             t = oracle.table
-            self._ego = [list(t.position[0, 1:] != NONE), list(t.heading[0, 1:] != NONE)]
-            self._mask = [
-                [sum(1 << int(r) for r in np.nonzero(m[1:, e + 1] != NONE)[0]) for e in range(n)]
-                for m in (t.position, t.heading)
-            ]
-            self._known = [[self.all] * n, [self.all] * n]
+            codes = [t[p.name] for p in oracle.parts]
+            # Ego's row also holds the witnesses that need no reference (Part.refless): always available.
+            self._ego = [list(c[0, 1:] != NONE) for c in codes]
+            self._mask = [[sum(1 << int(r) for r in np.nonzero(c[1:, e + 1] != NONE)[0]) for e in range(n)]
+                          for c in codes]
+            self._known = [[self.all] * n for _ in kinds]
         else:
             # The smt oracle: ask lazily, nearest reference first (Alg. 4's order), and remember.
-            self._ego = [[None] * n, [None] * n]
-            self._mask = [[0] * n, [0] * n]
-            self._known = [[1 << e for e in range(n)], [1 << e for e in range(n)]]
+            self._ego = [[None] * n for _ in kinds]
+            self._mask = [[0] * n for _ in kinds]
+            self._known = [[1 << e for e in range(n)] for _ in kinds]
             ents = oracle.entities()[1:]
             self._nearest = [
                 sorted((r for r in range(n) if r != e),
@@ -48,8 +51,7 @@ class CostModel:
     # ------------------------------------------------------------------------------------- witnesses
     def _ask(self, kind: int, r: int, e: int) -> bool:
         # Oracle indices: 0 is ego, entity i is i + 1.
-        ask = self.oracle.position if kind == POSITION else self.oracle.heading
-        return ask(r + 1, e + 1) != NONE
+        return self.oracle.relation(kind, r + 1, e + 1) != NONE
 
     def ego_witness(self, kind: int, e: int) -> bool:
         known = self._ego[kind][e]
@@ -72,7 +74,7 @@ class CostModel:
         return False
 
     def delta(self, e: int, declared: int) -> int:
-        return (not self.has_witness(POSITION, e, declared)) + (not self.has_witness(HEADING, e, declared))
+        return sum(not self.has_witness(kind, e, declared) for kind in range(self.kinds))
 
     # ------------------------------------------------------------------------------------- bounds
     def floors(self) -> list[int]:
@@ -82,10 +84,13 @@ class CostModel:
         return self._floors
 
     def witness_mask(self, e: int) -> int:
-        """Every entity that witnesses e's position or heading (needs an oracle with every pair known)."""
+        """Every entity that witnesses some part of e (needs an oracle with every pair known)."""
         if not self.oracle.complete:
             raise RuntimeError("witness_mask needs a complete relation table (call oracle.full_table())")
-        return self._mask[POSITION][e] | self._mask[HEADING][e]
+        mask = 0
+        for kind in range(self.kinds):
+            mask |= self._mask[kind][e]
+        return mask
 
     def order_cost(self, order: tuple[int, ...] | list[int]) -> int:
         declared, total = 0, 0

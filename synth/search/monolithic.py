@@ -1,13 +1,12 @@
 """The paper's Pure-SMT baseline: declaration order and geometry in one z3 optimisation problem.
 
-Each entity gets an integer position o_e in the order; e's position (heading) costs 0 when ego, or some r with
-o_r < o_e, satisfies one of the relations' geometric formulas. z3's Optimize minimises the summed cost under
-the time limit. Kept as the paper's reference point: it is exact but scales badly.
+Each entity gets an integer position o_e in the order; each part of e (position, heading) costs 0 when ego, or
+some r with o_r < o_e, satisfies one of the part's witness formulas (Part.any_relation). z3's Optimize
+minimises the summed cost under the time limit. Kept as the paper's reference point: it is exact but scales badly.
 """
 
 from __future__ import annotations
 
-from synth.dsl import DIRECTIONS
 from synth.search.budget import Budget
 from synth.search.common import SearchResult, finish, floor_bound, greedy_completion
 from synth.search.costs import CostModel
@@ -18,7 +17,6 @@ def monolithic(cm: CostModel, budget: Budget) -> SearchResult:
     oracle = cm.oracle
     smt = oracle.backend if isinstance(oracle.backend, Z3Backend) else Z3Backend(oracle.config)
     z3 = smt.z3
-    cfg = oracle.config
     ents = oracle.entities()  # 0 is ego
     n = cm.n
     o = [z3.Int(f"o{e}") for e in range(n)]
@@ -28,19 +26,12 @@ def monolithic(cm: CostModel, budget: Budget) -> SearchResult:
         opt.set(timeout=max(1, int(remaining * 1000)))
     opt.add(z3.Distinct(*o), *(z3.And(0 <= v, v < n) for v in o))
 
-    def pos_geom(r, e):
-        vx, vy = smt._offset(r, e)
-        return z3.Or(*(smt._cone(vx, vy, r.heading + phi, cfg.delta1) for _, phi in DIRECTIONS.values()))
-
-    def head_geom(r, e):
-        vx, vy = smt._offset(r, e)
-        return z3.Or(smt._cone(-vx, -vy, e.heading, cfg.delta2), smt._cone(vx, vy, e.heading, cfg.delta2))
-
     costs = []
     for e in range(n):
         te = ents[e + 1]
-        for geom in (pos_geom, head_geom):
-            ok = z3.Or(geom(ents[0], te), *(z3.And(o[r] < o[e], geom(ents[r + 1], te)) for r in range(n) if r != e))
+        for part in oracle.parts:
+            ok = z3.Or(part.any_relation(smt, ents[0], te),
+                       *(z3.And(o[r] < o[e], part.any_relation(smt, ents[r + 1], te)) for r in range(n) if r != e))
             costs.append(z3.If(ok, 0, 1))
     total = z3.Sum(*costs) if costs else z3.IntVal(0)
     opt.minimize(total)

@@ -1,0 +1,170 @@
+"""One interface for a statement part: what every module that handles a statement asks of position, heading, ...
+
+A statement `ID = new TYPE POS, HEADING` is a sequence of parts. Each part has a few witness relations, which
+cost 0 and name a reference (or, for some parts, need none), a fallback relative to ego (cost 1) and an absolute
+form (cost 2). The rest of the core is written once, over parts:
+
+  relations and costs   relations, refless, codes_from       -> search.costs (c(e, E) sums over parts)
+  robust bounds         perturbed                            -> which parts are asked the robust question
+  float table, exact    closed_form, robust_closed_form, exact   -> relations, oracle
+  SMT                   relation, robust_relation, any_relation, measure_terms, formula, violations -> smt
+  Alg. 4                quantity, float_measure, clause, robust_clause  -> statement
+  semantics             holds, observed                       -> semantics (the independent checker)
+  syntax                parse (printing is the clause's __str__) -> dsl
+  Scenic                keyword, scenic, needs_own_position, scenic_prelude -> emit_scenic
+  report                kinds, kind                           -> pipeline.report_stats
+
+The SMT methods take the backend as an argument and build formulas from its primitives (q, var, offset, cone,
+distance_in, angle_in, check, fresh_check, robust_cone, And, Not, Or, BoolVal), so one encoding serves z3 and
+dReal. A clause is a frozen dataclass with `cost`, `ref` (None for absolute forms) and `__str__` (its DSL text).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any, ClassVar
+
+import numpy as np
+
+from synth.config import SynthConfig
+from synth.perturbation import Bounds, bounds_of
+from synth.scene import Entity, Scene
+from synth.syntax import Line
+from synth.tables import SceneArrays
+
+Clause = Any  # a part's clause dataclass: .cost, .ref, str()
+Formula = Any  # a solver term of the backend at hand
+
+
+class Part(ABC):
+    name: ClassVar[str]  # the Statement field that holds this part's clause
+    relations: ClassVar[tuple[str, ...]]  # witness relations (cost 0); code = index
+    # Codes that need no reference: always available, like ego, so they are recorded in ego's row (index 0).
+    refless: ClassVar[frozenset[int]] = frozenset()
+    keyword: ClassVar[str]  # the Scenic specifier the clause becomes (at, facing, with speed)
+    kinds: ClassVar[tuple[str, ...]]  # report labels of the part's relation kinds, grammar order
+
+    # ------------------------------------------------------------------------------- relations and costs
+    def codes_from(self, ref_is_ego: bool) -> tuple[int, ...]:
+        """The codes that may hold with a reference (refless codes only in ego's row), asked in this order."""
+        return tuple(c for c in range(len(self.relations)) if ref_is_ego or c not in self.refless)
+
+    @abstractmethod
+    def perturbed(self, b: Bounds) -> bool:
+        """Does an entity with these measurement bounds make this part's questions robust ones?"""
+
+    def is_robust(self, scene: Scene, config: SynthConfig) -> bool:
+        return any(self.perturbed(bounds_of(e, config)) for e in scene.entities)
+
+    def pair_is_robust(self, a: Entity, b: Entity, config: SynthConfig) -> bool:
+        return self.perturbed(bounds_of(a, config)) or self.perturbed(bounds_of(b, config))
+
+    # ------------------------------------------------------------------------------- float table, exact
+    @abstractmethod
+    def closed_form(self, arrays: SceneArrays, config: SynthConfig) -> np.ndarray:
+        """codes[r, e] (int8) of every pair by floats: a code, NONE, or UNDECIDED inside the guard band."""
+
+    @abstractmethod
+    def robust_closed_form(self, arrays: SceneArrays, bounds: list[Bounds], config: SynthConfig) -> np.ndarray:
+        """The same for the robust question (does the relation hold for every perturbation within bounds)."""
+
+    @abstractmethod
+    def exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool:
+        """Does relation `code` hold, decided in exact rational arithmetic (what the solver encodes too)?"""
+
+    # ------------------------------------------------------------------------------- SMT
+    @abstractmethod
+    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+        """The solver's answer to: does relation `code` (with some Range, where it has one) hold?"""
+
+    @abstractmethod
+    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+        """The solver's answer to: does it hold for every perturbation (is its violation unsat)?"""
+
+    @abstractmethod
+    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Formula:
+        """A formula true iff some witness relation of e with ref holds (the monolithic baseline)."""
+
+    @abstractmethod
+    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+        """(constraints, variables) whose unique model values are the exact quantity (see quantity())."""
+
+    @abstractmethod
+    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Formula:
+        """The clause's semantics on the scene, Range bounds at their printed values (certification)."""
+
+    @abstractmethod
+    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
+        """Ways the clause could fail under a perturbation within the bounds: each must be unsat."""
+
+    # ------------------------------------------------------------------------------- Alg. 4
+    @abstractmethod
+    def quantity(self, code: int) -> str | None:
+        """What the clause written for `code` (NONE: the fallback) centres its Ranges on; None: it has none."""
+
+    @abstractmethod
+    def float_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        """The quantity from float geometry (the closed-form oracle)."""
+
+    def solver_measure(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        """The quantity as a solver without models of its own measures it (dReal); floats unless overridden."""
+        return self.float_measure(quantity, target, ref)
+
+    @abstractmethod
+    def clause(self, code: int, ref_id: str, values: tuple[Fraction, ...], config: SynthConfig) -> Clause:
+        """The clause of Alg. 4: relation `code` with ref, or the fallback (NONE), Ranges centred on values."""
+
+    @abstractmethod
+    def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
+        """The same with Ranges that cover every perturbation (robust synthesis)."""
+
+    # ------------------------------------------------------------------------------- semantics
+    @abstractmethod
+    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        """The paper's semantics read literally, in floats (independent of the oracles)."""
+
+    @abstractmethod
+    def observed(self, e: Entity) -> str:
+        """What the checker reports of e when the clause does not hold."""
+
+    # ------------------------------------------------------------------------------- syntax
+    @abstractmethod
+    def parse(self, ln: Line, declared: set[str]) -> Clause:
+        """The clause at the line's cursor."""
+
+    # ------------------------------------------------------------------------------- Scenic
+    @abstractmethod
+    def scenic(self, clause: Clause, at: str) -> str:
+        """The Scenic value of the specifier `keyword`; `at` names the entity's own position."""
+
+    def needs_own_position(self, clause: Clause) -> bool:
+        """Does the Scenic value refer to the entity's own position (which a specifier cannot name)?"""
+        return False
+
+    def scenic_prelude(self, config: SynthConfig) -> str:
+        """Helpers the part's Scenic values use beyond the paper's prelude."""
+        return ""
+
+    # ------------------------------------------------------------------------------- report
+    @abstractmethod
+    def kind(self, clause: Clause) -> str:
+        """The report label of a clause (one of kinds)."""
+
+
+@dataclass(frozen=True)
+class Want:
+    """One quantity a statement's Ranges are centred on: which part, what, relative to which reference."""
+
+    part: Part
+    quantity: str
+    ref: Entity
+
+
+@dataclass(frozen=True)
+class MeasureRequest:
+    """What to measure for one statement (a solver answers all statements of a program from one model)."""
+
+    target: Entity
+    wants: tuple[Want, ...]

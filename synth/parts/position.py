@@ -1,0 +1,342 @@
+"""POS, the position part (paper, Fig. 3):
+
+    (ahead of | behind | left of | right of) REF by Range(a, b)      cost 0
+    on Range(a, b) @ Range(c, d) relative to REF                    cost 1
+    on Range(a, b) @ Range(c, d)                                    cost 2
+
+`dir REF by Range(a, b)`: centre distance to REF in [a, b] and W(bearing(REF -> e), REF.heading + phi) <= delta1
+(phi = 0 ahead, 90 left, 180 behind, 270 right): the cone test with v = e - REF. `on ... relative to REF`:
+lateral lx = dx cos t + dy sin t, forward ly = dy cos t - dx sin t with t = REF.heading.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+from synth.config import SynthConfig
+from synth.geometry import (
+    angular_difference,
+    bearing,
+    exact_cos_squared,
+    exact_heading_vector,
+    exact_offset,
+    to_local,
+)
+from synth.parts.base import Clause, Part
+from synth.perturbation import (
+    Bounds,
+    bounds_of,
+    disc_in_cone,
+    distance_range,
+    local_ranges,
+    narrowed,
+    narrowed_cones,
+    radius_of,
+)
+from synth.ranges import centred
+from synth.scene import Entity
+from synth.syntax import DslError, Line, Range, fmt_number, printed
+from synth.tables import NONE, SceneArrays, exact_within, mark, no_self_witness, unit_vectors, within
+
+# Direction -> (printed words, phi in degrees, counter-clockwise from the reference's heading).
+DIRECTIONS: dict[str, tuple[str, float]] = {
+    "ahead": ("ahead of", 0.0),
+    "left": ("left of", 90.0),
+    "behind": ("behind", 180.0),
+    "right": ("right of", 270.0),
+}
+DIRECTION_NAMES = tuple(DIRECTIONS)  # ahead, left, behind, right: index = code in the tables
+MIN_DISTANCE = 0.05  # metres: a sector's distance is drawn from here at least (synth.emit_scenic says why)
+LENGTH_EPS = 1e-9
+ANGLE_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class DirectionPos:
+    """`ahead of | behind | left of | right of REF by Range`: cost 0."""
+
+    direction: str
+    ref: str
+    distance: Range
+    cost = 0
+
+    def __str__(self) -> str:
+        return f"{DIRECTIONS[self.direction][0]} {self.ref} by {self.distance}"
+
+
+@dataclass(frozen=True)
+class LocalXYPos:
+    """`on Range @ Range relative to REF`: lateral @ forward in REF's frame, cost 1."""
+
+    lateral: Range
+    forward: Range
+    ref: str
+    cost = 1
+
+    def __str__(self) -> str:
+        return f"on {self.lateral} @ {self.forward} relative to {self.ref}"
+
+
+@dataclass(frozen=True)
+class AbsoluteXYPos:
+    """`on Range @ Range`: x @ y in the scene frame, cost 2."""
+
+    x: Range
+    y: Range
+    cost = 2
+    ref = None
+
+    def __str__(self) -> str:
+        return f"on {self.x} @ {self.y}"
+
+
+class PositionPart(Part):
+    name = "position"
+    relations = DIRECTION_NAMES
+    keyword = "at"
+    kinds = ("ahead", "behind", "left", "right", "relative position", "absolute position")
+
+    def perturbed(self, b: Bounds) -> bool:
+        return b.pos != 0.0 or b.heading != 0.0
+
+    # ------------------------------------------------------------------------------- float table, exact
+    def closed_form(self, arrays: SceneArrays, config: SynthConfig) -> np.ndarray:
+        x, y, h = arrays.x, arrays.y, arrays.heading
+        dx = x[None, :] - x[:, None]  # [r, e] = e - r
+        dy = y[None, :] - y[:, None]
+        dist = np.hypot(dx, dy)
+        cos1 = float(np.cos(np.radians(config.delta1)))
+        codes = np.full(dx.shape, NONE, dtype=np.int8)
+        for code, name in enumerate(DIRECTION_NAMES):
+            ux, uy = unit_vectors(h + DIRECTIONS[name][1])
+            mark(codes, code, *within(dx * ux[:, None] + dy * uy[:, None], dist, cos1))
+        return no_self_witness(codes)
+
+    def robust_closed_form(self, arrays: SceneArrays, bounds: list[Bounds], config: SynthConfig) -> np.ndarray:
+        x, y, h = arrays.x, arrays.y, arrays.heading
+        rho = np.array([q.pos for q in bounds])
+        eta = np.array([q.heading for q in bounds])
+        dx = x[None, :] - x[:, None]
+        dy = y[None, :] - y[:, None]
+        radius = rho[:, None] + rho[None, :]
+        codes = np.full(dx.shape, NONE, dtype=np.int8)
+        cone = narrowed_cones(config.delta1, eta)[:, None] + np.zeros_like(dx)  # the reference's heading is perturbed
+        for code, name in enumerate(DIRECTION_NAMES):
+            axis = (h + DIRECTIONS[name][1])[:, None] + np.zeros_like(dx)
+            mark(codes, code, *disc_in_cone(dx, dy, radius, axis, cone))
+        return no_self_witness(codes)
+
+    def exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool:
+        vx, vy = exact_offset(ref, e)
+        u = exact_heading_vector(ref.heading + DIRECTIONS[DIRECTION_NAMES[code]][1])
+        return exact_within(vx, vy, u, exact_cos_squared(config.delta1))
+
+    # ------------------------------------------------------------------------------- SMT
+    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+        """Is there a Range(a, a + C_dist), a >= 0, such that `e = ... direction ref by Range(a, ...)` holds?"""
+        cfg = backend.config
+        vx, vy = backend.offset(ref, e)
+        a = backend.var("a")
+        return backend.check(
+            a >= 0,
+            backend.distance_in(vx, vy, a, a + backend.q(cfg.c_dist)),
+            backend.cone(vx, vy, ref.heading + DIRECTIONS[DIRECTION_NAMES[code]][1], cfg.delta1),
+        )
+
+    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+        """Does it hold for every perturbation? The Range then widens to cover every distance (robust_clause),
+        so only the sector is in question."""
+        cfg = backend.config
+        cone = narrowed(cfg.delta1, bounds_of(ref, cfg).heading)
+        return backend.robust_cone(exact_offset(ref, e), radius_of(ref, e, cfg),
+                                   ref.heading + DIRECTIONS[DIRECTION_NAMES[code]][1], cone)
+
+    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Any:
+        vx, vy = backend.offset(ref, e)
+        return backend.Or(*(backend.cone(vx, vy, ref.heading + phi, backend.config.delta1)
+                            for _, phi in DIRECTIONS.values()))
+
+    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+        vx, vy = backend.offset(ref, target)
+        if quantity == "distance":
+            d = backend.var("d")
+            return [d >= 0, d * d == vx * vx + vy * vy], [d]
+        ux, uy = (backend.q(c) for c in exact_heading_vector(ref.heading))
+        # cos t = uy, sin t = -ux for the heading vector (-sin t, cos t).
+        lx, ly = backend.var("lx"), backend.var("ly")
+        return [lx == vx * uy - vy * ux, ly == vy * uy + vx * ux], [lx, ly]
+
+    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Any:
+        q, cfg = backend.q, backend.config
+        if isinstance(clause, AbsoluteXYPos):
+            pairs = ((clause.x, e.x), (clause.y, e.y))
+            return backend.And(*(q(printed(b.lo)) <= q(v) for b, v in pairs),
+                               *(q(v) <= q(printed(b.hi)) for b, v in pairs))
+        vx, vy = backend.offset(ref, e)
+        if isinstance(clause, DirectionPos):
+            lo, hi = printed(clause.distance.lo), printed(clause.distance.hi)
+            # lo <= |v| <= hi with 0 <= lo, squared: no square root, a ground formula.
+            return backend.And(
+                q(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= q(hi * hi),
+                backend.cone(vx, vy, ref.heading + DIRECTIONS[clause.direction][1], cfg.delta1),
+            )
+        ux, uy = (q(c) for c in exact_heading_vector(ref.heading))
+        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+        return backend.And(
+            q(printed(clause.lateral.lo)) <= lx, lx <= q(printed(clause.lateral.hi)),
+            q(printed(clause.forward.lo)) <= ly, ly <= q(printed(clause.forward.hi)),
+        )
+
+    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
+        """A position depends on p_e - p_r only, which ranges over the disc of radius rho_e + rho_r (Minkowski
+        sum); the reference frame of a local position turns by (c, s) on the unit circle with c >= cos(eta), the
+        rational of the float cos(eta) (the constant synth.perturbation widens by); sectors narrow by reduction 1."""
+        q, cfg, out = backend.q, backend.config, []
+
+        def outside(v: Any, rng: Range) -> list[Any]:
+            return [v < q(printed(rng.lo)), v > q(printed(rng.hi))]
+
+        if isinstance(clause, AbsoluteXYPos):
+            rho = Fraction(bounds_of(e, cfg).pos)
+            wx, wy = backend.var("wx"), backend.var("wy")
+            disc = wx * wx + wy * wy <= q(rho * rho)
+            x, y = q(e.x) + wx, q(e.y) + wy
+            return [backend.And(disc, bad) for bad in outside(x, clause.x) + outside(y, clause.y)]
+        if isinstance(clause, DirectionPos):
+            vx, vy, cons = backend.perturbed_offset(exact_offset(ref, e), radius_of(ref, e, cfg))
+            lo, hi = max(printed(clause.distance.lo), Fraction(0)), printed(clause.distance.hi)
+            sq = vx * vx + vy * vy
+            out += [backend.And(*cons, sq < q(lo * lo)), backend.And(*cons, sq > q(hi * hi))]
+            out.append(backend.cone_fails(vx, vy, cons, ref.heading + DIRECTIONS[clause.direction][1],
+                                          narrowed(cfg.delta1, bounds_of(ref, cfg).heading)))
+            return out
+        # Local coordinates: Rot(c, s) L_u (c0 + w) = Rot(c, s) a + b, where a = L_u c0 is the observed local
+        # vector and b = Rot(c, s) L_u w runs over the disc of radius |u| R (L_u is |u| times a rotation, and
+        # rotations map a disc about 0 onto itself). Same set, but no products of unknowns: nlsat takes ms
+        # here where the literal product of the turn and the disc took it up to a minute.
+        cx, cy = exact_offset(ref, e)
+        ux, uy = exact_heading_vector(ref.heading)
+        ax, ay = cx * uy - cy * ux, cy * uy + cx * ux
+        lx, ly, cons = q(ax), q(ay), []
+        eta = bounds_of(ref, cfg).heading
+        if eta > 0:
+            c, s = backend.var("c"), backend.var("s")
+            cons += [c * c + s * s == 1, c >= q(Fraction(math.cos(math.radians(eta))))]
+            lx, ly = c * q(ax) - s * q(ay), s * q(ax) + c * q(ay)
+        radius = radius_of(ref, e, cfg)
+        if radius > 0:
+            bx, by = backend.var("bx"), backend.var("by")
+            cons.append(bx * bx + by * by <= q(radius * radius * (ux * ux + uy * uy)))
+            lx, ly = lx + bx, ly + by
+        return [backend.And(*cons, bad) for bad in outside(lx, clause.lateral) + outside(ly, clause.forward)]
+
+    # ------------------------------------------------------------------------------- Alg. 4
+    def quantity(self, code: int) -> str | None:
+        return "distance" if code != NONE else "local"
+
+    def float_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        if quantity == "distance":
+            return (Fraction(math.hypot(target.x - ref.x, target.y - ref.y)),)
+        lx, ly = to_local(target.x - ref.x, target.y - ref.y, ref.heading)
+        return (Fraction(lx), Fraction(ly))
+
+    def solver_measure(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        if quantity != "distance":
+            return self.float_measure(quantity, target, ref)
+        return (backend.distance_value(target.x - ref.x, target.y - ref.y),)
+
+    def clause(self, code: int, ref_id: str, values: tuple[Fraction, ...], config: SynthConfig) -> Clause:
+        if code != NONE:
+            return DirectionPos(DIRECTION_NAMES[code], ref_id, centred(values[0], config.c_dist, True))
+        return LocalXYPos(centred(values[0], config.c_dist), centred(values[1], config.c_dist), ref_id)
+
+    def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
+        radius = radius_of(target, ref, config)
+        if code != NONE:
+            return DirectionPos(DIRECTION_NAMES[code], ref.id, distance_range(target, ref, radius, config.c_dist))
+        lateral, forward = local_ranges(target, ref, radius, bounds_of(ref, config).heading, config.c_dist)
+        return LocalXYPos(lateral, forward, ref.id)
+
+    # ------------------------------------------------------------------------------- semantics
+    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        if isinstance(clause, AbsoluteXYPos):
+            return clause.x.contains(e.x, LENGTH_EPS) and clause.y.contains(e.y, LENGTH_EPS)
+        assert ref is not None
+        dx, dy = e.x - ref.x, e.y - ref.y
+        if isinstance(clause, LocalXYPos):
+            lx, ly = to_local(dx, dy, ref.heading)
+            return clause.lateral.contains(lx, LENGTH_EPS) and clause.forward.contains(ly, LENGTH_EPS)
+        if isinstance(clause, DirectionPos):
+            dist = math.hypot(dx, dy)
+            if dist == 0.0 or not clause.distance.contains(dist, LENGTH_EPS):
+                return False
+            axis = ref.heading + DIRECTIONS[clause.direction][1]
+            return angular_difference(bearing(ref.x, ref.y, e.x, e.y), axis) <= config.delta1 + ANGLE_EPS
+        raise TypeError(f"not a position: {clause!r}")
+
+    def observed(self, e: Entity) -> str:
+        return f"({e.x:.3f}, {e.y:.3f})"
+
+    # ------------------------------------------------------------------------------- syntax
+    def parse(self, ln: Line, declared: set[str]) -> Clause:
+        word = ln.peek()
+        if word in ("ahead", "left", "right"):
+            ln.take()
+            ln.take(text="of")
+        elif word == "behind":
+            ln.take()
+        elif word == "on":
+            ln.take()
+            first = ln.range_()
+            ln.take(text="@")
+            second = ln.range_()
+            if ln.accept("relative"):
+                ln.take(text="to")
+                return LocalXYPos(first, second, ln.reference(declared))
+            return AbsoluteXYPos(first, second)
+        else:
+            raise DslError(f"{ln.where()}: expected a position (ahead of, behind, left of, right of, on), found {word!r}")
+        ref = ln.reference(declared)
+        ln.take(text="by")
+        return DirectionPos(word, ref, ln.range_())
+
+    # ------------------------------------------------------------------------------- Scenic
+    def scenic(self, clause: Clause, at: str) -> str:
+        if isinstance(clause, DirectionPos):
+            return f"dsl__sector_{clause.direction}({clause.ref}, {_scenic_distance(clause.distance)})"
+        if isinstance(clause, LocalXYPos):
+            return f"dsl__relative_xy({clause.ref}, {clause.lateral}, {clause.forward})"
+        if isinstance(clause, AbsoluteXYPos):
+            return f"({clause.x} @ {clause.y})"
+        raise TypeError(f"not a DSL position: {clause!r}")
+
+    # ------------------------------------------------------------------------------- report
+    def kind(self, clause: Clause) -> str:
+        if isinstance(clause, DirectionPos):
+            return clause.direction
+        return "relative position" if isinstance(clause, LocalXYPos) else "absolute position"
+
+
+def sampled_distance(r: Range) -> tuple[float, float]:
+    """The distance interval Scenic draws for a sector's Range (kept off 0, where no bearing exists)."""
+    if r.lo >= MIN_DISTANCE:
+        return (r.lo, r.hi)
+    if r.hi >= MIN_DISTANCE:
+        return (MIN_DISTANCE, r.hi)
+    return (r.hi, r.hi)  # all of it under the floor: its top only
+
+
+def _scenic_distance(r: Range) -> str:
+    """A sector's distance Range, kept off 0 where the bearing vanishes (see synth.emit_scenic)."""
+    lo, hi = sampled_distance(r)
+    if lo == r.lo:
+        return str(r)
+    return f"Range({'dsl__MIN_DISTANCE' if lo == MIN_DISTANCE else fmt_number(lo)}, {fmt_number(hi)})"
+
+
+POSITION = PositionPart()
