@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from extractors.frames import FRAMES_COLUMNS, FramesError
-from pipeline.query_sql import EXACT_UDF, MACROS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
+from pipeline.query_sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
 from synth.scene import EGO_ID, ENTITY_TYPES, Entity
@@ -87,10 +87,13 @@ def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None
 
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
                                  **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
+    # Progress is tracked for _Progress, never printed by DuckDB itself (it would write to stdout).
+    con.execute("SET enable_progress_bar = true")
+    con.execute("SET enable_progress_bar_print = false")
     # Row ordinal: file number, then row number in the file; it orders frames and bindings deterministically.
     con.execute(
-        f"CREATE TEMP VIEW {ROWS} AS SELECT frame_id, scene, timestamp_us, entity_id, type, x, y, heading, is_ego, "
-        f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, "
+        f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, x, y, heading, is_ego, "
+        f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
         f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
         f"FROM read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)")
     for macro in MACROS:
@@ -99,7 +102,8 @@ def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None
 
 
 def _validate(con, where: str) -> int:
-    """The frames contract, checked in two streaming aggregates; returns the number of frames."""
+    """The frames contract, checked in two streaming aggregates; returns the number of frames. (Ids unique within a
+    frame is checked on the matching frames only, _check_unique_ids: over every row it costs more than the query.)"""
     known = ", ".join(repr(t) for t in sorted(ENTITY_TYPES))
     bad_num, bad_null, ego_named, unknown = con.execute(
         f"SELECT any_value(frame_id) FILTER (WHERE NOT coalesce(isfinite(x) AND isfinite(y) AND isfinite(heading), FALSE)), "
@@ -114,15 +118,38 @@ def _validate(con, where: str) -> int:
         raise FramesError(f"{where}: unknown entity type {unknown!r}")
     if ego_named is not None:
         raise FramesError(f"{where}: frame {ego_named!r}: the id 'ego' belongs to the ego row only")
-    n_frames, no_ego, dup = con.execute(
-        f"SELECT count(*), any_value(frame_id) FILTER (WHERE n_ego <> 1), any_value(frame_id) FILTER (WHERE n <> nd) "
-        f"FROM (SELECT frame_id, count(*) FILTER (WHERE is_ego) AS n_ego, count(*) AS n, "
-        f"count(DISTINCT entity_id) AS nd FROM {ROWS} GROUP BY frame_id)").fetchall()[0]
+    n_frames, no_ego = con.execute(
+        f"SELECT count(*), any_value(frame_id) FILTER (WHERE n_ego <> 1) FROM (SELECT fk, frame_id, "
+        f"count(*) FILTER (WHERE is_ego) AS n_ego FROM {ROWS} GROUP BY fk, frame_id)").fetchall()[0]
     if no_ego is not None:
         raise FramesError(f"{where}: frame {no_ego!r} does not have exactly one ego row")
-    if dup is not None:
-        raise FramesError(f"{where}: frame {dup!r} has an entity id twice")
     return int(n_frames)
+
+
+def _check_unique_ids(con, matches: Path, where: str) -> None:
+    """No matching frame has an entity id twice (a binding names entities by id)."""
+    dup = con.execute(
+        f"SELECT any_value(r.frame_id) FROM {ROWS} r SEMI JOIN (SELECT DISTINCT hash(frame_id) AS fk, frame_id "
+        f"FROM read_parquet('{str(matches).replace(chr(39), chr(39) * 2)}')) m ON r.fk = m.fk AND r.frame_id = m.frame_id "
+        f"GROUP BY r.fk, r.frame_id, r.entity_id HAVING count(*) > 1").fetchall()
+    if dup:
+        raise FramesError(f"{where}: frame {dup[0][0]!r} has an entity id twice")
+
+
+def _write_matches(reader, path: Path) -> tuple[int, int]:
+    """Stream the query's batches into Parquet; returns (frames matched, bindings)."""
+    import pyarrow.parquet as pq
+
+    frames_matched = bindings = 0
+    last = None
+    with pq.ParquetWriter(path, reader.schema, compression="zstd") as writer:
+        for batch in reader:
+            writer.write_batch(batch)
+            # Rows of a frame are consecutive (ordered by frame), each carrying the frame's count.
+            for fid, n in zip(batch.column("frame_id").to_pylist(), batch.column("n_matches").to_pylist()):
+                if fid != last:
+                    frames_matched, bindings, last = frames_matched + 1, bindings + n, fid
+    return frames_matched, bindings
 
 
 class _ExactCheck:
@@ -183,7 +210,6 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
                  log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
     """Write matches.parquet (atomically) for `pattern` over a frames file or dataset; bad input is a FramesError."""
     import duckdb
-    import pyarrow.parquet as pq
 
     from extractors.atomic import atomic_path
 
@@ -193,29 +219,18 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
     sql = compile_pattern(pattern, config, all_bindings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    check = _ExactCheck(pattern, config)
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
         con = _open(files, threads, memory_limit_mb, spill)
-        check = _ExactCheck(pattern, config)
         try:
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
-            try:
-                n_frames = _validate(con, str(frames))
-                with _Progress(con, log):
-                    reader = con.sql(sql).to_arrow_reader(BATCH_ROWS)
-                    frames_matched = bindings = 0
-                    seen_last = None
-                    with atomic_path(out) as tmp, pq.ParquetWriter(tmp, reader.schema, compression="zstd") as writer:
-                        for batch in reader:
-                            writer.write_batch(batch)
-                            fids = batch.column("frame_id").to_pylist()
-                            counts = batch.column("n_matches").to_pylist()
-                            for fid, n in zip(fids, counts):
-                                if fid != seen_last:
-                                    frames_matched += 1
-                                    bindings += n
-                                    seen_last = fid
-            except (duckdb.IOException, duckdb.InvalidInputException, duckdb.ConversionException) as exc:
-                raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
+            n_frames = _validate(con, str(frames))
+            with _Progress(con, log), atomic_path(out) as tmp:
+                matched, bindings = _write_matches(con.sql(sql).to_arrow_reader(BATCH_ROWS), tmp)
+                if matched:
+                    _check_unique_ids(con, tmp, str(frames))
+        except (duckdb.IOException, duckdb.InvalidInputException, duckdb.ConversionException) as exc:
+            raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
         finally:
             con.close()
-    return QuerySummary(n_frames, frames_matched, bindings, check.calls, time.monotonic() - t0)
+    return QuerySummary(n_frames, matched, bindings, check.calls, time.monotonic() - t0)

@@ -1,24 +1,33 @@
 """A pattern compiled into one DuckDB query over the frames rows: self-joins per pattern name, one predicate builder
 per clause kind, and a split of every candidate binding into *sure* and *to check*.
 
-Exactness. synth.semantics decides with float atan2 bearings and fmod normalisation. Each builder writes the same
-formula in SQL (same operations, in the same order; DuckDB's `%` on doubles is C fmod, exact as Python's) and
-returns two conditions:
-- `candidate`, the formula with every bound widened by SLACK: a superset of the true matches, used to join;
-- `sure`, every bound narrowed by SLACK: only true matches.
-The two evaluations differ only by libm rounding (atan2, sin, cos, sqrt vs hypot: an ulp or so, below 1e-9 for
-coordinates up to WILD_XY metres and headings up to WILD_HEADING degrees), far below SLACK, so a binding that is a
-candidate but not sure is re-checked by the semantics' own functions (a Python UDF, evaluated only for those rows),
-and the matches are exactly the checker's. An entity beyond those magnitudes is *wild*: every clause it takes part in
-is a candidate and never sure, so Python decides it.
+Exactness. synth.semantics decides with float atan2 bearings, fmod normalisation and hypot distances. Each builder
+returns two SQL conditions:
+- `candidate`, true for every binding the semantics accept (a superset: every bound widened by SLACK), used to join;
+- `sure`, true only for bindings the semantics accept (every bound narrowed by SLACK).
+A candidate that is not sure is re-checked by the semantics' own functions (a Python UDF, evaluated only on those
+rows), so the matches are exactly the checker's. Why the two conditions are a superset and a subset:
+- Local coordinates and heading Ranges are the semantics' formulas, operation for operation (DuckDB's `%` on doubles
+  is C fmod, exact as Python's; sin, cos and radians are libm's), so they differ from Python's by an ulp or so.
+- Distances: sqrt(dx*dx + dy*dy) against hypot, a few ulps apart, compared with bounds widened or narrowed by SLACK
+  metres per metre of bound (at least 1 m).
+- "Within delta of a direction" (ahead of, left of, ..., facing toward / away from) is decided without atan2, as
+  v.u >= |v| cos(delta): the angle of v to u is at most delta. Python's atan2 bearing is within ~1e-12 degrees of
+  the true angle, so widening delta by SLACK degrees and the cosine by COS_MARGIN (far above the ~1e-15 |v| rounding
+  of v.u and |v|) gives a superset, narrowing both a subset. A vector shorter than TINY (where squares underflow) is
+  never sure.
+All these rounding bounds hold for coordinates up to WILD_XY metres and headings up to WILD_HEADING degrees; an entity
+beyond them is *wild*: every clause it takes part in is a candidate and never sure, so Python decides it.
 
-Join order and memory are DuckDB's: statements that refer only to ego or to nothing filter each name's rows before
-any join (they are per-row conditions, with ego joined in per frame), statements between names are join filters on
-the frame, and DuckDB spills to its temporary directory under its memory limit.
+Speed: every angle is a dot product with the per-row sin / cos of the heading (columns s and c of the rows view),
+so the pairwise conditions are a few multiplications. Join order and memory are DuckDB's: clauses that refer only to
+ego or to nothing filter each name's rows before any join (ego joined in per frame), clauses between names filter
+the join on the frame, and DuckDB spills to its temporary directory under its memory limit.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -38,19 +47,20 @@ from synth.scene import EGO_ID
 from synth.semantics import ANGLE_EPS, LENGTH_EPS
 
 SLACK = 1e-6  # degrees; metres per metre of bound (at least 1 m)
+COS_MARGIN = 1e-9  # on cosines, relative to |v|
+TINY = 1e-100  # metres: shorter vectors are never sure
 WILD_XY = 1e6
 WILD_HEADING = 1e4
 ROWS = "r2s_rows"  # the view of the frames rows the query reads (pipeline.query creates it)
 EXACT_UDF = "r2s_exact"
 
-# SQL versions of synth.geometry's normalize / angular_difference / bearing, operation for operation.
+# synth.geometry.normalize, operation for operation (the heading Ranges use it).
 MACROS = (
     "CREATE OR REPLACE TEMP MACRO r2s_norm(a) AS (CASE WHEN (a) % 360.0 >= 0.0 THEN (a) % 360.0 "
     "WHEN (a) % 360.0 + 360.0 >= 360.0 THEN 0.0 ELSE (a) % 360.0 + 360.0 END)",
-    "CREATE OR REPLACE TEMP MACRO r2s_w(u, v) AS "
-    "least(abs(r2s_norm(u) - r2s_norm(v)), 360.0 - abs(r2s_norm(u) - r2s_norm(v)))",
-    "CREATE OR REPLACE TEMP MACRO r2s_bearing(fx, fy, tx, ty) AS r2s_norm(degrees(atan2(ty - fy, tx - fx)) - 90.0)",
 )
+# The per-row columns the builders read besides x, y, heading: c = cos, s = sin of the heading in radians.
+ROW_COLUMNS = "cos(radians(heading)) AS c, sin(radians(heading)) AS s"
 
 
 def lit(v: float) -> str:
@@ -80,10 +90,6 @@ def _within(expr: str, lo: float, hi: float) -> Condition:
                      f"{expr} >= {lit(lo + _slack_len(lo))} AND {expr} <= {lit(hi - _slack_len(hi))}")
 
 
-def _angle_at_most(expr: str, bound: float) -> Condition:
-    return Condition(f"{expr} <= {lit(bound + SLACK)}", f"{expr} <= {lit(bound - SLACK)}")
-
-
 def _distinct_points(e: str, r: str) -> str:
     # Exact in both evaluations: a bearing between coincident points is undefined, no relation holds there.
     return f"NOT ({e}.x = {r}.x AND {e}.y = {r}.y)"
@@ -93,22 +99,38 @@ def _and_exact(exact: str, cond: Condition) -> Condition:
     return Condition(f"{exact} AND {cond.candidate}", f"{exact} AND {cond.sure}")
 
 
+def _toward(vx: str, vy: str, ux: str, uy: str, delta: float) -> Condition:
+    """The angle between vector (vx, vy) and unit vector (ux, uy) is at most delta (+ the semantics' ANGLE_EPS)."""
+    dot, norm = f"({vx} * {ux} + {vy} * {uy})", f"sqrt({vx} * {vx} + {vy} * {vy})"
+    wide = math.cos(math.radians(min(delta + ANGLE_EPS + SLACK, 180.0))) - COS_MARGIN
+    candidate = f"({dot} >= {norm} * {lit(wide)} OR {norm} < {lit(TINY)})"
+    narrow = delta + ANGLE_EPS - SLACK
+    if narrow < 0.0:
+        return Condition(candidate, "FALSE")
+    sure = f"{norm} >= {lit(TINY)} AND {dot} >= {norm} * {lit(math.cos(math.radians(min(narrow, 180.0))) + COS_MARGIN)}"
+    return Condition(candidate, sure)
+
+
+def _axis(r: str, phi: float) -> tuple[str, str]:
+    """The unit vector of heading(r) + phi for phi a multiple of 90: a heading's (-sin, cos), turned exactly."""
+    return {0.0: (f"(-{r}.s)", f"{r}.c"), 90.0: (f"(-{r}.c)", f"(-{r}.s)"),
+            180.0: (f"{r}.s", f"(-{r}.c)"), 270.0: (f"{r}.c", f"{r}.s")}[phi]
+
+
 # ----------------------------------------------------------------------------- one builder per clause kind
 # Each takes the clause, the SQL alias of the entity and of its reference (None when absolute), and the config.
 
 def direction_pos(pos: DirectionPos, e: str, r: str | None, config: SynthConfig) -> Condition:
     dx, dy = f"({e}.x - {r}.x)", f"({e}.y - {r}.y)"
     dist = _within(f"sqrt({dx} * {dx} + {dy} * {dy})", pos.distance.lo - LENGTH_EPS, pos.distance.hi + LENGTH_EPS)
-    phi = DIRECTIONS[pos.direction][1]
-    angle = _angle_at_most(f"r2s_w(r2s_bearing({r}.x, {r}.y, {e}.x, {e}.y), {r}.heading + {lit(phi)})",
-                           config.delta1 + ANGLE_EPS)
+    angle = _toward(dx, dy, *_axis(r, DIRECTIONS[pos.direction][1]), config.delta1)
     return _and_exact(_distinct_points(e, r), Condition.all([dist, angle]))
 
 
 def local_xy_pos(pos: LocalXYPos, e: str, r: str | None, config: SynthConfig) -> Condition:
     dx, dy = f"({e}.x - {r}.x)", f"({e}.y - {r}.y)"
-    c, s = f"cos(radians({r}.heading))", f"sin(radians({r}.heading))"
-    lx, ly = f"({dx} * {c} + {dy} * {s})", f"({dy} * {c} - {dx} * {s})"
+    # synth.geometry.to_local: lx = dx cos t + dy sin t, ly = dy cos t - dx sin t.
+    lx, ly = f"({dx} * {r}.c + {dy} * {r}.s)", f"({dy} * {r}.c - {dx} * {r}.s)"
     return Condition.all([_within(lx, pos.lateral.lo - LENGTH_EPS, pos.lateral.hi + LENGTH_EPS),
                           _within(ly, pos.forward.lo - LENGTH_EPS, pos.forward.hi + LENGTH_EPS)])
 
@@ -119,11 +141,10 @@ def absolute_xy_pos(pos: AbsoluteXYPos, e: str, r: str | None, config: SynthConf
 
 
 def facing_relation(head: FacingRelation, e: str, r: str | None, config: SynthConfig) -> Condition:
-    if head.mode == "toward":
-        target = f"r2s_bearing({e}.x, {e}.y, {r}.x, {r}.y)"
-    else:
-        target = f"r2s_bearing({r}.x, {r}.y, {e}.x, {e}.y)"
-    return _and_exact(_distinct_points(e, r), _angle_at_most(f"r2s_w({e}.heading, {target})", config.delta2 + ANGLE_EPS))
+    # toward: e's heading within delta2 of the bearing from e to r; away: of the bearing from r to e.
+    sign = "-" if head.mode == "toward" else ""
+    vx, vy = f"{sign}({e}.x - {r}.x)", f"{sign}({e}.y - {r}.y)"
+    return _and_exact(_distinct_points(e, r), _toward(vx, vy, f"(-{e}.s)", f"{e}.c", config.delta2))
 
 
 def _angle_range(heading: str, base: str | None, lo: float, hi: float) -> Condition:
@@ -185,8 +206,10 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
     ego's x, y, heading, then x, y, heading per name; types one per name."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ctes = [f"ego AS (SELECT frame_id, ord AS frame_ord, scene, timestamp_us, x, y, heading, wild FROM {ROWS} "
-            "WHERE is_ego)"]
+    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.type, f.x, f.y, f.heading, f.c, f.s, f.wild"
+    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, scene, timestamp_us, x, y, heading, c, s, wild "
+            f"FROM {ROWS} WHERE is_ego)"]
+    first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
     for k, st in enumerate(pattern.statements):
         a = alias[st.id]
@@ -200,15 +223,12 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
             where.append(f"f.type IN ({', '.join(repr(t) for t in sorted(types))})")
         cond = Condition.all(unary)
         where.append(f"({cond.candidate})")
-        ego_cols = ", g.x AS ego_x, g.y AS ego_y, g.heading AS ego_heading, g.frame_ord, g.scene, g.timestamp_us" if k == 0 else ""
-        join_ego = " JOIN ego g ON f.frame_id = g.frame_id" if k == 0 or any(
-            c.ref == EGO_ID for c in clauses(st)) else ""
-        ctes.append(f"{a} AS (SELECT f.frame_id, f.ord, f.entity_id, f.type, f.x, f.y, f.heading, f.wild, "
-                    f"({cond.sure}) AS sure{ego_cols} FROM {ROWS} f{join_ego} WHERE {' AND '.join(where)})")
+        join_ego = f" JOIN ego g ON {_same_frame('f', 'g')}" if any(c.ref == EGO_ID for c in clauses(st)) else ""
+        ctes.append(f"{a} AS (SELECT {cols}, ({cond.sure}) AS sure FROM {ROWS} f{join_ego} WHERE {' AND '.join(where)})")
         sure_parts.append(f"{a}.sure")
         if k == 0:
             continue
-        on = [f"{a}.frame_id = {alias[names[0]]}.frame_id"]
+        on = [_same_frame(a, first)]
         # Injective: a different input row from every earlier name whose types can coincide.
         on += [f"{a}.ord <> {alias[other.id]}.ord" for other in pattern.statements[:k] if _overlap(st.type, other.type)]
         bcond = Condition.all(binary)
@@ -216,15 +236,13 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
         sure_parts.append(f"({bcond.sure})")
         candidate_parts.append(f"({bcond.candidate})")
         joins.append(f"JOIN {a} ON {' AND '.join(on)}")
-    first = alias[names[0]]
-    numbers = [f"{first}.ego_x", f"{first}.ego_y", f"{first}.ego_heading"]
-    numbers += [f"{alias[n]}.{c}" for n in names for c in ("x", "y", "heading")]
+    numbers = ["g.x", "g.y", "g.heading"] + [f"{alias[n]}.{c}" for n in names for c in ("x", "y", "heading")]
     types = [f"{alias[n]}.type" for n in names]
     key = "[" + ", ".join(f"{alias[n]}.ord" for n in names) + "]"
     binding = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.entity_id" for n in names) + ")"
     ctes.append(
-        f"m AS (SELECT {first}.frame_id, {first}.frame_ord, {first}.scene, {first}.timestamp_us, {key} AS key, "
-        f"{binding} AS binding FROM {first} {' '.join(joins)} "
+        f"m AS (SELECT g.frame_id, g.frame_ord, g.scene, g.timestamp_us, {key} AS key, {binding} AS binding "
+        f"FROM {first} {' '.join(joins)} JOIN ego g ON {_same_frame(first, 'g')} "
         # CASE, not OR: DuckDB reorders a filter's conjuncts adaptively, and the exact check must only ever see
         # candidates that are not sure.
         f"WHERE CASE WHEN {' AND '.join(sure_parts)} THEN TRUE WHEN {' AND '.join(candidate_parts) or 'TRUE'} "
@@ -237,6 +255,11 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
                   "count(*) AS n_matches, arg_min(binding, key) AS binding FROM m GROUP BY frame_ord, frame_id "
                   "ORDER BY frame_ord")
     return "WITH " + ",\n".join(ctes) + "\n" + select
+
+
+def _same_frame(a: str, b: str) -> str:
+    # fk = hash(frame_id): joining on an integer is faster than on the id; the id comparison settles collisions.
+    return f"{a}.fk = {b}.fk AND {a}.frame_id = {b}.frame_id"
 
 
 def _overlap(t1: str, t2: str) -> bool:

@@ -345,7 +345,7 @@ def _frames_with(tmp_path, change) -> Path:
 ])
 def test_bad_frames_input_is_one_line_exit_2(make, needle, tmp_path):
     pattern = tmp_path / "p.dsl"
-    pattern.write_text(FOLLOWER)
+    pattern.write_text(f"x = new Object {ANYWHERE}, {ANY_HEADING}\n")  # every frame with an entity matches
     frames = make(tmp_path)
     proc = run_r2s("query", str(frames), str(pattern), "--out", str(tmp_path / "m.parquet"))
     assert_one_line_error(proc, 2, needle)
