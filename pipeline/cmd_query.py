@@ -8,6 +8,7 @@ the semantics `r2s check` uses. One row per matching frame (or per binding with 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):
         if value is not None and value < 1:
             raise UserError(f"{flag} must be at least 1, got {value}")
+    if Path(args.out).is_dir():
+        raise UserError(f"--out {args.out} is a directory; matches are one Parquet file")
     config = load_config(args.config)
     try:
         pattern = parse_pattern(read_text_file(args.pattern, "pattern"))

@@ -321,6 +321,20 @@ def test_bad_pattern_is_one_line_with_line_and_column(text, where, needle, tmp_p
         parse_pattern(text)
 
 
+@pytest.mark.parametrize("args,needle", [
+    (["--threads", "0"], "--threads must be at least 1"),
+    (["--memory-limit", "-5"], "--memory-limit must be at least 1"),
+    (["--config", "missing.toml"], "does not exist"),
+])
+def test_bad_options_are_one_line_exit_2(args, needle, tmp_path):
+    pattern = tmp_path / "p.dsl"
+    pattern.write_text(FOLLOWER)
+    proc = run_r2s("query", str(KEYFRAMES), str(pattern), "--out", str(tmp_path / "m.parquet"), *args)
+    assert_one_line_error(proc, 2, needle)
+    proc = run_r2s("query", str(KEYFRAMES), str(pattern), "--out", str(tmp_path))
+    assert_one_line_error(proc, 2, "is a directory")
+
+
 def _frames_with(tmp_path, change) -> Path:
     df = read_frames(KEYFRAMES).head(200)
     df = change(df.copy())
