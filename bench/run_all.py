@@ -23,7 +23,7 @@ sys.path.insert(0, str(HERE))
 from common import RESULTS, machine  # noqa: E402
 
 ORDER = ("bench_synth.py", "bench_extract.py", "bench_scenic.py", "bench_variants.py", "bench_robust.py",
-         "bench_pipeline.py", "bench_ablation.py", "bench_costs.py")
+         "bench_pipeline.py", "bench_query.py", "bench_ablation.py", "bench_costs.py")
 
 
 def scripts(only: list[str] | None, skip: list[str]) -> list[Path]:
@@ -102,17 +102,27 @@ def variants_summary(va: dict) -> list[str]:
             f"frames compared ([variants.md](variants.md))."]
 
 
+def query_summary(q: dict) -> list[str]:
+    two = [r for r in q["runs"] if r["pattern"] == "pedestrian-beside-vehicle.dsl" and not r["memory_limit_mb"]]
+    parts = [f"{r['n_frames']:,} frames ({r['rows'] / 1e6:.1f} M rows) in {r['wall_s']:.1f} s" for r in two]
+    return [f"`r2s query` with a two-name pattern: {'; '.join(parts)} (target: 200,000 frames under "
+            f"{q['target_s']:.0f} s; load average before {q['load_before']}); plain Python backtracking "
+            f"{q['python_baseline']['per_frame_ms']:.2f} ms a frame ([query.md](query.md))."]
+
+
 def readme() -> str:
     m = machine()
     md = ["# Benchmark results", "", f"`make bench` (`python bench/run_all.py`) on {m['cpu']} ({m['cores']} cores), "
           f"Python {m['python']}. {m['note']}.", ""]
-    ab, co, va = _load("ablation"), _load("costs"), _load("variants")
+    ab, co, va, qu = _load("ablation"), _load("costs"), _load("variants"), _load("query")
     if co:
         md += ["## Program cost", ""] + costs_summary(co) + [""]
     if va:
         md += ["## Variants", ""] + variants_summary(va) + [""]
     if ab:
         md += ["## Search strategies", ""] + ablation_summary(ab) + [""]
+    if qu:
+        md += ["## Scenario mining", ""] + query_summary(qu) + [""]
     return "\n".join(md + ["## All results", ""] + files_table()) + "\n"
 
 
