@@ -195,8 +195,8 @@ def _quote(name: str) -> str:
 
 
 def clauses(st: Statement) -> tuple:
-    """The parts of a statement that relate it to a reference (or to nothing): its position and its heading."""
-    return (st.position, st.heading)
+    """The statement's clauses, one per part it carries (synth.parts), each with a builder in BUILDERS."""
+    return tuple(clause for _, clause in st.clauses())
 
 
 def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -> str:

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from synth.config import SynthConfig
 from synth.dsl import DslError, Statement, parse_statements
 from synth.scene import EGO_ID, ENTITY_TYPES, VEHICLE_CLASSES, Entity, Scene
-from synth.semantics import heading_holds, position_holds
 
 VEHICLE = "Vehicle"
 ANY = "Object"
@@ -60,15 +59,12 @@ def type_matches(pattern_type: str, entity_type: str) -> bool:
 
 
 def statement_holds(st: Statement, bound: Mapping[str, Entity], config: SynthConfig) -> bool:
-    """Does statement st hold of bound[st.id], its references looked up in `bound` (which maps ego too)?"""
+    """Does statement st hold of bound[st.id], its references looked up in `bound` (which maps ego too)? Every
+    part's clause is read by the part's own semantics (Part.holds, what `r2s check` uses)."""
     e = bound[st.id]
-    if not type_matches(st.type, e.type):
-        return False
-    pref = bound[st.position.ref] if st.position.ref is not None else None
-    if not position_holds(st.position, e, pref, config):
-        return False
-    href = bound[st.heading.ref] if st.heading.ref is not None else None
-    return heading_holds(st.heading, e, href, config)
+    return type_matches(st.type, e.type) and all(
+        part.holds(clause, e, bound[clause.ref] if clause.ref is not None else None, config)
+        for part, clause in st.clauses())
 
 
 def binding_holds(pattern: Pattern, ego: Entity, binding: Mapping[str, Entity], config: SynthConfig) -> bool:
