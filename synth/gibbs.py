@@ -28,6 +28,7 @@ the program, the scene, the tolerances, the settings and the seed (never on how 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -44,6 +45,7 @@ DEFAULT_BURN_IN = 20  # sweeps from the recorded scene to the first variant
 DEFAULT_THIN = 10  # sweeps between variants
 DEFAULT_START_SWEEPS = 200  # sweeps to find a valid start when the given scene is not one
 MAX_DRAWS = 8  # draws per move: the first from the whole box, each next from a box shrunk after a rejection
+FEW_PAIRS = 24  # up to this many candidate pairs are tested one by one in floats (numpy's per-call cost dominates)
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,7 @@ class Chain:
         dims = [by_id[i].dimensions() for i in p.ids]
         self.length = np.array([d[0] for d in dims])
         self.width = np.array([d[1] for d in dims])
+        self.lengths, self.widths = self.length.tolist(), self.width.tolist()
         self.radius = box_radius(self.length, self.width)
         self.x = np.array([q.x for q in self.poses])
         self.y = np.array([q.y for q in self.poses])
@@ -135,9 +138,12 @@ class Chain:
         if a.size == 0:
             return 0
         a = idx[a]
-        hit = boxes_overlap(x[a], y[a], h[a], self.length[a], self.width[a],
-                            x[b], y[b], h[b], self.length[b], self.width[b])
-        return int(np.count_nonzero(hit))
+        if a.size > FEW_PAIRS:
+            return int(np.count_nonzero(boxes_overlap(x[a], y[a], h[a], self.length[a], self.width[a],
+                                                      x[b], y[b], h[b], self.length[b], self.width[b])))
+        xs, ys, hs, ls, ws = x.tolist(), y.tolist(), h.tolist(), self.lengths, self.widths
+        return sum(boxes_overlap(xs[i], ys[i], hs[i], ls[i], ws[i], xs[j], ys[j], hs[j], ls[j], ws[j], xp=math)
+                   for i, j in zip(a.tolist(), b.tolist()))
 
     def violated_pairs(self) -> list[tuple[int, int]]:
         """Forbidden pairs (i < j) that overlap in the current state."""

@@ -19,19 +19,20 @@ def box_radius(length, width):
     return np.hypot(length, width) / 2
 
 
-def boxes_overlap(ax, ay, ah, al, aw, bx, by, bh, bl, bw) -> np.ndarray:
-    """Elementwise: does box a (x, y, heading in degrees, length, width) overlap box b? Arrays broadcast."""
-    ta, tb = np.radians(ah), np.radians(bh)
-    ca, sa, cb, sb = np.cos(ta), np.sin(ta), np.cos(tb), np.sin(tb)
-    dx, dy = np.subtract(bx, ax), np.subtract(by, ay)
-    cos_d = np.abs(ca * cb + sa * sb)  # |cos(hb - ha)|: forward.forward and right.right
-    sin_d = np.abs(ca * sb - sa * cb)  # |sin(hb - ha)|: forward.right
-    hal, haw, hbl, hbw = (np.multiply(v, 0.5) for v in (al, aw, bl, bw))
+def boxes_overlap(ax, ay, ah, al, aw, bx, by, bh, bl, bw, xp=np):
+    """Does box a (x, y, heading in degrees, length, width) overlap box b? Elementwise over numpy arrays (they
+    broadcast), or for one pair of plain floats with xp=math (no numpy call overhead: the sampler's inner loop)."""
+    ta, tb = xp.radians(ah), xp.radians(bh)
+    ca, sa, cb, sb = xp.cos(ta), xp.sin(ta), xp.cos(tb), xp.sin(tb)
+    dx, dy = bx - ax, by - ay
+    cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|: forward.forward and right.right
+    sin_d = abs(ca * sb - sa * cb)  # |sin(hb - ha)|: forward.right
+    hal, haw, hbl, hbw = al * 0.5, aw * 0.5, bl * 0.5, bw * 0.5
     # Forward of heading h is (-sin h, cos h), right is (cos h, sin h); project the centre offset on each axis.
-    return ((np.abs(-dx * sa + dy * ca) <= hal + hbl * cos_d + hbw * sin_d)
-            & (np.abs(dx * ca + dy * sa) <= haw + hbl * sin_d + hbw * cos_d)
-            & (np.abs(-dx * sb + dy * cb) <= hbl + hal * cos_d + haw * sin_d)
-            & (np.abs(dx * cb + dy * sb) <= hbw + hal * sin_d + haw * cos_d))
+    return ((abs(-dx * sa + dy * ca) <= hal + hbl * cos_d + hbw * sin_d)
+            & (abs(dx * ca + dy * sa) <= haw + hbl * sin_d + hbw * cos_d)
+            & (abs(-dx * sb + dy * cb) <= hbl + hal * cos_d + haw * sin_d)
+            & (abs(dx * cb + dy * sb) <= hbw + hal * sin_d + haw * cos_d))
 
 
 def box_arrays(entities: list[Entity]) -> tuple[np.ndarray, ...]:
