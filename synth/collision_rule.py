@@ -6,7 +6,7 @@ ever satisfy it. The rule here keeps every recorded contact and forbids every ne
 
 Which pairs must be stated? A pair whose boxes can never meet, whatever the program's Ranges draw, needs no
 requirement. The bound is sound and cheap: each entity's centre lies in a disc and its heading in an arc that
-contain everything the program can place there (synth.parameters, Part.reach, derived in declaration order
+contain everything the program can place there (synth.parameters, Draws.reach, derived in declaration order
 from ego outwards), and two boxes can only meet if their discs come within the sum of their half-diagonals.
 The remaining pairs are `apart`: the emitted Scenic text requires `not (a intersects b)` for each of them
 (synth.emit_scenic) and the sampler (synth.gibbs) tests exactly them, so both samplers draw from one

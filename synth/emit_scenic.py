@@ -36,7 +36,7 @@ and runs every sampled scene through synth.semantics.check):
   (allowCollisions: True), and the text ends with one requirement per entity, `require dsl__apart(e, 'a b')`:
   e's box meets none of the named earlier entities' boxes (`intersects`, which for planar boxes is shapely's
   footprint test in scenic 3.1.1, as in synth.overlap). Only pairs that do not overlap in the recording and can
-  meet at all (Part.reach) are named; the partners are one string rather than a tuple of names because Scenic's
+  meet at all (Draws.reach) are named; the partners are one string rather than a tuple of names because Scenic's
   parser takes ~1 ms per name token, which for the 9,560 pairs of a 141-entity frame would be 8 s of
   compiling (one string per entity: 0.2 s). The requirements stay off when the global parameter
   r2s_allow_collisions is overridden (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).

@@ -121,7 +121,7 @@ class Chain:
                 self.dependants[r] = sorted(set(self.dependants[r]) | {k} | set(self.dependants[k]))
         # moves[k][part]: the entities a redraw of that part changes, k first (a heading move leaves alone those
         # that only face k, a position move those that only turn with k).
-        self.moves = [[np.array(p.moved_by(k, j, self.dependants[k])) for j in range(len(p.parts[k]))]
+        self.moves = [[np.array(p.moved_by(k, j, self.dependants[k])) for j in range(len(p.draws[k]))]
                       for k in range(n)]
         self.proposals = self.accepted = 0
         self.moved = np.zeros(n, dtype=bool)
@@ -161,7 +161,7 @@ class Chain:
     def _move(self, k: int, part: int, descend: bool) -> None:
         """Redraw one part's parameters: uniformly in its box, shrunk toward the current value on each rejection."""
         p = self.params_of
-        lo, hi = list(p.parts[k][part].lo), list(p.parts[k][part].hi)
+        lo, hi = list(p.draws[k][part].lo), list(p.draws[k][part].hi)
         now = self.params[k][part]
         idx = self.moves[k][part]
         moved = idx.tolist()
@@ -197,7 +197,7 @@ class Chain:
     def sweep(self, descend: bool = False) -> None:
         """Move every part of every statement once, in declaration order."""
         for k in range(1, len(self.poses)):
-            for part in range(len(self.params_of.parts[k])):
+            for part in range(len(self.params_of.draws[k])):
                 self._move(k, part, descend)
 
     def draw_from_prior(self) -> None:
@@ -205,7 +205,7 @@ class Chain:
         p = self.params_of
         for k in range(1, len(self.poses)):
             self.params[k] = [tuple(a + (b - a) * t for a, b, t in zip(part.lo, part.hi, self.rng.random(len(part.lo))))
-                              for part in p.parts[k]]
+                              for part in p.draws[k]]
             p.evaluate_into(k, self.params[k], self.poses)
         self.x = np.array([q.x for q in self.poses])
         self.y = np.array([q.y for q in self.poses])

@@ -2,8 +2,8 @@
 
 Scenic samples a program written by synth.emit_scenic by drawing every Range in it independently and uniformly
 and evaluating the statements in order (ego is fixed, as recorded). So a program denotes a distribution: the
-product of its parts' uniform boxes, pushed through the statements. Each statement has a position part and a
-heading part (a motion part will be one more class here), and each part is:
+product of its clauses' uniform boxes, pushed through the statements. Every clause of a statement (one per part
+of synth.parts: position, heading, ...) has its `Draws` here, built by the DRAWS entry of its part:
 
 - its parameters' box: what Scenic draws, in Scenic's own parameterisation (the emitted helpers): a sector
   (`ahead of R by Range(a, b)`) draws a distance in [a, b] and an angle offset in +-delta1 about R.heading + phi;
@@ -23,7 +23,7 @@ Angles are degrees here (Scenic draws radians; a uniform draw is the same distri
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -80,14 +80,14 @@ class Reach:
     heading: Arc
 
 
-POSITION, HEADING = "position", "heading"  # the fields of an entity that parts write and read
+XY, HEADING = "xy", "heading"  # the fields of a Pose that clauses write and read
 
 
-class Part(Protocol):
-    """One part of a statement: the parameters Scenic draws for it and what they make of the entity.
+class Draws(Protocol):
+    """One clause of a statement: the parameters Scenic draws for it and what they make of the entity.
 
-    `writes` is the field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
-    entity (set by an earlier part of the statement): what a sampler must re-evaluate when something moves.
+    `writes` is the Pose field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
+    entity (set by an earlier clause of the statement): what a sampler must re-evaluate when something moves.
     """
 
     ref: str | None
@@ -138,15 +138,15 @@ def _disc_plus(ref: Reach, dx: float, dy: float, r: float, heading: Arc) -> Reac
 # ------------------------------------------------------------------------------------------------ positions
 
 @dataclass(frozen=True)
-class SectorPart:
+class SectorDraws:
     """`DIR of REF by Range(a, b)`: dsl__sector draws (distance, angle offset in +-delta1)."""
 
     ref: str
     phi: float
     lo: tuple[float, ...]
     hi: tuple[float, ...]
-    writes = POSITION
-    reads = (POSITION, HEADING)
+    writes = XY
+    reads = (XY, HEADING)
     reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
@@ -165,14 +165,14 @@ class SectorPart:
 
 
 @dataclass(frozen=True)
-class RelativeXYPart:
+class RelativeXYDraws:
     """`on Range @ Range relative to REF`: dsl__relative_xy draws (lateral, forward) in REF's frame."""
 
     ref: str
     lo: tuple[float, ...]
     hi: tuple[float, ...]
-    writes = POSITION
-    reads = (POSITION, HEADING)
+    writes = XY
+    reads = (XY, HEADING)
     reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
@@ -195,13 +195,13 @@ class RelativeXYPart:
 
 
 @dataclass(frozen=True)
-class AbsoluteXYPart:
+class AbsoluteXYDraws:
     """`on Range @ Range`: x and y drawn in the scene frame."""
 
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     ref = None
-    writes = POSITION
+    writes = XY
     reads = ()
     reads_own = ()
 
@@ -219,7 +219,7 @@ class AbsoluteXYPart:
 # ------------------------------------------------------------------------------------------------- headings
 
 @dataclass(frozen=True)
-class FacingPart:
+class FacingDraws:
     """`facing toward | away from REF`: dsl__facing_* draws an offset in +-delta2 about the bearing."""
 
     ref: str
@@ -227,8 +227,8 @@ class FacingPart:
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     writes = HEADING
-    reads = (POSITION,)
-    reads_own = (POSITION,)
+    reads = (XY,)
+    reads_own = (XY,)
 
     def _target(self, own: Pose, ref: Pose) -> float:
         if self.toward:
@@ -252,7 +252,7 @@ class FacingPart:
 
 
 @dataclass(frozen=True)
-class RelativeHeadingPart:
+class RelativeHeadingDraws:
     """`facing Range(a, b) deg relative to REF`: the angle added to REF's heading."""
 
     ref: str
@@ -275,7 +275,7 @@ class RelativeHeadingPart:
 
 
 @dataclass(frozen=True)
-class AbsoluteHeadingPart:
+class AbsoluteHeadingDraws:
     """`facing Range(a, b) deg`: the heading drawn directly."""
 
     lo: tuple[float, ...]
@@ -306,35 +306,39 @@ def _angle_in(angle: float, lo: float, hi: float) -> float:
 
 # ------------------------------------------------------------------------------------------------- programs
 
-def position_part(pos, config: SynthConfig) -> Part:
+def position_draws(pos, config: SynthConfig) -> Draws:
     if isinstance(pos, DirectionPos):
         d0, d1 = sampled_distance(pos.distance)
-        return SectorPart(pos.ref, DIRECTIONS[pos.direction][1], (d0, -config.delta1), (d1, config.delta1))
+        return SectorDraws(pos.ref, DIRECTIONS[pos.direction][1], (d0, -config.delta1), (d1, config.delta1))
     if isinstance(pos, LocalXYPos):
-        return RelativeXYPart(pos.ref, (pos.lateral.lo, pos.forward.lo), (pos.lateral.hi, pos.forward.hi))
+        return RelativeXYDraws(pos.ref, (pos.lateral.lo, pos.forward.lo), (pos.lateral.hi, pos.forward.hi))
     if isinstance(pos, AbsoluteXYPos):
-        return AbsoluteXYPart((pos.x.lo, pos.y.lo), (pos.x.hi, pos.y.hi))
+        return AbsoluteXYDraws((pos.x.lo, pos.y.lo), (pos.x.hi, pos.y.hi))
     raise TypeError(f"not a DSL position: {pos!r}")
 
 
-def heading_part(head, config: SynthConfig) -> Part:
+def heading_draws(head, config: SynthConfig) -> Draws:
     if isinstance(head, FacingRelation):
-        return FacingPart(head.ref, head.mode == "toward", (-config.delta2,), (config.delta2,))
+        return FacingDraws(head.ref, head.mode == "toward", (-config.delta2,), (config.delta2,))
     if isinstance(head, RelativeHeading):
-        return RelativeHeadingPart(head.ref, (head.angle.lo,), (head.angle.hi,))
+        return RelativeHeadingDraws(head.ref, (head.angle.lo,), (head.angle.hi,))
     if isinstance(head, AbsoluteHeading):
-        return AbsoluteHeadingPart((head.angle.lo,), (head.angle.hi,))
+        return AbsoluteHeadingDraws((head.angle.lo,), (head.angle.hi,))
     raise TypeError(f"not a DSL heading: {head!r}")
+
+
+# A clause's Draws, by the name of its part (synth.parts): a new part is one more entry.
+DRAWS: dict[str, Callable[[object, SynthConfig], Draws]] = {"position": position_draws, "heading": heading_draws}
 
 
 @dataclass(frozen=True)
 class Parameterisation:
-    """A program's parts in declaration order. Index 0 is ego (fixed, no parts); statement k is index k + 1."""
+    """A program's clauses, as draws, in declaration order. Index 0 is ego (fixed, none); statement k is index k + 1."""
 
     ids: tuple[str, ...]
     types: tuple[str, ...]
     ego: Entity
-    parts: tuple[tuple[Part, ...], ...]  # per index; () for ego
+    draws: tuple[tuple[Draws, ...], ...]  # per index, one per clause in statement order; () for ego
     refs: tuple[tuple[int | None, ...], ...]  # per index, per part: the reference's index (None: absolute)
 
     def start(self, scene: Scene) -> tuple[list[Pose], list[list[tuple[float, ...]]]]:
@@ -345,7 +349,7 @@ class Parameterisation:
         params: list[list[tuple[float, ...]]] = [[]]
         for k in range(1, len(self.ids)):
             row = []
-            for part, r in zip(self.parts[k], self.refs[k]):
+            for part, r in zip(self.draws[k], self.refs[k]):
                 # Invert against the recorded entity and its already re-evaluated reference, then evaluate.
                 p = part.invert(recorded[k], None if r is None else poses[r])
                 part.evaluate(p, poses[k], None if r is None else poses[r])
@@ -355,17 +359,17 @@ class Parameterisation:
 
     def evaluate_into(self, k: int, params: Sequence[Sequence[float]], poses: list[Pose]) -> None:
         """Entity k's pose from its parameters and its references' poses (written into poses[k])."""
-        for part, r, p in zip(self.parts[k], self.refs[k], params):
+        for part, r, p in zip(self.draws[k], self.refs[k], params):
             part.evaluate(p, poses[k], None if r is None else poses[r])
 
     def moved_by(self, k: int, part: int, dependants: list[int]) -> list[int]:
         """Every entity whose value changes when part `part` of entity k is redrawn (k first, then in order), of
         k's dependants (the entities that refer to k through any chain of references, in order)."""
-        changed = {(k, self.parts[k][part].writes)}
+        changed = {(k, self.draws[k][part].writes)}
         moved = [k]
         for m in [k, *dependants]:
             hit = False
-            for j, (p, r) in enumerate(zip(self.parts[m], self.refs[m])):
+            for j, (p, r) in enumerate(zip(self.draws[m], self.refs[m])):
                 if m == k and j <= part:
                     continue
                 if any((r, f) in changed for f in p.reads) or any((m, f) in changed for f in p.reads_own):
@@ -380,7 +384,7 @@ class Parameterisation:
         out = [Reach(ego.x, ego.y, 0.0, Arc(ego.heading, 0.0))]
         for k in range(1, len(self.ids)):
             own = Reach(0.0, 0.0, math.inf, Arc(0.0, 180.0))
-            for part, r in zip(self.parts[k], self.refs[k]):
+            for part, r in zip(self.draws[k], self.refs[k]):
                 own = part.reach(own, None if r is None else out[r])
             out.append(own)
         return out
@@ -390,11 +394,11 @@ def parameterise(program: Program, scene: Scene, config: SynthConfig) -> Paramet
     """The program's parts in Scenic's parameterisation; ego (and its box) from the scene."""
     ids = (EGO_ID, *(s.id for s in program.statements))
     index = {name: k for k, name in enumerate(ids)}
-    parts: list[tuple[Part, ...]] = [()]
+    draws: list[tuple[Draws, ...]] = [()]
     refs: list[tuple[int | None, ...]] = [()]
     for st in program.statements:
-        ps = (position_part(st.position, config), heading_part(st.heading, config))
-        parts.append(ps)
+        ps = tuple(DRAWS[part.name](clause, config) for part, clause in st.clauses())
+        draws.append(ps)
         refs.append(tuple(None if p.ref is None else index[p.ref] for p in ps))
     return Parameterisation(ids, (scene.ego.type, *(s.type for s in program.statements)), scene.ego,
-                            tuple(parts), tuple(refs))
+                            tuple(draws), tuple(refs))

@@ -77,7 +77,7 @@ def test_the_start_is_the_recorded_scene(programs):
         p = parameterise(program, scene, config)
         poses, params = p.start(scene)
         by_id = scene.by_id()
-        for name, pose, row, parts in zip(p.ids, poses, params, p.parts):
+        for name, pose, row, parts in zip(p.ids, poses, params, p.draws):
             e = by_id[name]
             assert math.hypot(pose.x - e.x, pose.y - e.y) < 1e-9, (scene.frame_id, name)
             assert angular_difference(pose.heading, e.heading) < 1e-9, (scene.frame_id, name)
@@ -98,7 +98,7 @@ def test_parts_invert_what_they_evaluate(programs):
         for c in _draws(chain, 20):
             poses = [Pose(q.x, q.y, q.heading) for q in c.poses]
             for k in range(1, len(p.ids)):
-                for part, r, values in zip(p.parts[k], p.refs[k], c.params[k]):
+                for part, r, values in zip(p.draws[k], p.refs[k], c.params[k]):
                     back = part.invert(poses[k], None if r is None else poses[r])
                     assert np.allclose(back, values, atol=1e-7), (scene.frame_id, p.ids[k], part)
 
@@ -119,7 +119,7 @@ def test_a_move_re_places_every_entity_it_changes(programs):
         p = chain.params_of
         before = _placed(p, chain.params)
         for k in range(1, len(p.ids)):
-            for j, part in enumerate(p.parts[k]):
+            for j, part in enumerate(p.draws[k]):
                 params = [list(row) for row in chain.params]
                 params[k][j] = tuple(a + (b - a) * t for a, b, t in zip(part.lo, part.hi, rng.random(len(part.lo))))
                 after = _placed(p, params)
