@@ -39,8 +39,10 @@ FRAMES_SCHEMA = pa.schema(
     ]
 )
 FRAMES_COLUMNS = tuple(FRAMES_SCHEMA.names)
-# Optional per-entity measurement uncertainty (robust synthesis); absent in most files.
-OPTIONAL_COLUMNS = {"pos_sigma": pa.float64(), "heading_sigma": pa.float64()}
+# Optional per-entity columns, null where unknown: speed (m/s, the magnitude of the ground velocity; motion needs
+# it) and measurement uncertainty (robust synthesis). Readers accept files without them.
+OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_sigma": pa.float64(),
+                    "speed_sigma": pa.float64()}
 
 
 class FramesError(ValueError):
@@ -201,7 +203,7 @@ def frame_to_scene(rows: pd.DataFrame) -> Scene:
         for key in ("length", "width"):
             if (v := _dim(getattr(r, key))) is not None:
                 d[key] = v
-        # Optional measurement bounds (robust synthesis); a missing value (NaN, None) means "not given".
+        # Speed and measurement bounds; a missing value (NaN, None) means "not given".
         for key in OPTIONAL_COLUMNS:
             if (v := _given(getattr(r, key, None))) is not None:
                 d[key] = v
@@ -219,8 +221,9 @@ def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
 
 
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
-    """A Scene back as frames rows (ids kept as they are; measurement sigmas as their optional columns, if any)."""
-    sigmas = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
+    """A Scene back as frames rows (ids kept as they are; speeds and measurement sigmas as their optional columns,
+    if any entity has one)."""
+    optional = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
     rows = []
     for e in scene.entities:
         rows.append(
@@ -229,7 +232,7 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
                 "frame_index": frame_index, "timestamp_us": None, "entity_id": e.id, "track_id": e.id,
                 "type": e.type, "category": e.type, "x": e.x, "y": e.y, "heading": e.heading,
                 "length": e.length, "width": e.width, "is_ego": e.is_ego,
-                **{c: getattr(e, c) for c in sigmas},
+                **{c: getattr(e, c) for c in optional},
             }
         )
     return rows

@@ -39,8 +39,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
     p.add_argument("--config", metavar="F", help="TOML config (configs/default.toml, configs/paper.toml)")
-    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG",
-                   help="robust synthesis, as in r2s synth (frames' pos_sigma / heading_sigma columns override)")
+    p.add_argument("--motion", action="store_const", const=True, default=None,
+                   help="statements also say how fast entities move, as in r2s synth (needs the frames' speed "
+                        "column; a frame with an entity lacking speed is an error row naming it)")
+    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG[,SPEED_MPS]",
+                   help="robust synthesis, as in r2s synth (frames' pos_sigma / heading_sigma / speed_sigma columns "
+                        "override)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local worker processes (default); dask: a dask.distributed cluster")
     p.add_argument("--scheduler", metavar="ADDR", help="dask scheduler address (tcp://host:8786); without it, "
@@ -65,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--out is the input frames file; choose another path")
     config = load_config(args.config).with_(
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,
-        time_limit=args.time_limit, memory_limit=args.memory_limit, **(args.uncertainty or {}),
+        time_limit=args.time_limit, memory_limit=args.memory_limit, motion=args.motion, **(args.uncertainty or {}),
     )
     return _Run(args, config).go()
 

@@ -21,21 +21,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="F", help="write to this file (atomically) instead of stdout")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
                    help="refuse scenes with more entities than this (default 1000)")
-    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG",
+    p.add_argument("--motion", action="store_const", const=True, default=None,
+                   help="every statement also says how fast its entity moves (stationary, moving like REF, "
+                        "moving Range m/s [relative to REF]); every entity needs a speed (config: motion = true)")
+    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG[,SPEED_MPS]",
                    help="robust synthesis: the program contains every scene whose entities (not ego) are within "
-                        "POS_M metres and HEAD_DEG degrees of the record (an entity's pos_sigma / heading_sigma "
-                        "overrides); default 0,0 = plain synthesis")
+                        "POS_M metres and HEAD_DEG degrees (and, with --motion, SPEED_MPS m/s) of the record (an "
+                        "entity's pos_sigma / heading_sigma / speed_sigma overrides); default 0,0 = plain synthesis")
 
 
 def uncertainty_arg(text: str) -> dict[str, float]:
     """argparse type of --uncertainty: the SynthConfig fields it sets (also for `r2s run --uncertainty`)."""
-    from synth.config import ConfigError, parse_uncertainty
+    from synth.config import UNCERTAINTY_FIELDS, ConfigError, parse_uncertainty
 
     try:
-        pos, head = parse_uncertainty(text)
+        values = parse_uncertainty(text)
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-    return {"pos_uncertainty": pos, "heading_uncertainty": head}
+    return dict(zip(UNCERTAINTY_FIELDS, values))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = load_config(args.config).with_(
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,
-        time_limit=args.time_limit, memory_limit=args.memory_limit, **(args.uncertainty or {}),
+        time_limit=args.time_limit, memory_limit=args.memory_limit, motion=args.motion, **(args.uncertainty or {}),
     )
     scene = read_scene(args.scene, max_entities=args.max_entities)
     result = synthesize(scene, config)

@@ -40,7 +40,9 @@ from synth.emit_scenic import (
     COLLISIONS_PARAM,
     FRAME_PARAM,
     MIN_DISTANCE,
+    MOTION_PARAM,
     NotGenerated,
+    has_motion,
     read_source,
     rebuild_from_source,
     render_scenic,
@@ -185,8 +187,9 @@ def _frame_id(scenario, k: int) -> str:
     return f"{base[:240]}#sample{k}"  # the scene contract caps frame ids at 256 characters
 
 
-def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>") -> Scene:
-    """A sampled Scenic scene as our scene: `name` is the id, the class the type; all of it re-validated."""
+def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>", motion: bool = False) -> Scene:
+    """A sampled Scenic scene as our scene: `name` is the id, the class the type; all of it re-validated.
+    With motion (the text says `param r2s_motion = True`) each object's speed too."""
     entities = []
     for i, o in enumerate(sampled.objects):
         name = getattr(o, "name", None)
@@ -198,7 +201,7 @@ def scene_from_scenic(sampled, frame_id: str, filename: str = "<program>") -> Sc
             # + 0.0 turns -0.0 into 0.0, which Scenic produces for a zero yaw and JSON would print as -0.0.
             "id": name, "type": type(o).__name__, "x": float(o.position.x) + 0.0, "y": float(o.position.y) + 0.0,
             "heading": normalize(math.degrees(float(o.heading))) + 0.0, "length": float(o.length),
-            "width": float(o.width),
+            "width": float(o.width), **({"speed": float(o.speed) + 0.0} if motion else {}),
         })
     try:
         return scene_from_dict({"frame_id": frame_id, "entities": entities}, max_entities=DEFAULT_MAX_ENTITIES)
@@ -223,7 +226,8 @@ def draw_scenes(scenario, options: SampleOptions, filename: str = "<program>",
             except Exception as exc:
                 raise ScenicProgramError(f"{filename}: Scenic fails while sampling: {_first_line(exc)}") from None
             total += iterations
-            scenes.append(scene_from_scenic(sampled, _frame_id(scenario, k), filename))
+            motion = scenario.params.get(MOTION_PARAM) is True
+            scenes.append(scene_from_scenic(sampled, _frame_id(scenario, k), filename, motion))
             if progress is not None:
                 progress(k + 1, options.n)
     return Samples(tuple(scenes), "scenic", iterations=total)
@@ -279,6 +283,12 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
 
 def _sample(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions, sampler: str,
             text: str | None, filename: str, progress: Progress | None) -> Samples:
+    if has_motion(program):
+        # The chain (synth.gibbs) draws positions and headings only; Scenic draws every speed the text gives.
+        if options.sampler == "gibbs":
+            raise UserError(f"{filename}: the program says how fast entities move, and --sampler gibbs does not "
+                            "draw speeds yet: use --sampler scenic")
+        sampler = "scenic"
     if sampler == "gibbs":
         from synth.gibbs import NoVariant, sample_variants
 

@@ -1,4 +1,5 @@
-"""Synthesis configuration: the paper's four constants and the choice of strategy, oracle and solver."""
+"""Synthesis configuration: the paper's four constants, the motion constants, and the choice of strategy, oracle
+and solver."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-from synth.scene import MAX_HEADING_SIGMA, MAX_POS_SIGMA
+from synth.scene import MAX_HEADING_SIGMA, MAX_POS_SIGMA, MAX_SPEED_SIGMA
 
 STRATEGIES = (
     "auto",
@@ -55,6 +56,14 @@ class SynthConfig:
     # own pos_sigma / heading_sigma overrides these. 0, 0 is plain synthesis, byte for byte.
     pos_uncertainty: float = 0.0
     heading_uncertainty: float = 0.0
+    # Motion (beyond the paper; `--motion`): every statement also says how fast its entity moves, from each
+    # entity's `speed` (m/s). stationary: speed <= v_stop; moving like REF: |speed - REF's| <= dv; speed Ranges
+    # are c_speed wide. speed_uncertainty (m/s, the third number of --uncertainty) is the speed's measurement error.
+    motion: bool = False
+    v_stop: float = 0.5
+    dv: float = 1.0
+    c_speed: float = 2.0
+    speed_uncertainty: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("delta1", "delta2"):
@@ -78,6 +87,19 @@ class SynthConfig:
         if not (_number(self.heading_uncertainty) and 0.0 <= self.heading_uncertainty < MAX_HEADING_SIGMA):
             raise ConfigError(f"heading_uncertainty must be a number of degrees in [0, {MAX_HEADING_SIGMA:g}), "
                               f"got {self.heading_uncertainty!r}")
+        if not isinstance(self.motion, bool):
+            raise ConfigError(f"motion must be true or false, got {self.motion!r}")
+        for name, lo in (("v_stop", 0.0), ("dv", 0.0)):
+            v = getattr(self, name)
+            if not (_number(v) and lo <= v <= 100.0):
+                raise ConfigError(f"{name} must be a number of m/s in [{lo:g}, 100], got {v!r}")
+        if not (_number(self.c_speed) and 0.02 <= self.c_speed <= 1000.0):
+            raise ConfigError(f"c_speed must be a number in [0.02, 1000], got {self.c_speed!r}")
+        if not (_number(self.speed_uncertainty) and 0.0 <= self.speed_uncertainty < MAX_SPEED_SIGMA):
+            raise ConfigError(f"speed_uncertainty must be a number of m/s in [0, {MAX_SPEED_SIGMA:g}), "
+                              f"got {self.speed_uncertainty!r}")
+        if self.speed_uncertainty and not self.motion:
+            raise ConfigError("a speed uncertainty needs motion (--motion, or motion = true)")
         _one_of("strategy", self.strategy, STRATEGIES)
         _one_of("oracle", self.oracle, ORACLES)
         _one_of("solver", self.solver, SOLVERS)
@@ -90,34 +112,47 @@ class SynthConfig:
         """Hash of what decides the program: constants, strategy, oracle, solver, limits.
 
         Two runs with the same hash on the same frame produce the same row, so the pipeline may skip one.
-        The uncertainty fields enter only when non-zero: plain synthesis keeps the hashes it always had, so
-        programs.parquet files written before robust synthesis existed still resume.
+        The uncertainty fields enter only when non-zero, and the motion fields only with motion on: plain static
+        synthesis keeps the hashes it always had, so programs.parquet files written before robust synthesis or
+        motion existed still resume.
         """
         # 10 in a TOML file and 10.0 on the command line are one setting: hash numbers as floats.
         values = {k: float(v) if isinstance(v, int) and not isinstance(v, bool) else v
                   for k, v in asdict(self).items()}
-        for name in ("pos_uncertainty", "heading_uncertainty"):
+        for name in ("pos_uncertainty", "heading_uncertainty", "speed_uncertainty"):
             if values[name] == 0.0:
                 del values[name]
+        if not self.motion:
+            for name in MOTION_FIELDS:
+                values.pop(name, None)
         blob = json.dumps(values, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+MOTION_FIELDS = ("motion", "v_stop", "dv", "c_speed", "speed_uncertainty")
 
 
 def _number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def parse_uncertainty(text: str) -> tuple[float, float]:
-    """`POS_M,HEAD_DEG` (as `--uncertainty` takes it) -> (metres, degrees); ConfigError when it is not that."""
+UNCERTAINTY_FIELDS = ("pos_uncertainty", "heading_uncertainty", "speed_uncertainty")
+
+
+def parse_uncertainty(text: str) -> tuple[float, ...]:
+    """`POS_M,HEAD_DEG[,SPEED_MPS]` (as `--uncertainty` takes it) -> (metres, degrees[, m/s]), as many numbers as
+    given (UNCERTAINTY_FIELDS in order); ConfigError when it is not that."""
     parts = str(text).split(",")
-    if len(parts) != 2:
-        raise ConfigError(f"uncertainty must be POS_M,HEAD_DEG (two numbers), got {text!r}")
+    usage = f"uncertainty must be POS_M,HEAD_DEG or POS_M,HEAD_DEG,SPEED_MPS (two or three numbers), got {text!r}"
+    if len(parts) not in (2, 3):
+        raise ConfigError(usage)
     try:
-        pos, head = (float(p) for p in parts)
+        values = tuple(float(p) for p in parts)
     except ValueError:
-        raise ConfigError(f"uncertainty must be POS_M,HEAD_DEG (two numbers), got {text!r}") from None
-    SynthConfig(pos_uncertainty=pos, heading_uncertainty=head)  # the one range check, at parse time
-    return pos, head
+        raise ConfigError(usage) from None
+    # The one range check, at parse time (a speed bound is checked as if motion were on: --motion may come later).
+    SynthConfig(**dict(zip(UNCERTAINTY_FIELDS, values)), motion=len(values) == 3)
+    return values
 
 
 def _one_of(name: str, value: Any, allowed: tuple[str, ...]) -> None:

@@ -1,13 +1,16 @@
 """The paper's DSL (Fig. 3): statements and programs, their cost, printer and parser, which round-trip exactly.
 
     P       ::= S*
-    S       ::= ID = new TYPE POS, HEADING
+    S       ::= ID = new TYPE POS, HEADING [, MOTION]
     POS     ::= (ahead of | behind | left of | right of) REF by Range(a, b)      cost 0
               | on Range(a, b) @ Range(c, d) relative to REF                    cost 1
               | on Range(a, b) @ Range(c, d)                                    cost 2
     HEADING ::= facing (toward | away from) REF                                 cost 0
               | facing Range(a, b) deg relative to REF                          cost 1
               | facing Range(a, b) deg                                          cost 2
+    MOTION  ::= stationary | moving like REF                                     cost 0  (beyond the paper)
+              | moving Range(a, b) m/s relative to REF                          cost 1
+              | moving Range(a, b) m/s                                          cost 2
     REF     ::= ego | an ID declared earlier
 
 Each part's clauses (their classes, printing and parsing) live with the part, in synth.parts; they are
@@ -20,14 +23,16 @@ from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from typing import Union
 
-from synth.parts import STATIC_PARTS
+from synth.parts import ALL_PARTS, MOTION, STATIC_PARTS
 from synth.parts.heading import FACINGS, AbsoluteHeading, FacingRelation, RelativeHeading
+from synth.parts.motion import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary
 from synth.parts.position import DIRECTIONS, AbsoluteXYPos, DirectionPos, LocalXYPos
 from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
 from synth.syntax import DslError, Line, Range, fmt_number
 
 Position = Union[DirectionPos, LocalXYPos, AbsoluteXYPos]
 Heading = Union[FacingRelation, RelativeHeading, AbsoluteHeading]
+Motion = Union[Stationary, MovingLike, RelativeSpeed, AbsoluteSpeed]
 
 
 @dataclass(frozen=True)
@@ -36,10 +41,11 @@ class Statement:
     type: str
     position: Position
     heading: Heading
+    motion: Motion | None = None  # static programs (the paper's) have none
 
     def clauses(self) -> Iterator[tuple[object, object]]:
         """(part, clause) for every part the statement carries, in statement order."""
-        for part in STATIC_PARTS:
+        for part in ALL_PARTS:
             clause = getattr(self, part.name)
             if clause is not None:
                 yield part, clause
@@ -111,6 +117,8 @@ def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statemen
         if k:
             ln.take(text=",")
         clauses[part.name] = part.parse(ln, declared)
+    if ln.accept(","):
+        clauses[MOTION.name] = MOTION.parse(ln, declared)
     ln.end()
     return Statement(name, etype, **clauses)
 
@@ -124,7 +132,8 @@ def iter_references(program: Program) -> Iterator[tuple[str, str, str]]:
 
 
 __all__ = [
-    "DIRECTIONS", "FACINGS", "AbsoluteHeading", "AbsoluteXYPos", "DirectionPos", "DslError", "FacingRelation",
-    "Heading", "LocalXYPos", "Position", "Program", "Range", "RelativeHeading", "Statement", "fmt_number",
+    "DIRECTIONS", "FACINGS", "AbsoluteHeading", "AbsoluteSpeed", "AbsoluteXYPos", "DirectionPos", "DslError",
+    "FacingRelation", "Heading", "LocalXYPos", "Motion", "MovingLike", "Position", "Program", "Range",
+    "RelativeHeading", "RelativeSpeed", "Stationary", "Statement", "fmt_number",
     "format_program", "iter_references", "parse_program", "parse_statements",
 ]

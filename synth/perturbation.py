@@ -48,17 +48,29 @@ _CENT = Fraction(1, 100)
 
 @dataclass(frozen=True)
 class Bounds:
-    """How far one entity may be from its record: pos metres (disc radius), heading degrees (each side)."""
+    """How far one entity may be from its record: pos metres (disc radius), heading degrees (each side), speed m/s
+    (each side, never below 0)."""
 
     pos: float = 0.0
     heading: float = 0.0
+    speed: float = 0.0
 
 
 def bounds_of(e: Entity, config: SynthConfig) -> Bounds:
-    """The entity's own sigma where it has one, else the configured uncertainty (ego: 0, it is the origin)."""
+    """The entity's own sigma where it has one, else the configured uncertainty (ego: 0, it is the origin; its
+    speed comes from odometry, far more precise than perception's). Speed bounds count only with motion on."""
     pos = e.pos_sigma if e.pos_sigma is not None else (0.0 if e.is_ego else config.pos_uncertainty)
     head = e.heading_sigma if e.heading_sigma is not None else (0.0 if e.is_ego else config.heading_uncertainty)
-    return Bounds(float(pos), float(head))
+    speed = 0.0
+    if config.motion:
+        speed = e.speed_sigma if e.speed_sigma is not None else (0.0 if e.is_ego else config.speed_uncertainty)
+    return Bounds(float(pos), float(head), float(speed))
+
+
+def speed_box(e: Entity, config: SynthConfig) -> tuple[Fraction, Fraction]:
+    """Every speed e may have had, exactly: [max(0, s - sigma), s + sigma] (a speed is a magnitude)."""
+    s, sigma = Fraction(e.speed), Fraction(bounds_of(e, config).speed)
+    return max(Fraction(0), s - sigma), s + sigma
 
 
 def narrowed(delta: float, eta: float) -> float | None:

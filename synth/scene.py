@@ -44,9 +44,14 @@ VEHICLE_CLASSES = frozenset(
 EGO_ID = "ego"
 MAX_ID_LENGTH = 64
 DEFAULT_MAX_ENTITIES = 1000
-# Bounds on a measurement error (robust synthesis): metres of position, degrees of heading.
+# Bounds on a measurement error (robust synthesis): metres of position, degrees of heading, m/s of speed.
 MAX_POS_SIGMA = 1000.0
 MAX_HEADING_SIGMA = 90.0
+MAX_SPEED_SIGMA = 100.0
+MAX_SPEED = 1000.0  # m/s: anything faster is a unit or decoding error, not a road user
+# The optional per-entity bounds, each with its cap (the sigma keys of scene JSON and the frames columns).
+SIGMA_CAPS: Mapping[str, float] = {"pos_sigma": MAX_POS_SIGMA, "heading_sigma": MAX_HEADING_SIGMA,
+                                   "speed_sigma": MAX_SPEED_SIGMA}
 
 _ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
@@ -101,6 +106,9 @@ class Entity:
     # overriding the configured uncertainty (robust synthesis). None: the configured one applies.
     pos_sigma: float | None = None
     heading_sigma: float | None = None
+    # Magnitude of the ground velocity (m/s, >= 0); None where the source does not know it (motion needs it).
+    speed: float | None = None
+    speed_sigma: float | None = None  # m/s, each side (robust synthesis with motion)
 
     @property
     def is_ego(self) -> bool:
@@ -145,7 +153,9 @@ class Scene:
                 d["length"] = e.length
             if e.width is not None:
                 d["width"] = e.width
-            for key in ("pos_sigma", "heading_sigma"):
+            if e.speed is not None:
+                d["speed"] = e.speed
+            for key in SIGMA_CAPS:
                 if (v := getattr(e, key)) is not None:
                     d[key] = v
             out.append(d)
@@ -178,15 +188,19 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
             raise SceneError(f"entity {eid!r} {key} must be positive, got {v!r}")
         dims.append(f)
     sigmas = []
-    for key in ("pos_sigma", "heading_sigma"):
+    for key, cap in SIGMA_CAPS.items():
         v = raw.get(key)
         if v is not None:
             v = _finite(v, f"entity {eid!r} {key}")
             # Two headings' bounds together must stay under half a turn, so a heading Range stays < 360 wide.
-            cap = MAX_HEADING_SIGMA if key == "heading_sigma" else MAX_POS_SIGMA
             if not 0.0 <= v < cap:
                 raise SceneError(f"entity {eid!r} {key} must be in [0, {cap:g}), got {v!r}")
         sigmas.append(v)
+    speed = raw.get("speed")
+    if speed is not None:
+        speed = _finite(speed, f"entity {eid!r} speed")
+        if not 0.0 <= speed <= MAX_SPEED:
+            raise SceneError(f"entity {eid!r} speed must be in [0, {MAX_SPEED:g}] m/s, got {raw['speed']!r}")
     return Entity(
         id=eid,
         type=etype,
@@ -197,6 +211,8 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         width=dims[1],
         pos_sigma=sigmas[0],
         heading_sigma=sigmas[1],
+        speed=speed,
+        speed_sigma=sigmas[2],
     )
 
 

@@ -10,8 +10,9 @@ from synth.config import SynthConfig
 from synth.dsl import Program, fmt_number
 from synth.emit_scenic import render_scenic
 from synth.oracle import make_oracle
+from synth.parts import MOTION
 from synth.robust import is_robust
-from synth.scene import Scene
+from synth.scene import Scene, SceneError
 from synth.search import Budget, CostModel, search
 from synth.search.budget import peak_rss_mb
 from synth.statement import build_program
@@ -62,12 +63,26 @@ class SynthResult:
         }
 
 
+class SpeedMissing(SceneError):
+    """Motion was asked for a scene with an entity whose speed is unknown. One line naming the entity."""
+
+
+def require_speeds(scene: Scene) -> None:
+    """Motion describes every entity's speed, ego's too: refuse a scene where one is not known."""
+    missing = [e.id for e in scene.entities if e.speed is None]
+    if missing:
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise SpeedMissing(f"entity {missing[0]!r}{more} has no speed, which motion (--motion) needs")
+
+
 class CertificationError(RuntimeError):
     """The solver could not confirm a statement of the synthesized program: an internal error, never silent."""
 
 
 def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
     config = config or SynthConfig()
+    if config.motion:
+        require_speeds(scene)
     started = time.perf_counter()
     budget = Budget(config.time_limit, config.memory_limit)
     oracle = make_oracle(scene, config)
@@ -89,8 +104,9 @@ def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
         certified = True
     header = f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}"
     if is_robust(scene, config):
+        speed = f", {fmt_number(config.speed_uncertainty)} m/s" if MOTION.is_robust(scene, config) else ""
         header += (f"; robust to {fmt_number(config.pos_uncertainty)} m, {fmt_number(config.heading_uncertainty)} deg"
-                   " (entities' own sigmas override)")
+                   f"{speed} (entities' own sigmas override)")
     scenic = render_scenic(program, scene, config, header=header)
     stats = oracle.backend.stats if oracle.backend is not None else None
     return SynthResult(

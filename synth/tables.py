@@ -34,6 +34,7 @@ class SceneArrays:
     x: np.ndarray
     y: np.ndarray
     heading: np.ndarray
+    speed: np.ndarray  # m/s; NaN where an entity has no speed
 
 
 def scene_arrays(scene: Scene) -> SceneArrays:
@@ -43,6 +44,7 @@ def scene_arrays(scene: Scene) -> SceneArrays:
         np.array([e.x for e in ents], dtype=np.float64),
         np.array([e.y for e in ents], dtype=np.float64),
         np.array([e.heading for e in ents], dtype=np.float64),
+        np.array([np.nan if e.speed is None else e.speed for e in ents], dtype=np.float64),
     )
 
 

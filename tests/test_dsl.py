@@ -10,15 +10,19 @@ from hypothesis import strategies as st
 
 from synth.dsl import (
     AbsoluteHeading,
+    AbsoluteSpeed,
     AbsoluteXYPos,
     DirectionPos,
     DslError,
     FacingRelation,
     LocalXYPos,
+    MovingLike,
     Program,
     Range,
     RelativeHeading,
+    RelativeSpeed,
     Statement,
+    Stationary,
     fmt_number,
     parse_program,
 )
@@ -50,7 +54,11 @@ def programs(draw):
             st.builds(RelativeHeading, ranges(), st.sampled_from(refs)),
             st.builds(AbsoluteHeading, ranges()),
         ))
-        statements.append(Statement(f"e{i}", draw(st.sampled_from(sorted(ENTITY_TYPES))), pos, head))
+        motion = draw(st.one_of(
+            st.none(), st.builds(Stationary), st.builds(MovingLike, st.sampled_from(refs)),
+            st.builds(RelativeSpeed, ranges(), st.sampled_from(refs)), st.builds(AbsoluteSpeed, ranges()),
+        ))
+        statements.append(Statement(f"e{i}", draw(st.sampled_from(sorted(ENTITY_TYPES))), pos, head, motion))
     return Program(tuple(statements))
 
 
@@ -88,6 +96,11 @@ def test_comments_and_blank_lines_are_allowed():
     ("__import__ = new Car ahead of ego by Range(0, 5), facing toward ego", "identifier"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego; import os", "unexpected character"),
     ("a = new Car above ego by Range(0, 5), facing toward ego", "expected a position"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving fast", "expected Range"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving Range(1, 3) km/h", "expected m"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving like b", "neither ego nor declared"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, stationary, stationary", "unexpected ','"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego,", "expected moving"),
     ("a = new Car ahead of ego by Range(0, 1e999), facing toward ego", "out of range"),
 ])
 def test_parse_errors_are_one_line_with_a_position(text, needle):

@@ -1,25 +1,27 @@
-"""Statement parts, each behind the one interface of synth.parts.base: position and heading (the paper's)."""
+"""Statement parts, each behind the one interface of synth.parts.base: position and heading (the paper's), and
+motion (beyond it, with `--motion`)."""
 
 from __future__ import annotations
 
 from synth.config import SynthConfig
 from synth.parts.base import MeasureRequest, Part, Want
 from synth.parts.heading import HEADING
+from synth.parts.motion import MOTION
 from synth.parts.position import POSITION
 
 # In statement order: the order clauses print in, and the order every module asks its questions in.
 STATIC_PARTS: tuple[Part, ...] = (POSITION, HEADING)
-ALL_PARTS: tuple[Part, ...] = STATIC_PARTS
+ALL_PARTS: tuple[Part, ...] = (POSITION, HEADING, MOTION)
 _BY_NAME = {p.name: p for p in ALL_PARTS}
 
 
 def parts_for(config: SynthConfig) -> tuple[Part, ...]:
     """The parts every statement carries under this configuration."""
-    return STATIC_PARTS
+    return ALL_PARTS if config.motion else STATIC_PARTS
 
 
 def part_named(name: str) -> Part:
     return _BY_NAME[name]
 
 
-__all__ = ["ALL_PARTS", "HEADING", "POSITION", "STATIC_PARTS", "MeasureRequest", "Part", "Want", "part_named", "parts_for"]
+__all__ = ["ALL_PARTS", "HEADING", "MOTION", "POSITION", "STATIC_PARTS", "MeasureRequest", "Part", "Want", "part_named", "parts_for"]

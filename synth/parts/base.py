@@ -1,6 +1,6 @@
-"""One interface for a statement part: what every module that handles a statement asks of position, heading, ...
+"""One interface for a statement part: what every module that handles a statement asks of position, heading, motion.
 
-A statement `ID = new TYPE POS, HEADING` is a sequence of parts. Each part has a few witness relations, which
+A statement `ID = new TYPE POS, HEADING [, MOTION]` is a sequence of parts. Each part has a few witness relations, which
 cost 0 and name a reference (or, for some parts, need none), a fallback relative to ego (cost 1) and an absolute
 form (cost 2). The rest of the core is written once, over parts:
 
@@ -11,7 +11,7 @@ form (cost 2). The rest of the core is written once, over parts:
   Alg. 4                quantity, float_measure, clause, robust_clause  -> statement
   semantics             holds, observed                       -> semantics (the independent checker)
   syntax                parse (printing is the clause's __str__) -> dsl
-  Scenic                keyword, scenic, needs_own_position, scenic_prelude -> emit_scenic
+  Scenic                keyword, scenic, needs_own_position, scenic_requirements, scenic_prelude -> emit_scenic
   report                kinds, kind                           -> pipeline.report_stats
 
 The SMT methods take the backend as an argument and build formulas from its primitives (q, var, offset, cone,
@@ -142,6 +142,10 @@ class Part(ABC):
     def needs_own_position(self, clause: Clause) -> bool:
         """Does the Scenic value refer to the entity's own position (which a specifier cannot name)?"""
         return False
+
+    def scenic_requirements(self, clause: Clause, entity: str) -> list[str]:
+        """Scenic `require` lines that keep sampled values inside the clause where a value alone cannot."""
+        return []
 
     def scenic_prelude(self, config: SynthConfig) -> str:
         """Helpers the part's Scenic values use beyond the paper's prelude."""
