@@ -11,7 +11,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from synth.dsl import DirectionPos, FacingRelation, LocalXYPos, Program, RelativeHeading
+from synth.dsl import (
+    AbsoluteHeading,
+    AbsoluteSpeed,
+    AbsoluteXYPos,
+    DirectionPos,
+    FacingRelation,
+    LocalXYPos,
+    MovingLike,
+    Program,
+    RelativeHeading,
+    RelativeSpeed,
+    Stationary,
+)
 from synth.geometry import heading_vector, normalize, to_local
 from synth.scene import Scene
 
@@ -22,8 +34,8 @@ FORMATS = ("png", "svg", "pdf")
 class RelationKind:
     label: str
     color: str
-    linestyle: str  # solid: places the position; dashed: sets the heading
-    rad: float  # curvature, so a position and a heading arrow between the same pair stay apart
+    linestyle: str  # solid: places the position; dashed: sets the heading; dotted: sets the speed
+    rad: float  # curvature, so position, heading and motion arrows between the same pair stay apart
 
 
 # Colour by relation kind; cost-0 kinds warm, cost-1 kinds cool.
@@ -32,6 +44,24 @@ RELATION_KINDS: dict[str, RelationKind] = {
     "relative_xy": RelationKind("on Range @ Range relative to\n(position, cost 1)", "#5e3c99", "-", 0.08),
     "facing": RelationKind("facing toward / away from\n(heading, cost 0)", "#1a9641", "--", -0.2),
     "relative_heading": RelationKind("facing Range deg relative to\n(heading, cost 1)", "#0571b0", "--", -0.2),
+    "moving_like": RelationKind("moving like\n(motion, cost 0)", "#d01c8b", ":", 0.32),
+    "relative_speed": RelationKind("moving Range m/s relative to\n(motion, cost 1)", "#4d9221", ":", 0.32),
+}
+
+
+@dataclass(frozen=True)
+class MarkKind:
+    label: str
+    marker: str
+    hollow: bool = False  # drawn as an outline, so the box under it stays visible
+
+
+# Clauses with no reference, marked on the entity: the absolute forms (cost 2) and `stationary` (cost 0).
+MARK_KINDS: dict[str, MarkKind] = {
+    "absolute_position": MarkKind("absolute position (cost 2)", "*"),
+    "absolute_heading": MarkKind("absolute heading (cost 2)", "x"),
+    "stationary": MarkKind("stationary (motion, cost 0)", "s", hollow=True),
+    "absolute_speed": MarkKind("absolute speed (cost 2)", "^"),
 }
 
 @dataclass(frozen=True)
@@ -97,22 +127,30 @@ class Reference:
     kind: str  # a key of RELATION_KINDS
 
 
-# The DSL's relative forms, by the kind of arrow they draw; the absolute forms (cost 2) have no reference.
+@dataclass(frozen=True)
+class Mark:
+    entity: str
+    kind: str  # a key of MARK_KINDS
+
+
+# Every clause of the DSL by what it draws: an arrow from its reference, or a mark on the entity.
 _KINDS = {DirectionPos: "sector", LocalXYPos: "relative_xy", FacingRelation: "facing",
-          RelativeHeading: "relative_heading"}
+          RelativeHeading: "relative_heading", MovingLike: "moving_like", RelativeSpeed: "relative_speed",
+          AbsoluteXYPos: "absolute_position", AbsoluteHeading: "absolute_heading", Stationary: "stationary",
+          AbsoluteSpeed: "absolute_speed"}
 
 
-def references(program: Program) -> tuple[tuple[Reference, ...], tuple[str, ...], tuple[str, ...]]:
-    """(arrows from reference to entity, ids placed absolutely (cost 2), ids headed absolutely (cost 2))."""
-    arrows, abs_pos, abs_head = [], [], []
+def references(program: Program) -> tuple[tuple[Reference, ...], tuple[Mark, ...]]:
+    """(arrows from reference to entity, marks of the clauses without a reference), in statement order."""
+    arrows, marks = [], []
     for st in program.statements:
-        for part, absolute in ((st.position, abs_pos), (st.heading, abs_head)):
-            kind = _KINDS.get(type(part))
-            if kind is None:
-                absolute.append(st.id)
+        for _, clause in st.clauses():
+            kind = _KINDS[type(clause)]
+            if kind in MARK_KINDS:
+                marks.append(Mark(st.id, kind))
             else:
-                arrows.append(Reference(part.ref, st.id, kind))
-    return tuple(arrows), tuple(abs_pos), tuple(abs_head)
+                arrows.append(Reference(clause.ref, st.id, kind))
+    return tuple(arrows), tuple(marks)
 
 
 def _extent(boxes: Sequence[Box], margin: float) -> tuple[float, float, float, float]:
@@ -174,7 +212,7 @@ def draw(view: View):
         handles.append(Patch(facecolor=FAMILIES["vehicle"].variant, alpha=0.3,
                              label=f"{len(view.samples)} sampled variants\n(translucent)"))
     if view.program is not None:
-        arrows, abs_pos, abs_head = references(view.program)
+        arrows, marks = references(view.program)
         for r in arrows:
             k = RELATION_KINDS[r.kind]
             a, e = boxes[r.ref], boxes[r.entity]
@@ -184,12 +222,14 @@ def draw(view: View):
         used = {r.kind for r in arrows}
         handles += [Line2D([], [], color=k.color, linestyle=k.linestyle, label=k.label)
                     for name, k in RELATION_KINDS.items() if name in used]
-        marks = (("*", abs_pos, "absolute position (cost 2)"), ("x", abs_head, "absolute heading (cost 2)"))
-        for marker, ids, label in marks:
+        for name, k in MARK_KINDS.items():
+            ids = [m.entity for m in marks if m.kind == name]
             if ids:
-                ax.scatter([boxes[i].x for i in ids], [boxes[i].y for i in ids], marker=marker, s=40, c="black",
-                           zorder=7, linewidths=1.0)
-                handles.append(Line2D([], [], color="black", marker=marker, linestyle="none", label=label))
+                colour = {"facecolors": "none", "edgecolors": "black"} if k.hollow else {"c": "black"}
+                ax.scatter([boxes[i].x for i in ids], [boxes[i].y for i in ids], marker=k.marker, s=40, zorder=7,
+                           linewidths=1.0, **colour)
+                handles.append(Line2D([], [], color="black", marker=k.marker, linestyle="none", label=k.label,
+                                      **({"markerfacecolor": "none"} if k.hollow else {})))
 
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)

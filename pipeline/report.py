@@ -19,7 +19,6 @@ from pipeline.programs import STATUSES
 from pipeline.report_plots import Plot, all_plots
 from pipeline.report_stats import (
     ABSOLUTE_COST_PER_ENTITY,
-    RELATION_KINDS,
     FailureGroup,
     GroupStats,
     Prepared,
@@ -160,11 +159,13 @@ def side_by_side_section(t: SideBySide) -> Section:
 
 def relation_section(usage: RelationUsage, configs: tuple[str, ...], plot: Plot) -> Section:
     rows = tuple((kind, *(str(int(usage.counts.loc[kind, c])) for c in configs),
-                  str(int(usage.counts.loc[kind].sum()))) for kind in RELATION_KINDS)
+                  str(int(usage.counts.loc[kind].sum()))) for kind in usage.kinds)
+    motion = (" Motion: stationary and moving like cost 0, relative speed 1, absolute speed 2."
+              if usage.motion else "")
     blocks: list[str | Table | Plot] = [
         "Counts of each relation in the programs, parsed with the DSL's own parser. "
         "ahead / behind / left / right and toward / away are the cost-0 relations; relative position and "
-        "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2.",
+        "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2." + motion,
         Table(("Relation", *configs, "Total"), rows, "l" + "r" * (len(configs) + 1)),
         plot,
     ]

@@ -15,6 +15,7 @@ import numpy as np
 from pipeline.report_stats import (
     ABSOLUTE_COST_PER_ENTITY,
     HEADING_KINDS,
+    MOTION_KINDS,
     POSITION_KINDS,
     GroupStats,
     Prepared,
@@ -27,8 +28,9 @@ PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 REFERENCE = "#555555"  # the absolute-coordinate baseline and other guides
 DPI = 110
-KIND_COST = {**dict.fromkeys(("ahead", "behind", "left", "right", "toward", "away"), 0),
-             "relative position": 1, "relative heading": 1, "absolute position": 2, "absolute heading": 2}
+KIND_COST = {**dict.fromkeys(("ahead", "behind", "left", "right", "toward", "away", "stationary", "moving like"), 0),
+             "relative position": 1, "relative heading": 1, "relative speed": 1, "absolute position": 2,
+             "absolute heading": 2, "absolute speed": 2}
 # Every file all_plots writes, in report order; `r2s report` may replace a directory holding only these.
 PLOT_FILES = ("runtime_vs_n.png", "cost_vs_n.png", "cost_distribution.png", "cost_vs_absolute.png",
               "relation_usage.png")
@@ -202,14 +204,15 @@ def _grouped_barh(ax, kinds: tuple[str, ...], usage: RelationUsage, configs: tup
 def relation_usage(usage: RelationUsage, configs: tuple[str, ...], path: Path) -> Plot:
     shown = [c for c in configs if usage.counts[c].sum() > 0]  # configs without a program have nothing to show
     height = max(3.6, 1.4 + 0.22 * len(POSITION_KINDS) * max(len(shown), 1))
-    fig, (left, right) = _figure(width=10.5, height=height, ncols=2)
-    _grouped_barh(left, POSITION_KINDS, usage, configs, shown)
-    _grouped_barh(right, HEADING_KINDS, usage, configs, shown)
-    if not shown:
-        for ax in (left, right):
+    panels = [(POSITION_KINDS, "Position relations (cost)"), (HEADING_KINDS, "Heading relations (cost)")]
+    if usage.motion:
+        panels.append((MOTION_KINDS, "Motion relations (cost)"))
+    fig, axes = _figure(width=5.25 * len(panels), height=height, ncols=len(panels))
+    for ax, (kinds, title) in zip(axes, panels):
+        _grouped_barh(ax, kinds, usage, configs, shown)
+        if not shown:
             _no_data(ax, "no program to count")
-    left.set_title("Position relations (cost)")
-    right.set_title("Heading relations (cost)")
+        ax.set_title(title)
     fig.suptitle("Relation usage in the synthesized programs")
     _legend(fig)
     _save(fig, path)

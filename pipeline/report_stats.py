@@ -14,15 +14,16 @@ import pandas as pd
 
 from pipeline.programs import STATUSES
 from synth.dsl import AbsoluteHeading, AbsoluteXYPos
-from synth.parts import HEADING, POSITION
+from synth.parts import HEADING, MOTION, POSITION
 
 # Entity-count buckets (N excludes ego). Later buckets are wide because dense frames are rare and slow.
 BUCKETS: tuple[tuple[int, int | None], ...] = ((0, 0), (1, 5), (6, 10), (11, 20), (21, 40), (41, 80), (81, None))
 # The absolute-coordinate program declares every entity with `on Range @ Range, facing Range deg`: 2 + 2.
 ABSOLUTE_COST_PER_ENTITY = AbsoluteXYPos.cost + AbsoluteHeading.cost
-# Relation kinds in the order the paper's grammar lists them (position first, then heading).
+# Relation kinds in the order the grammar lists them (position first, then heading, then motion if any).
 POSITION_KINDS = POSITION.kinds
 HEADING_KINDS = HEADING.kinds
+MOTION_KINDS = MOTION.kinds
 RELATION_KINDS = POSITION_KINDS + HEADING_KINDS
 ALL = "all"
 
@@ -139,12 +140,22 @@ def relation_kinds(program_text: str) -> Counter:
 
 @dataclass(frozen=True)
 class RelationUsage:
-    counts: pd.DataFrame  # index RELATION_KINDS, one column per config, integer counts
+    counts: pd.DataFrame  # index RELATION_KINDS + MOTION_KINDS, one column per config, integer counts
     unparsable: tuple[tuple[str, str, str], ...]  # (config, frame_id, parser message) of programs not in the DSL
+
+    @property
+    def motion(self) -> bool:
+        """Do any programs say how fast their entities move?"""
+        return bool(self.counts.loc[list(MOTION_KINDS)].to_numpy().sum())
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The kinds to show: the paper's always, motion's when some program has them."""
+        return RELATION_KINDS + (MOTION_KINDS if self.motion else ())
 
 
 def relation_usage(p: Prepared) -> RelationUsage:
-    counts = pd.DataFrame(0, index=list(RELATION_KINDS), columns=list(p.configs), dtype=int)
+    counts = pd.DataFrame(0, index=list(RELATION_KINDS + MOTION_KINDS), columns=list(p.configs), dtype=int)
     unparsable = []
     from synth.dsl import DslError
 

@@ -47,11 +47,11 @@ def test_references_name_each_relation_kind():
         "car1 = new Car ahead of ego by Range(5, 10), facing toward ego\n"
         "car2 = new Car on Range(1, 6) @ Range(0, 5) relative to car1, facing Range(0, 5) deg relative to ego\n"
         "car3 = new Car on Range(1, 6) @ Range(0, 5), facing Range(0, 5) deg\n")
-    arrows, abs_pos, abs_head = references(program)
+    arrows, marks = references(program)
     assert [(r.ref, r.entity, r.kind) for r in arrows] == [
         ("ego", "car1", "sector"), ("ego", "car1", "facing"),
         ("car1", "car2", "relative_xy"), ("ego", "car2", "relative_heading")]
-    assert abs_pos == ("car3",) and abs_head == ("car3",)
+    assert [(m.entity, m.kind) for m in marks] == [("car3", "absolute_position"), ("car3", "absolute_heading")]
 
 
 @pytest.fixture(scope="module")
@@ -130,3 +130,31 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(inputs, tmp_path, case
     proc = run_r2s("render", *args)
     assert_one_line_error(proc, 2, contains=message)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.dsl", "bad.json", "foreign.dsl"]
+
+
+def test_motion_references_are_drawn(tmp_path):
+    from pipeline.render import View, draw, save
+    from synth.scene import scene_from_dict
+
+    program = parse_program(
+        "car1 = new Car ahead of ego by Range(5, 10), facing toward ego, moving like ego\n"
+        "car2 = new Car ahead of car1 by Range(0, 5), facing Range(0, 5) deg relative to ego, stationary\n"
+        "car3 = new Car on Range(1, 6) @ Range(0, 5), facing Range(0, 5) deg, moving Range(2, 4) m/s relative to car1\n"
+        "car4 = new Car on Range(1, 6) @ Range(5, 10), facing Range(0, 5) deg, moving Range(0, 2) m/s\n")
+    arrows, marks = references(program)
+    motion = [(r.ref, r.entity, r.kind) for r in arrows if r.kind in ("moving_like", "relative_speed")]
+    assert motion == [("ego", "car1", "moving_like"), ("car1", "car3", "relative_speed")]
+    assert [(m.entity, m.kind) for m in marks if m.kind in ("stationary", "absolute_speed")] == [
+        ("car2", "stationary"), ("car4", "absolute_speed")]
+    scene = scene_from_dict({"frame_id": "m", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0, "speed": 5},
+        {"id": "car1", "type": "Car", "x": 0, "y": 8, "heading": 180, "speed": 5.5},
+        {"id": "car2", "type": "Car", "x": 0, "y": 11, "heading": 2, "speed": 0},
+        {"id": "car3", "type": "Car", "x": 3, "y": 3, "heading": 2, "speed": 8},
+        {"id": "car4", "type": "Car", "x": 3, "y": 8, "heading": 2, "speed": 1}]})
+    fig = draw(View(scene, program))
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any("moving like" in t for t in labels) and any("stationary" in t for t in labels)
+    assert any("relative to\n(motion" in t for t in labels) and any("absolute speed" in t for t in labels)
+    save(fig, tmp_path / "m.png")
+    assert (tmp_path / "m.png").stat().st_size > 10_000

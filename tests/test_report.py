@@ -270,3 +270,34 @@ def test_programs_files_with_wrong_types_or_values_exit_2_everywhere(two_strateg
     proc = run_r2s("run", str(frames), "--out", str(path), "--jobs", "1")
     assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     assert path.read_bytes() == before
+
+
+def test_motion_relations_are_counted_only_where_programs_have_them(real_frames, tmp_path):
+    import random
+    from dataclasses import replace
+
+    from synth.scene import Scene
+
+    rng = random.Random(8)
+    config = SynthConfig(motion=True)
+    rows = []
+    for scene in [s for s in real_frames if len(s.others) <= 25][:6]:
+        moving = Scene(scene.frame_id, tuple(replace(e, speed=rng.choice([0.0, 0.3, rng.uniform(1, 12)]))
+                                             for e in scene.entities))
+        rows.append(result_row(synthesize(moving, config), config.semantic_hash()))
+    out = tmp_path / "report"
+    proc = run_r2s("report", str(_write(rows, tmp_path / "programs.parquet")), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    table = _by_name(_table((out / "report.md").read_text(), "Relation usage"))
+    lines = [ln for r in rows for ln in r["program"].splitlines()]
+    expected = {"stationary": sum(ln.endswith(", stationary") for ln in lines),
+                "moving like": sum(", moving like " in ln for ln in lines),
+                "relative speed": sum(bool(re.search(r"m/s relative to \w+$", ln)) for ln in lines),
+                "absolute speed": sum(ln.endswith(" m/s") for ln in lines)}
+    assert {k: int(table[k]["Total"]) for k in expected} == expected
+    assert sum(expected.values()) == len(lines) and expected["stationary"] > 0
+
+
+def test_static_reports_have_no_motion_rows(report):
+    table = _by_name(_table((report / "report.md").read_text(), "Relation usage"))
+    assert "stationary" not in table and "relative speed" not in table
