@@ -397,7 +397,8 @@ def parameterise(program: Program, scene: Scene, config: SynthConfig) -> Paramet
     draws: list[tuple[Draws, ...]] = [()]
     refs: list[tuple[int | None, ...]] = [()]
     for st in program.statements:
-        ps = tuple(DRAWS[part.name](clause, config) for part, clause in st.clauses())
+        # Parts without draws here (motion: a speed moves no box) do not enter the placement of boxes.
+        ps = tuple(DRAWS[part.name](clause, config) for part, clause in st.clauses() if part.name in DRAWS)
         draws.append(ps)
         refs.append(tuple(None if p.ref is None else index[p.ref] for p in ps))
     return Parameterisation(ids, (scene.ego.type, *(s.type for s in program.statements)), scene.ego,
