@@ -26,6 +26,13 @@ class SynthStats:
     smt_queries: int
     nodes_expanded: int
     peak_rss_mb: float
+    # Where runtime_s went, stage by stage (not in the JSON document or programs.parquet): the relation oracle
+    # (every pair's witness relations), Alg. 4 (references and Range values), certification of the printed
+    # program, Scenic rendering. smt_s is the solver's share of the first three.
+    oracle_s: float = 0.0
+    ranges_s: float = 0.0
+    certify_s: float = 0.0
+    render_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -90,24 +97,31 @@ def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
         oracle.full_table()
     cm = CostModel(oracle)
     t = time.perf_counter()
+    oracle_s = t - started
     found = search(config.strategy, cm, budget)
     search_s = time.perf_counter() - t
+    t = time.perf_counter()
     # Search indices are oracle indices minus one (oracle index 0 is ego).
     program = build_program(oracle, tuple(i + 1 for i in found.order), config)
     if program.cost != found.cost:
         raise AssertionError(f"program cost {program.cost} differs from the search's {found.cost}")
+    ranges_s = time.perf_counter() - t
+    t = time.perf_counter()
     certified = False
     if oracle.backend is not None:
         failed = oracle.backend.certify(program, scene)
         if failed:
             raise CertificationError(f"the solver refutes the statements of {', '.join(failed)}")
         certified = True
+    certify_s = time.perf_counter() - t
+    t = time.perf_counter()
     header = f"frame {scene.frame_id}: cost {program.cost} ({found.status}), r2sgen {__version__}"
     if is_robust(scene, config):
         speed = f", {fmt_number(config.speed_uncertainty)} m/s" if MOTION.is_robust(scene, config) else ""
         header += (f"; robust to {fmt_number(config.pos_uncertainty)} m, {fmt_number(config.heading_uncertainty)} deg"
                    f"{speed} (entities' own sigmas override)")
     scenic = render_scenic(program, scene, config, header=header)
+    render_s = time.perf_counter() - t
     stats = oracle.backend.stats if oracle.backend is not None else None
     return SynthResult(
         frame_id=scene.frame_id,
@@ -125,6 +139,10 @@ def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
             smt_queries=stats.queries if stats else 0,
             nodes_expanded=found.nodes_expanded,
             peak_rss_mb=peak_rss_mb(),
+            oracle_s=oracle_s,
+            ranges_s=ranges_s,
+            certify_s=certify_s,
+            render_s=render_s,
         ),
         config=config,
     )
