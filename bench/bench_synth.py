@@ -1,28 +1,49 @@
-"""Synthesizer core benchmark (issue 2): `auto` on every real keyframe, and its speed-up over the paper's BFS-CPA.
+"""Synthesizer core benchmark (issues 2 and 18): time per frame of certified synthesis, before and after, and
+`auto`'s speed-up over the paper's BFS-CPA.
 
-1. Scale: every nuScenes-mini keyframe, all categories within 50 m (up to 141 entities), strategy auto, oracle
-   hybrid (the default): proved-optimal share, search / total time, SMT queries and seconds per frame, memory.
-2. Ratio: vehicle-only keyframes, one per N, auto vs bfs-cpa in this same process, same oracle, equal cost
-   required; bfs-cpa under a time limit (TO when it runs out).
-Writes bench/results/synth.json and synth.md.
+1. Before / after (issue 18). Frame sets (bench/workloads.py): all 242 shipped nuScenes-mini keyframes (all
+   categories within 50 m), Waymo-like ScenarioNet frames (real nuScenes tracks in the Waymo converter's layout,
+   needs ../shared) and dense crowds (tests/crowds.py). Each set is synthesized with the default configuration
+   (auto, hybrid oracle, z3: certified) by this tree ("after") and by a frozen checkout of the baseline commit
+   ("before", `git archive` into a temporary folder), each in its own warmed process (bench/synth_worker.py),
+   one after the other in this run. Per frame: wall time and its split into relation oracle, search, Alg. 4
+   (references and Range values), certification and Scenic rendering; A* nodes and solver queries. Reported:
+   median / p95 / max per set and side, frames over 0.5 s, the speed-up, and whether every frame's output (DSL,
+   Scenic, JSON without timings, certified) is byte-identical.
+2. Where the time goes: a cProfile of each tree on a sample of every set, its own time summed by kind of code.
+3. Ratio (skipped by --quick): vehicle-only keyframes, one per N, auto vs bfs-cpa in this process, same oracle,
+   equal cost required; bfs-cpa under a time limit (TO when it runs out).
+Writes bench/results/synth.json and synth.md, with the machine, commits and the load average seen.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import pstats
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from collections import defaultdict
+from pathlib import Path
 
-sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
 
-from common import machine, write_results
-from realdata import available, keyframe_scenes
+import workloads  # noqa: E402
+from common import machine, write_results  # noqa: E402
+from realdata import keyframe_scenes  # noqa: E402
 
-from synth.config import SynthConfig
-from synth.search.budget import peak_rss_mb
-from synth.synthesize import synthesize
+# The last main commit before issue 18's changes (the core as it stood when the issue was filed).
+BASELINE = "169f18e"
+STAGES = ("oracle_s", "search_s", "ranges_s", "certify_s", "render_s")
+STAGE_NAMES = {"oracle_s": "relation oracle", "search_s": "search", "ranges_s": "Alg. 4 + Range values",
+               "certify_s": "certification", "render_s": "Scenic rendering"}
+SLOW_S = 0.5
 
 
 def pct(values, q):
@@ -30,33 +51,87 @@ def pct(values, q):
     return v[min(len(v) - 1, int(round(q * (len(v) - 1))))]
 
 
-def scale(scenes) -> dict:
-    rows = []
-    for s in scenes:
-        r = synthesize(s)
-        rows.append({"frame_id": s.frame_id, "n": r.n_entities, "status": r.status, "cost": r.cost,
-                     "lower_bound": r.lower_bound, "search_s": r.stats.search_s, "runtime_s": r.stats.runtime_s,
-                     "smt_queries": r.stats.smt_queries, "smt_s": r.stats.smt_s, "certified": r.certified})
-    search = [r["search_s"] for r in rows]
-    n_total = sum(r["n"] for r in rows)
-    return {
-        "frames": len(rows),
-        "max_entities": max(r["n"] for r in rows),
-        "optimal_share": sum(r["status"] == "optimal" for r in rows) / len(rows),
-        "certified_share": sum(r["certified"] for r in rows) / len(rows),
-        "search_s": {"median": statistics.median(search), "p95": pct(search, 0.95), "max": max(search)},
-        "runtime_s": {"median": statistics.median(r["runtime_s"] for r in rows),
-                      "max": max(r["runtime_s"] for r in rows), "total": sum(r["runtime_s"] for r in rows)},
-        "smt_queries_per_entity": sum(r["smt_queries"] for r in rows) / n_total,
-        "smt_queries_per_entity_range": [min(r["smt_queries"] / r["n"] for r in rows if r["n"]),
-                                         max(r["smt_queries"] / r["n"] for r in rows if r["n"])],
-        "smt_s_per_frame": {"median": statistics.median(r["smt_s"] for r in rows), "max": max(r["smt_s"] for r in rows)},
-        "peak_rss_mb": peak_rss_mb(),
-        "rows": rows,
-    }
+def summary(values) -> dict:
+    values = list(values)
+    return {"median": statistics.median(values), "p95": pct(values, 0.95), "max": max(values),
+            "total": sum(values)}
 
+
+# ------------------------------------------------------------------------------------------ before / after
+
+def frozen_tree(commit: str, into: Path) -> Path:
+    """The repository at `commit`, as files (git archive), for the worker to import."""
+    tree = into / f"r2sgen-{commit}"
+    tree.mkdir()
+    archive = subprocess.run(["git", "archive", "--format=tar", commit], cwd=ROOT, capture_output=True, check=True)
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive.stdout, check=True)
+    return tree
+
+
+def run_worker(frames: Path, code: Path, out: Path, config: dict, profile: Path | None = None) -> list[dict]:
+    cmd = [sys.executable, str(HERE / "synth_worker.py"), str(frames), "--code", str(code), "--out", str(out),
+           "--config", json.dumps(config)]
+    if profile is not None:
+        cmd += ["--profile", str(profile)]
+    subprocess.run(cmd, check=True, cwd=tempfile.gettempdir())
+    return [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+
+
+def side_summary(rows: list[dict]) -> dict:
+    out = {"frames": len(rows), "max_n": max(r["n"] for r in rows), "wall_s": summary(r["wall_s"] for r in rows),
+           "over_0_5_s": sum(r["wall_s"] > SLOW_S for r in rows),
+           "certified_share": sum(r["certified"] for r in rows) / len(rows),
+           "optimal_share": sum(r["status"] == "optimal" for r in rows) / len(rows),
+           "nodes_expanded": summary(r["nodes_expanded"] for r in rows),
+           "smt_queries": summary(r["smt_queries"] for r in rows)}
+    for k in STAGES + ("smt_s",):
+        out[k] = summary(r[k] for r in rows)
+    return out
+
+
+def compare(before: list[dict], after: list[dict]) -> dict:
+    keys = ("frame_id", "status", "cost", "lower_bound", "certified", "program", "scenic_sha256", "json_sha256")
+    differ = [b["frame_id"] for b, a in zip(before, after) if any(b[k] != a[k] for k in keys)]
+    assert [b["frame_id"] for b in before] == [a["frame_id"] for a in after]
+    bw, aw = summary(r["wall_s"] for r in before), summary(r["wall_s"] for r in after)
+    return {"identical": len(before) - len(differ), "differ": differ,
+            "speedup_median": bw["median"] / aw["median"], "speedup_total": bw["total"] / aw["total"],
+            "speedup_max": bw["max"] / aw["max"]}
+
+
+# ------------------------------------------------------------------------------------------ profile
+
+PROFILE_KINDS = (
+    ("z3 solving (check)", lambda f, fn: "/z3/" in f and fn.startswith(("Z3_solver_check", "Z3_optimize_check"))),
+    ("z3 formula building (Python API)", lambda f, fn: "/z3/" in f),
+    ("search (synth/search)", lambda f, fn: "/synth/search/" in f),
+    ("Scenic rendering and collision rule", lambda f, fn: any(m in f for m in ("emit_scenic", "collision_rule",
+                                                                                "overlap", "parameters"))),
+    ("relation tables (numpy)", lambda f, fn: "numpy" in f or "relations" in f or "tables" in f),
+    ("fractions / exact arithmetic", lambda f, fn: "fractions" in f or "geometry" in f),
+)
+
+
+def profile_kinds(path: Path) -> dict:
+    """Own time (tottime) of every function, summed by kind of code, in seconds."""
+    st = pstats.Stats(str(path))
+    out: dict[str, float] = defaultdict(float)
+    for (filename, _line, fn), (_cc, _nc, tt, _ct, _callers) in st.stats.items():
+        kind = next((k for k, match in PROFILE_KINDS if match(filename, fn)), "other Python")
+        out[kind] += tt
+    out["total"] = sum(v for k, v in out.items())
+    top = sorted(st.stats.items(), key=lambda kv: -kv[1][2])[:12]
+    out_top = [{"function": f"{Path(f).name}:{line}({fn})", "tottime_s": v[2], "calls": v[1]}
+               for (f, line, fn), v in top]
+    return {"kinds": dict(out), "top": out_top}
+
+
+# ------------------------------------------------------------------------------------------ ratio vs BFS-CPA
 
 def ratio(scenes, limit: float, n_min: int, n_max: int) -> list[dict]:
+    from synth.config import SynthConfig
+    from synth.synthesize import synthesize
+
     by_n = defaultdict(list)
     for s in scenes:
         by_n[len(s.others)].append(s)
@@ -79,37 +154,130 @@ def ratio(scenes, limit: float, n_min: int, n_max: int) -> list[dict]:
     return out
 
 
+# ------------------------------------------------------------------------------------------ report
+
+def ms(v: float) -> str:
+    return f"{v * 1e3:,.1f} ms" if v < 10 else f"{v:,.1f} s"
+
+
+def markdown(payload: dict, args) -> str:
+    m = payload["machine"]
+    md = ["# Synthesizer core benchmark", "",
+          f"Machine: {m['cpu']} ({m['cores']} cores), Python {m['python']}, {m['date']}, commit {m['commit']}; "
+          f"load average {payload['load_before'][0]:.2f} at the start, {payload['load_after'][0]:.2f} at the end "
+          "(shared machine: compare the two sides of one run, not runs).", "",
+          "## Certified synthesis per frame, before and after (issue 18)", "",
+          f"Default configuration (strategy auto, oracle hybrid, solver z3: every program certified). **before**: "
+          f"commit {payload['baseline']} (frozen checkout); **after**: commit {m['commit']} (this tree). Each in its "
+          "own warmed process, one frame at a time; wall time of `synthesize` per frame.", "",
+          "| frames | N max | side | median | p95 | max | > 0.5 s | certified | max A* nodes | median solver queries |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, s in payload["sets"].items():
+        for side in ("before", "after"):
+            x = s[side]
+            md.append(f"| {name} ({x['frames']}) | {x['max_n']} | {side} | {ms(x['wall_s']['median'])} | "
+                      f"{ms(x['wall_s']['p95'])} | {ms(x['wall_s']['max'])} | {x['over_0_5_s']} | "
+                      f"{x['certified_share']:.0%} | {x['nodes_expanded']['max']:,.0f} | "
+                      f"{x['smt_queries']['median']:.0f} |")
+    md += ["", "| frames | speed-up (median) | speed-up (total time) | speed-up (slowest frame) | byte-identical output |",
+           "|---|---|---|---|---|"]
+    for name, s in payload["sets"].items():
+        c = s["compare"]
+        md.append(f"| {name} | {c['speedup_median']:.1f}x | {c['speedup_total']:.1f}x | {c['speedup_max']:.1f}x | "
+                  f"{c['identical']} of {s['before']['frames']} |")
+    md += ["", "### Where the time goes, stage by stage (median / max per frame)", "",
+           "| frames | side | " + " | ".join(STAGE_NAMES[k] for k in STAGES) + " | solver (in the first three) |",
+           "|---|---|" + "---|" * (len(STAGES) + 1)]
+    for name, s in payload["sets"].items():
+        for side in ("before", "after"):
+            x = s[side]
+            cells = [f"{ms(x[k]['median'])} / {ms(x[k]['max'])}" for k in STAGES + ("smt_s",)]
+            md.append(f"| {name} | {side} | " + " | ".join(cells) + " |")
+    if payload.get("profile"):
+        md += ["", "### Profile (cProfile, own time by kind of code, share of the profiled run)", "",
+               f"On {payload['profile_frames']} frames (every set, evenly spaced).", "",
+               "| kind of code | before | after |", "|---|---|---|"]
+        kinds = sorted({k for p in payload["profile"].values() for k in p["kinds"] if k != "total"},
+                       key=lambda k: -payload["profile"]["before"]["kinds"].get(k, 0.0))
+        for k in kinds:
+            cells = []
+            for side in ("before", "after"):
+                p = payload["profile"][side]["kinds"]
+                cells.append(f"{p.get(k, 0.0) / p['total']:.0%} ({p.get(k, 0.0):.2f} s)")
+            md.append(f"| {k} | " + " | ".join(cells) + " |")
+        tot = [payload["profile"][s]["kinds"]["total"] for s in ("before", "after")]
+        md.append(f"| total | {tot[0]:.2f} s | {tot[1]:.2f} s |")
+        md += ["", "Heaviest functions before (own time):", ""]
+        md += [f"- `{t['function']}`: {t['tottime_s']:.2f} s, {t['calls']:,} calls"
+               for t in payload["profile"]["before"]["top"][:8]]
+    rt = payload.get("ratio_vs_bfs_cpa")
+    if rt:
+        md += ["", "## auto vs the paper's BFS-CPA (vehicles only, one frame per N, same process, closed-form oracle)",
+               "", "| N | auto search | bfs-cpa search | speed-up | cost |", "|---|---|---|---|---|"]
+        for r in rt:
+            sp = (f"{r['speedup']:,.0f}x" if "speedup" in r
+                  else f">= {r['speedup_at_least']:,.0f}x (TO {args.bfs_limit:.0f} s)")
+            md.append(f"| {r['n']} | {r['auto_search_s']*1e3:.2f} ms | {r['bfs_cpa_search_s']:.2f} s "
+                      f"({r['bfs_cpa_status']}) | {sp} | {r['auto_cost']} |")
+    return "\n".join(md) + "\n"
+
+
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--baseline", default=BASELINE, help=f"the 'before' commit (default {BASELINE})")
+    ap.add_argument("--crowds", type=int, default=32, help="crowd frames (seeds 0..N-1; default 32)")
+    ap.add_argument("--waymo-every", type=int, default=10, help="Waymo-like frames: one every K 10 Hz steps")
+    ap.add_argument("--profile-every", type=int, default=8, help="profile one frame in K of every set (0: none)")
     ap.add_argument("--bfs-limit", type=float, default=120.0, help="seconds per bfs-cpa frame (default 120)")
     ap.add_argument("--max-n", type=int, default=23, help="largest vehicle count for the ratio (default 23)")
+    ap.add_argument("--quick", action="store_true", help="8 crowds, every 40th Waymo-like step, no BFS-CPA ratio")
     args = ap.parse_args()
-    if not available():
-        print("bench_synth: ../shared/data/nuscenes-mini not found; nothing to measure (set R2S_SHARED)")
-        return 0
-    import networkx  # noqa: F401  (warm the lazy import so it is not charged to the first frame)
-
-    t = time.time()
-    all_scenes = keyframe_scenes()
-    sc = scale(all_scenes)
-    print(f"scale: {sc['frames']} frames, optimal {sc['optimal_share']:.0%}, median search {sc['search_s']['median']*1e3:.2f} ms, "
-          f"max {sc['search_s']['max']*1e3:.1f} ms, peak {sc['peak_rss_mb']:.0f} MB", flush=True)
-    rt = ratio(keyframe_scenes(vehicles_only=True), args.bfs_limit, 5, args.max_n)
-    payload = {"machine": machine(), "scale": sc, "ratio_vs_bfs_cpa": rt, "wall_s": time.time() - t}
-    md = ["# Synthesizer core benchmark", "", f"Machine: {payload['machine']['cpu']} ({payload['machine']['cores']} cores), "
-          f"Python {payload['machine']['python']}, {payload['machine']['date']}, commit {payload['machine']['commit']}.", "",
-          "## auto on every nuScenes-mini keyframe (all categories within 50 m, hybrid oracle)", "",
-          "| frames | max N | proved optimal | certified | median search | p95 search | max search | median total | SMT queries / entity | peak RSS |",
-          "|---|---|---|---|---|---|---|---|---|---|",
-          f"| {sc['frames']} | {sc['max_entities']} | {sc['optimal_share']:.0%} | {sc['certified_share']:.0%} | "
-          f"{sc['search_s']['median']*1e3:.2f} ms | {sc['search_s']['p95']*1e3:.2f} ms | {sc['search_s']['max']*1e3:.1f} ms | "
-          f"{sc['runtime_s']['median']*1e3:.0f} ms | {sc['smt_queries_per_entity']:.2f} | {sc['peak_rss_mb']:.0f} MB |", "",
-          "## auto vs the paper's BFS-CPA (vehicles only, one frame per N, same process, closed-form oracle)", "",
-          "| N | auto search | bfs-cpa search | speed-up | cost |", "|---|---|---|---|---|"]
-    for r in rt:
-        sp = f"{r['speedup']:,.0f}x" if "speedup" in r else f">= {r['speedup_at_least']:,.0f}x (TO {args.bfs_limit:.0f} s)"
-        md.append(f"| {r['n']} | {r['auto_search_s']*1e3:.2f} ms | {r['bfs_cpa_search_s']:.2f} s ({r['bfs_cpa_status']}) | {sp} | {r['auto_cost']} |")
-    write_results("synth", payload, "\n".join(md) + "\n")
+    if args.quick:
+        args.crowds, args.waymo_every = min(args.crowds, 8), max(args.waymo_every, 40)
+    t0 = time.time()
+    load_before = os.getloadavg()
+    sets = {"nuScenes-mini keyframes": workloads.keyframes()}
+    waymo = workloads.waymo_like(args.waymo_every)
+    if waymo:
+        sets["Waymo-like (ScenarioNet)"] = waymo
+    else:
+        print(f"bench_synth: {workloads.SCENARIONET} not found: no Waymo-like frames (set R2S_SHARED)")
+    sets["crowds"] = workloads.crowds(args.crowds)
+    payload: dict = {"machine": machine(), "baseline": args.baseline, "load_before": load_before, "sets": {}}
+    with tempfile.TemporaryDirectory(prefix="bench_synth_") as tmp:
+        tmp = Path(tmp)
+        before_tree = frozen_tree(args.baseline, tmp)
+        sample = []
+        for i, (name, scenes) in enumerate(sets.items()):
+            frames = tmp / f"set{i}.jsonl"
+            frames.write_text("".join(json.dumps({"set": name, "scene": s}) + "\n" for s in scenes))
+            if args.profile_every:
+                sample += [{"set": name, "scene": s} for s in scenes[::args.profile_every]]
+            sides = {}
+            for side, code in (("before", before_tree), ("after", ROOT)):
+                t = time.time()
+                sides[side] = run_worker(frames, code, tmp / f"set{i}-{side}.jsonl", {})
+                print(f"{name}: {side} {len(scenes)} frames in {time.time() - t:.1f} s", flush=True)
+            payload["sets"][name] = {"before": side_summary(sides["before"]), "after": side_summary(sides["after"]),
+                                     "compare": compare(sides["before"], sides["after"]),
+                                     "rows": {k: v for k, v in sides.items()}}
+            c = payload["sets"][name]["compare"]
+            print(f"{name}: median x{c['speedup_median']:.1f}, total x{c['speedup_total']:.1f}, "
+                  f"identical {c['identical']}/{len(scenes)}", flush=True)
+        if sample:
+            frames = tmp / "profile.jsonl"
+            frames.write_text("".join(json.dumps(x) + "\n" for x in sample))
+            payload["profile_frames"] = len(sample)
+            payload["profile"] = {}
+            for side, code in (("before", before_tree), ("after", ROOT)):
+                prof = tmp / f"profile-{side}.pstats"
+                run_worker(frames, code, tmp / f"profile-{side}.jsonl", {}, profile=prof)
+                payload["profile"][side] = profile_kinds(prof)
+    if not args.quick and workloads.SCENARIONET.is_dir():
+        payload["ratio_vs_bfs_cpa"] = ratio(keyframe_scenes(vehicles_only=True), args.bfs_limit, 5, args.max_n)
+    payload["load_after"] = os.getloadavg()
+    payload["wall_s"] = time.time() - t0
+    write_results("synth", payload, markdown(payload, args))
     return 0
 
 
