@@ -6,7 +6,7 @@
    needs ../shared) and dense crowds (tests/crowds.py). Each set is synthesized with the default configuration
    (auto, hybrid oracle, z3: certified) by this tree ("after") and by a frozen checkout of the baseline commit
    ("before", `git archive` into a temporary folder), each in its own warmed process (bench/synth_worker.py),
-   one after the other in this run. Per frame: wall time and its split into relation oracle, search, Alg. 4
+   frame by frame in turn (so both see the same load on a shared machine). Per frame: wall time and its split into relation oracle, search, Alg. 4
    (references and Range values), certification and Scenic rendering; A* nodes and solver queries. Reported:
    median / p95 / max per set and side, frames over 0.5 s, the speed-up, and whether every frame's output (DSL,
    Scenic, JSON without timings, certified) is byte-identical.
@@ -22,6 +22,7 @@ import argparse
 import json
 import os
 import pstats
+import shutil
 import statistics
 import subprocess
 import sys
@@ -68,13 +69,60 @@ def frozen_tree(commit: str, into: Path) -> Path:
     return tree
 
 
-def run_worker(frames: Path, code: Path, out: Path, config: dict, profile: Path | None = None) -> list[dict]:
-    cmd = [sys.executable, str(HERE / "synth_worker.py"), str(frames), "--code", str(code), "--out", str(out),
-           "--config", json.dumps(config)]
-    if profile is not None:
-        cmd += ["--profile", str(profile)]
-    subprocess.run(cmd, check=True, cwd=tempfile.gettempdir())
-    return [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+def snapshot_tree(into: Path) -> Path:
+    """This tree's packages as they are now (edits made while the benchmark runs do not leak into it)."""
+    tree = into / "r2sgen-after"
+    for pkg in ("synth", "extractors", "pipeline"):
+        shutil.copytree(ROOT / pkg, tree / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    return tree
+
+
+def tree_state() -> str:
+    """'' when the working tree matches its commit, else '+ uncommitted changes'."""
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True,
+                           text=True).stdout.strip()
+    return " + uncommitted changes" if dirty else ""
+
+
+class Worker:
+    """A synth_worker.py process timing one tree, fed one frame at a time."""
+
+    def __init__(self, code: Path, config: dict, profile: Path | None = None):
+        cmd = [sys.executable, str(HERE / "synth_worker.py"), "--code", str(code), "--config", json.dumps(config)]
+        if profile is not None:
+            cmd += ["--profile", str(profile)]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                     cwd=tempfile.gettempdir())
+
+    def run(self, item: dict) -> dict:
+        self.proc.stdin.write(json.dumps(item) + "\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"synth worker died on {item['scene']['frame_id']} (exit {self.proc.wait()})")
+        return json.loads(line)
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        if self.proc.wait() != 0:
+            raise RuntimeError(f"synth worker exited {self.proc.returncode}")
+
+
+def run_sides(items: list[dict], trees: dict[str, Path], config: dict,
+              profiles: dict[str, Path] | None = None) -> dict[str, list[dict]]:
+    """Every frame through one worker per tree, in turn (the order alternating frame by frame), so that both
+    trees see the same load on a shared machine."""
+    workers = {side: Worker(code, config, (profiles or {}).get(side)) for side, code in trees.items()}
+    out: dict[str, list[dict]] = {side: [] for side in trees}
+    try:
+        for i, item in enumerate(items):
+            sides = list(trees) if i % 2 == 0 else list(reversed(trees))
+            for side in sides:
+                out[side].append(workers[side].run(item))
+    finally:
+        for w in workers.values():
+            w.close()
+    return out
 
 
 def side_summary(rows: list[dict]) -> dict:
@@ -87,6 +135,16 @@ def side_summary(rows: list[dict]) -> dict:
     for k in STAGES + ("smt_s",):
         out[k] = summary(r[k] for r in rows)
     return out
+
+
+ROW_KEYS = ("wall_s",) + STAGES + ("smt_s", "smt_queries", "nodes_expanded")
+
+
+def frame_rows(sides: dict[str, list[dict]]) -> list[dict]:
+    """Per frame: id, N, cost, and each side's time, stages, solver queries and nodes (programs left out)."""
+    return [{"frame_id": b["frame_id"], "n": b["n"], "cost": b["cost"],
+             **{f"{side}_{k}": r[k] for side, r in (("before", b), ("after", a)) for k in ROW_KEYS}}
+            for b, a in zip(sides["before"], sides["after"])]
 
 
 def compare(before: list[dict], after: list[dict]) -> dict:
@@ -168,8 +226,8 @@ def markdown(payload: dict, args) -> str:
           "(shared machine: compare the two sides of one run, not runs).", "",
           "## Certified synthesis per frame, before and after (issue 18)", "",
           f"Default configuration (strategy auto, oracle hybrid, solver z3: every program certified). **before**: "
-          f"commit {payload['baseline']} (frozen checkout); **after**: commit {m['commit']} (this tree). Each in its "
-          "own warmed process, one frame at a time; wall time of `synthesize` per frame.", "",
+          f"commit {payload['baseline']} (frozen checkout); **after**: commit {m['commit']}{payload['tree']}. Each in its "
+          "own warmed process, the two fed the same frame in turn; wall time of `synthesize` per frame.", "",
           "| frames | N max | side | median | p95 | max | > 0.5 s | certified | max A* nodes | median solver queries |",
           "|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in payload["sets"].items():
@@ -243,36 +301,31 @@ def main() -> int:
     else:
         print(f"bench_synth: {workloads.SCENARIONET} not found: no Waymo-like frames (set R2S_SHARED)")
     sets["crowds"] = workloads.crowds(args.crowds)
-    payload: dict = {"machine": machine(), "baseline": args.baseline, "load_before": load_before, "sets": {}}
+    payload: dict = {"machine": machine(), "tree": tree_state(), "baseline": args.baseline, "load_before": load_before,
+                     "sets": {}}
     with tempfile.TemporaryDirectory(prefix="bench_synth_") as tmp:
         tmp = Path(tmp)
         before_tree = frozen_tree(args.baseline, tmp)
+        after_tree = snapshot_tree(tmp)
+        trees = {"before": before_tree, "after": after_tree}
         sample = []
-        for i, (name, scenes) in enumerate(sets.items()):
-            frames = tmp / f"set{i}.jsonl"
-            frames.write_text("".join(json.dumps({"set": name, "scene": s}) + "\n" for s in scenes))
+        for name, scenes in sets.items():
+            items = [{"set": name, "scene": sc} for sc in scenes]
             if args.profile_every:
-                sample += [{"set": name, "scene": s} for s in scenes[::args.profile_every]]
-            sides = {}
-            for side, code in (("before", before_tree), ("after", ROOT)):
-                t = time.time()
-                sides[side] = run_worker(frames, code, tmp / f"set{i}-{side}.jsonl", {})
-                print(f"{name}: {side} {len(scenes)} frames in {time.time() - t:.1f} s", flush=True)
+                sample += items[::args.profile_every]
+            t = time.time()
+            sides = run_sides(items, trees, {})
+            print(f"{name}: {len(items)} frames, both sides, in {time.time() - t:.1f} s", flush=True)
             payload["sets"][name] = {"before": side_summary(sides["before"]), "after": side_summary(sides["after"]),
-                                     "compare": compare(sides["before"], sides["after"]),
-                                     "rows": {k: v for k, v in sides.items()}}
+                                     "compare": compare(sides["before"], sides["after"]), "frames": frame_rows(sides)}
             c = payload["sets"][name]["compare"]
             print(f"{name}: median x{c['speedup_median']:.1f}, total x{c['speedup_total']:.1f}, "
-                  f"identical {c['identical']}/{len(scenes)}", flush=True)
+                  f"identical {c['identical']}/{len(items)}", flush=True)
         if sample:
-            frames = tmp / "profile.jsonl"
-            frames.write_text("".join(json.dumps(x) + "\n" for x in sample))
             payload["profile_frames"] = len(sample)
-            payload["profile"] = {}
-            for side, code in (("before", before_tree), ("after", ROOT)):
-                prof = tmp / f"profile-{side}.pstats"
-                run_worker(frames, code, tmp / f"profile-{side}.jsonl", {}, profile=prof)
-                payload["profile"][side] = profile_kinds(prof)
+            profiles = {side: tmp / f"profile-{side}.pstats" for side in trees}
+            run_sides(sample, trees, {}, profiles)
+            payload["profile"] = {side: profile_kinds(path) for side, path in profiles.items()}
     if not args.quick and workloads.SCENARIONET.is_dir():
         payload["ratio_vs_bfs_cpa"] = ratio(keyframe_scenes(vehicles_only=True), args.bfs_limit, 5, args.max_n)
     payload["load_after"] = os.getloadavg()

@@ -1,12 +1,14 @@
-"""One timing process of bench_synth.py: synthesize every frame of a JSONL file with the source tree at --code.
+"""One timing process of bench_synth.py: synthesize frames with the source tree at --code, one request at a time.
 
-    python bench/synth_worker.py FRAMES.jsonl --code TREE --out RESULTS.jsonl [--config '{"oracle": "smt"}']
+    python bench/synth_worker.py --code TREE [--config '{"oracle": "smt"}'] [--profile OUT.pstats]
 
-The tree at --code goes first on sys.path, so the same script times today's tree and a frozen checkout of an
-older commit. Each line of FRAMES is `{"set": NAME, "scene": SCENE_JSON}`; each line written is one frame's
-record: the program, hashes of its Scenic text and JSON document, and where the time went. Trees whose
-SynthStats lack the stage split (oracle_s, ranges_s, certify_s, render_s; commits before issue 18) are timed
-by wrapping the stages' functions as synthesize calls them. One warm-up frame is run first and not recorded.
+Reads one JSON line per frame on stdin, `{"set": NAME, "scene": SCENE_JSON}`, and answers each with one JSON line
+on stdout: the program, hashes of its Scenic text and JSON document (without stats), and where the time went. The
+benchmark runs a worker per tree and hands them the frames in turn, so both trees see the same machine load. The
+tree at --code goes first on sys.path, so the same script times today's tree and a frozen checkout of an older
+commit; trees whose SynthStats lack the stage split (oracle_s, ranges_s, certify_s, render_s; before issue 18)
+are timed by wrapping the stages' functions as synthesize calls them. The first frame is run twice, the first
+time to warm the process (z3 context, lazy imports) and not timed.
 """
 
 from __future__ import annotations
@@ -18,12 +20,14 @@ import sys
 import time
 from pathlib import Path
 
+STAGES = ("oracle_s", "ranges_s", "certify_s", "render_s")
 
-def _stage_timers(code: Path):
+
+def _stage_timers():
     """Wrap the stages of an older synthesize() (module-level names it calls) with timers; returns the totals."""
     import synth.synthesize as mod
 
-    totals = {"oracle_s": 0.0, "ranges_s": 0.0, "certify_s": 0.0, "render_s": 0.0}
+    totals = dict.fromkeys(STAGES, 0.0)
 
     def timed(fn, key):
         def wrapper(*a, **k):
@@ -55,11 +59,9 @@ def _stage_timers(code: Path):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("frames")
     ap.add_argument("--code", required=True, help="the source tree to time")
-    ap.add_argument("--out", required=True)
     ap.add_argument("--config", default="{}", help="SynthConfig fields as JSON")
-    ap.add_argument("--profile", help="write a cProfile of the frames (not the warm-up) to this file")
+    ap.add_argument("--profile", help="write a cProfile of the frames (not the warm-up) to this file at the end")
     args = ap.parse_args()
     code = Path(args.code).resolve()
     sys.path.insert(0, str(code))
@@ -75,41 +77,44 @@ def main() -> int:
     from synth.synthesize import SynthStats, synthesize
 
     split = "certify_s" in SynthStats.__dataclass_fields__
-    totals = None if split else _stage_timers(code)
+    totals = None if split else _stage_timers()
     config = SynthConfig(**json.loads(args.config))
-    lines = [json.loads(line) for line in Path(args.frames).read_text().splitlines() if line.strip()]
-    synthesize(scene_from_dict(lines[0]["scene"]), config)  # warm-up: z3 context, lazy imports
-    profiler = None
+    profiler, warm = None, False
     if args.profile:
         import cProfile
 
         profiler = cProfile.Profile()
-        profiler.enable()
-    with open(args.out, "w") as out:
-        for item in lines:
-            scene = scene_from_dict(item["scene"])
-            if totals is not None:
-                for k in totals:
-                    totals[k] = 0.0
-            t = time.perf_counter()
-            r = synthesize(scene, config)
-            wall = time.perf_counter() - t
-            st = r.stats
-            stages = ({k: getattr(st, k) for k in ("oracle_s", "ranges_s", "certify_s", "render_s")} if split
-                      else dict(totals))
-            doc = r.to_json_dict()
-            doc.pop("stats")
-            out.write(json.dumps({
-                "set": item["set"], "frame_id": r.frame_id, "n": r.n_entities, "status": r.status, "cost": r.cost,
-                "lower_bound": r.lower_bound, "certified": r.certified, "program": str(r.program),
-                "scenic_sha256": hashlib.sha256(r.scenic.encode()).hexdigest(),
-                "json_sha256": hashlib.sha256(json.dumps(doc, indent=1).encode()).hexdigest(),
-                "wall_s": wall, "runtime_s": st.runtime_s, "search_s": st.search_s, "smt_s": st.smt_s,
-                "smt_queries": st.smt_queries, "nodes_expanded": st.nodes_expanded, **stages,
-            }) + "\n")
-            out.flush()
+    for line in sys.stdin:
+        if not line.strip():
+            continue
+        item = json.loads(line)
+        scene = scene_from_dict(item["scene"])
+        if not warm:
+            synthesize(scene, config)
+            warm = True
+        if totals is not None:
+            for k in totals:
+                totals[k] = 0.0
+        if profiler is not None:
+            profiler.enable()
+        t = time.perf_counter()
+        r = synthesize(scene, config)
+        wall = time.perf_counter() - t
+        if profiler is not None:
+            profiler.disable()
+        st = r.stats
+        stages = {k: getattr(st, k) for k in STAGES} if split else dict(totals)
+        doc = r.to_json_dict()
+        doc.pop("stats")
+        print(json.dumps({
+            "set": item["set"], "frame_id": r.frame_id, "n": r.n_entities, "status": r.status, "cost": r.cost,
+            "lower_bound": r.lower_bound, "certified": r.certified, "program": str(r.program),
+            "scenic_sha256": hashlib.sha256(r.scenic.encode()).hexdigest(),
+            "json_sha256": hashlib.sha256(json.dumps(doc, indent=1).encode()).hexdigest(),
+            "wall_s": wall, "runtime_s": st.runtime_s, "search_s": st.search_s, "smt_s": st.smt_s,
+            "smt_queries": st.smt_queries, "nodes_expanded": st.nodes_expanded, **stages,
+        }), flush=True)
     if profiler is not None:
-        profiler.disable()
         profiler.dump_stats(args.profile)
     return 0
 
