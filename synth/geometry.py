@@ -70,6 +70,17 @@ def exact_offset(ref, e) -> tuple[Fraction, Fraction]:
     return Fraction(e.x) - Fraction(ref.x), Fraction(e.y) - Fraction(ref.y)
 
 
+def sqrt_rational(s: Fraction, digits: int = 15) -> Fraction:
+    """sqrt(s) of a rational s >= 0: exact where it is rational, else rounded down to `digits` decimals."""
+    p, q = s.numerator, s.denominator
+    rp, rq = math.isqrt(p), math.isqrt(q)
+    if rp * rp == p and rq * rq == q:
+        return Fraction(rp, rq)
+    scale = 10**digits
+    # floor(sqrt(x)) == isqrt(floor(x)) for real x >= 0.
+    return Fraction(math.isqrt(p * scale * scale // q), scale)
+
+
 def to_local(dx: float, dy: float, ref_heading: float) -> tuple[float, float]:
     """(dx, dy) in a reference's frame: lateral lx (+ = the reference's right), forward ly.
 

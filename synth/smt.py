@@ -183,7 +183,21 @@ class Z3Backend(_ByName):
 
     # ------------------------------------------------------------------------------------ range values
     def measure(self, requests: list[MeasureRequest]) -> Measurements:
-        """The exact quantities the Ranges of many statements are centred on, from one model."""
+        """The exact quantities the Ranges of many statements are centred on.
+
+        The paper's all-SMT mode (oracle smt) reads them all from one model of the solver; otherwise each part
+        computes its ground quantities in exact arithmetic (Part.exact_measure), and only those it leaves go to
+        the solver, from one model.
+        """
+        if self.config.oracle == "smt":
+            return self._model_measure(requests)
+        exact = [tuple(w.part.exact_measure(w.quantity, req.target, w.ref) for w in req.wants) for req in requests]
+        left = [i for i, values in enumerate(exact) if any(v is None for v in values)]
+        for i, values in zip(left, self._model_measure([requests[i] for i in left])):
+            exact[i] = values
+        return exact
+
+    def _model_measure(self, requests: list[MeasureRequest]) -> Measurements:
         z3 = self.z3
         if not requests:
             return []
@@ -224,16 +238,19 @@ class Z3Backend(_ByName):
                              if part.name not in skip))
 
     def certify(self, program: Program, scene: Scene) -> list[str]:
-        """Ids of the statements the solver cannot show to hold on the scene (empty: certified).
+        """Ids of the statements that cannot be shown to hold on the scene (empty: certified).
 
-        Plain parts: one check for the whole program; only when it fails is each statement asked alone, to name
-        it. Robust parts: each clause's violations over every perturbation must be unsat (robust_violations).
+        Plain parts, in the paper's all-SMT mode (oracle smt): the solver checks the whole program at once, and
+        only when that fails is each statement asked alone, to name it. Otherwise each clause is first decided by
+        rigorous interval arithmetic (Part.decide, synth.intervals): a clause it proves holds needs nothing more,
+        one it refutes fails, and the clauses it cannot decide (within rounding of a boundary) go to the solver,
+        statement by statement. Robust parts: each clause's violations over every perturbation must be unsat.
         """
         robust = robust_parts(scene, self.config)
         by_id = scene.by_id()
         failed: set[str] = set()
         plain = [st for st in program.statements if any(p.name not in robust for p, _ in st.clauses())]
-        if plain:
+        if plain and self.config.oracle == "smt":
             t = time.perf_counter()  # building the formulas is solver work too: it is counted
             formulas = [self.statement_formula(st, by_id, robust) for st in plain]
             s = self.z3.SolverFor("QF_NRA")
@@ -243,9 +260,25 @@ class Z3Backend(_ByName):
             self.stats.seconds += time.perf_counter() - t
             if not ok:
                 failed |= {st.id for st, f in zip(plain, formulas) if not self.check(f)}
+        elif plain:
+            failed |= {st.id for st in plain if not self._decided_or_checked(st, by_id, robust)}
         if robust:
             failed |= {st.id for st in program.statements if not self.robust_holds(st, by_id, robust)}
         return [st.id for st in program.statements if st.id in failed]
+
+    def _decided_or_checked(self, st: Statement, by_id: dict[str, Entity], skip: frozenset[str]) -> bool:
+        """Does the statement hold? Intervals first, the solver for the clauses they leave undecided."""
+        e = by_id[st.id]
+        left = []
+        for part, clause, ref in _statement_refs(st, by_id):
+            if part.name in skip:
+                continue
+            fact = part.decide(clause, e, ref, self.config)
+            if fact is False:
+                return False
+            if fact is None:
+                left.append(part.formula(self, clause, e, ref))
+        return not left or self.check(*left)
 
     # ------------------------------------------------------------------------------------ robust certification
     def robust_violations(self, st: Statement, by_id: dict[str, Entity], parts: frozenset[str] | None = None) -> list[Any]:

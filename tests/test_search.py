@@ -68,7 +68,8 @@ def test_solver_oracles_agree_with_closed_form_and_certify(oracle, real_frames):
         result = synthesize(scene, SynthConfig(oracle=oracle))
         assert_optimal_and_contained(result, scene, optimal_cost(scene))
         assert result.certified
-        assert result.stats.smt_queries > 0
+        # The all-SMT oracle asks the solver everything; hybrid's clear facts are decided by intervals.
+        assert (result.stats.smt_queries > 0) == (oracle == "smt")
 
 
 def test_paper_bfs_cpa_with_smt_oracle_on_a_real_frame(real_frames):

@@ -8,6 +8,7 @@ form (cost 2). The rest of the core is written once, over parts:
   robust bounds         perturbed                            -> which parts are asked the robust question
   float table, exact    closed_form, robust_closed_form, exact   -> relations, oracle
   SMT                   relation, robust_relation, any_relation, measure_terms, formula, violations -> smt
+  exact, fast           decide, exact_measure               -> smt (certification, Range values)
   Alg. 4                quantity, float_measure, clause, robust_clause  -> statement
   semantics             holds, observed                       -> semantics (the independent checker)
   syntax                parse (printing is the clause's __str__) -> dsl
@@ -98,6 +99,17 @@ class Part(ABC):
     @abstractmethod
     def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
         """Ways the clause could fail under a perturbation within the bounds: each must be unsat."""
+
+    # ------------------------------------------------------------------------------- exact, without a solver
+    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        """formula(), decided rigorously without the solver (synth.intervals; exact rationals where cheap):
+        True / False, or None where it cannot tell and the solver must. A part may leave it all to the solver."""
+        return None
+
+    def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...] | None:
+        """The quantity measure_terms pins down, computed in exact arithmetic (irrational values to within
+        1e-15, as the solver's model gives them to 1e-12), or None to leave it to the solver."""
+        return None
 
     # ------------------------------------------------------------------------------- Alg. 4
     @abstractmethod

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from synth import intervals
 from synth.config import SynthConfig
 from synth.geometry import (
     angular_difference,
@@ -181,6 +182,25 @@ class HeadingPart(Part):
         turn = backend.var("theta")
         return [backend.And(-q(eta) <= turn, turn <= q(eta), bad)
                 for bad in (q(alpha) + turn < q(lo), q(alpha) + turn > q(hi))]
+
+    # ------------------------------------------------------------------------------- exact, without a solver
+    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        if isinstance(clause, FacingRelation):
+            vx, vy = intervals.offset(ref, e)
+            if clause.mode == "toward":
+                vx, vy = -vx, -vy
+            return intervals.cone(vx, vy, e.heading, config.delta2)
+        # angle_in's question, whose terms are rationals of the floats and printed bounds: exact and cheap.
+        lo, hi = printed(clause.angle.lo), printed(clause.angle.hi)
+        gap = Fraction(e.heading) - Fraction(ref.heading if isinstance(clause, RelativeHeading) else 0.0)
+        alpha = gap - 360 * ((gap - lo) // 360)
+        return lo <= alpha <= hi
+
+    def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        base = ref.heading if quantity == "angle" else 0.0
+        gap = Fraction(target.heading) - Fraction(base)
+        # The one of gap, gap +- 360 in (-180, 180], as measure_terms has the solver find it.
+        return (next(a for a in (gap + 360, gap, gap - 360) if -180 < a <= 180),)
 
     # ------------------------------------------------------------------------------- Alg. 4
     def quantity(self, code: int) -> str | None:

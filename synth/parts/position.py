@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from synth import intervals
 from synth.config import SynthConfig
 from synth.geometry import (
     angular_difference,
@@ -25,6 +26,7 @@ from synth.geometry import (
     exact_cos_squared,
     exact_heading_vector,
     exact_offset,
+    sqrt_rational,
     to_local,
 )
 from synth.parts.base import Clause, Part
@@ -234,6 +236,30 @@ class PositionPart(Part):
             cons.append(bx * bx + by * by <= q(radius * radius * (ux * ux + uy * uy)))
             lx, ly = lx + bx, ly + by
         return [backend.And(*cons, bad) for bad in outside(lx, clause.lateral) + outside(ly, clause.forward)]
+
+    # ------------------------------------------------------------------------------- exact, without a solver
+    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        if isinstance(clause, AbsoluteXYPos):
+            # Rational comparisons of the floats with the printed bounds: exact and cheap.
+            return all(printed(b.lo) <= Fraction(v) <= printed(b.hi) for b, v in ((clause.x, e.x), (clause.y, e.y)))
+        vx, vy = intervals.offset(ref, e)
+        if isinstance(clause, DirectionPos):
+            lo, hi = max(printed(clause.distance.lo), Fraction(0)), printed(clause.distance.hi)
+            sq = vx * vx + vy * vy
+            return intervals.all_of(intervals.between(lo * lo, sq, hi * hi),
+                                    intervals.cone(vx, vy, ref.heading + DIRECTIONS[clause.direction][1],
+                                                   config.delta1))
+        ux, uy = (intervals.ball(c) for c in exact_heading_vector(ref.heading))
+        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+        return intervals.all_of(intervals.between(printed(clause.lateral.lo), lx, printed(clause.lateral.hi)),
+                                intervals.between(printed(clause.forward.lo), ly, printed(clause.forward.hi)))
+
+    def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        vx, vy = exact_offset(ref, target)
+        if quantity == "distance":
+            return (sqrt_rational(vx * vx + vy * vy),)
+        ux, uy = exact_heading_vector(ref.heading)
+        return (vx * uy - vy * ux, vy * uy + vx * ux)
 
     # ------------------------------------------------------------------------------- Alg. 4
     def quantity(self, code: int) -> str | None:
