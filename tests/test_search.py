@@ -115,7 +115,7 @@ def test_mutual_witnesses_form_a_component_that_a_star_solves():
     # car1 and car2 face each other, 5 m apart, 45 degrees off ego's axes: each witnesses the other (ahead of,
     # facing toward) and ego witnesses neither. Whoever is declared first pays 2; the optimum is 2.
     from synth.oracle import make_oracle
-    from synth.search.auto import closure, components
+    from synth.search.auto import closed_sources, closure, components
     from synth.search.costs import CostModel
 
     scene = scene_from_dict({"frame_id": "cycle", "entities": [
@@ -125,7 +125,53 @@ def test_mutual_witnesses_form_a_component_that_a_star_solves():
     ]})
     cm = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
     assert cm.floors() == [0, 0]
-    order, declared, _ = closure(cm, (), 0, cm.all)
+    order, declared, _, _ = closure(cm, (), 0, cm.unmet(0), cm.all)
     assert declared == 0 and components(cm, cm.all) == [0b11]
+    # Two closed sources (the pair for position, the pair for heading): the closed-group bound is the optimum.
+    assert len(closed_sources(cm, cm.unmet(0), cm.all)) == 2
     assert_optimal_and_contained(synthesize(scene, SynthConfig(oracle="closed-form")), scene, 2)
     assert optimal_cost(scene) == 2
+
+
+def _cost_to_go(cm, declared: int) -> int:
+    """The least cost of declaring everything not in `declared` (dynamic programming over subsets)."""
+    from functools import cache
+
+    @cache
+    def best(d: int) -> int:
+        if d == cm.all:
+            return 0
+        return min(cm.delta(e, d) + best(d | 1 << e) for e in range(cm.n) if not d >> e & 1)
+
+    return best(declared)
+
+
+@settings(max_examples=40)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 9), crowd=st.booleans())
+def test_the_closed_group_bound_is_admissible_and_consistent(seed, n, crowd):
+    # A* may prune with it only because it never overestimates the cost to go and never drops by more than a
+    # move costs (then pruning keeps every node that leads below the incumbent, in the same order).
+    from crowds import crowd_scene
+
+    from synth.oracle import make_oracle
+    from synth.search.auto import closed_sources
+    from synth.search.costs import CostModel
+
+    rng = random.Random(seed)
+    scene = crowd_scene(seed % 1000, pedestrians=n, barriers=1, cones=0, cars=0) if crowd else \
+        scene_from_dict(random_scene_dict(rng, n))
+    cm = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
+
+    def h(d: int) -> int:
+        todo = cm.all & ~d
+        return cm.floor_sum(todo) + len(closed_sources(cm, cm.unmet(d), todo))
+
+    root = closed_sources(cm, cm.unmet(0), cm.all)
+    for _ in range(6):
+        d = rng.getrandbits(cm.n) & cm.all
+        assert h(d) <= _cost_to_go(cm, d)
+        # Declarations only remove sources, never add one: the search counts the root's untouched ones.
+        assert sorted(closed_sources(cm, cm.unmet(d), cm.all & ~d)) == sorted(x for x in root if not x & d)
+        for e in range(cm.n):
+            if not d >> e & 1:
+                assert h(d) <= cm.delta(e, d) + h(d | 1 << e)

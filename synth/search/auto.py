@@ -10,6 +10,26 @@ Why each step keeps the optimum (c(e, E) depends only on the set E and only fall
    h = sum of floors + the least regret of any next move (no forced move means the next entity pays at least
    one over its floor), an incumbent from greedy completion, and branch and bound on it. Anytime: on budget
    exhaustion, the incumbent and the least f in the open list.
+
+A state carries, per statement part, the set of entities that have a witness but none declared yet (CostModel.
+unmet), so a move costs a few bitset operations: declaring e changes only the entities e witnesses.
+
+A stronger bound (closed sources). Per part, a source component of the witness graph among the undeclared
+entities whose members all lack a declared witness (two people facing each other whom nobody else stands in
+line with, say) makes its first member pay one over its floor; distinct sources are disjoint, so
+h_closed = sum of floors + the number of such sources, over the parts, is admissible. It is also consistent:
+declaring e removes only the one source of each part that holds e, and then e pays that part; no new source
+ever appears (a component that becomes a source was fed by what was just declared). So the closed sources of a
+state are the root's that no declaration has touched, and h_closed costs a few bit operations.
+
+Same answer, fewer nodes. The answer of step 3 is the first improvement on the greedy incumbent that reaches the
+optimum, in the plain A*'s order. On crowds the plain A* meets it only at its very last node, after every state
+whose f = g + h is below the optimum (h counts one regret where there are a dozen closed sources). So pass 1
+finds the optimum's cost by A* on g + max(h, h_closed), and pass 2 replays the plain A* keeping only the nodes
+with g + h_closed <= optimum: with a consistent bound those are the nodes that can still reach the optimum,
+their children are theirs alone, and they are pushed and popped in the same relative order (ties are numbered
+by push), so the replay meets the same first optimal improvement, having skipped the rest (tests/
+test_crowd_golden.py holds it to the plain A*'s programs).
 """
 
 from __future__ import annotations
@@ -17,29 +37,110 @@ from __future__ import annotations
 import heapq
 
 from synth.search.budget import Budget, BudgetExhausted
-from synth.search.common import SearchResult, finish, floor_bound, greedy_completion
+from synth.search.common import SearchResult, finish, floor_bound
 from synth.search.costs import CostModel, bits
 
+Unmet = tuple[int, ...]
 
-def closure(cm: CostModel, order: tuple[int, ...], declared: int, within: int) -> tuple[tuple[int, ...], int, int]:
-    """Declare zero-regret entities of `within` (lowest index first) until none is left.
 
-    Returns (order, declared, cost added).
+def _union(unmet: Unmet) -> int:
+    out = 0
+    for u in unmet:
+        out |= u
+    return out
+
+
+def _regret(unmet: Unmet, e: int) -> int:
+    """c(e, E) - floor(e): the parts of e still without a declared witness."""
+    return sum(u >> e & 1 for u in unmet)
+
+
+def _least_regret(unmet: Unmet, todo: int) -> tuple[int, int]:
+    """(least regret over todo, the entities that have it), by counting set membership bit-parallel."""
+    at_least = [todo] + [0] * len(unmet)
+    for u in unmet:
+        for j in range(len(unmet), 0, -1):
+            at_least[j] |= at_least[j - 1] & u
+    at_least.append(0)
+    for j in range(len(unmet) + 1):
+        exactly = at_least[j] & ~at_least[j + 1]
+        if exactly:
+            return j, exactly
+    raise ValueError("empty todo")
+
+
+def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
+            within: int) -> tuple[tuple[int, ...], int, Unmet, int]:
+    """Declare zero-regret entities of `within` until none is left, in passes over the undeclared in index order
+    (lowest first; within a pass each declaration counts for the entities after it).
+
+    Returns (order, declared, unmet, cost added).
     """
-    floors = cm.floors()
     out, added = list(order), 0
     todo = within & ~declared
-    progress = True
-    while progress and todo:
-        progress = False
-        for e in bits(todo):
-            if cm.delta(e, declared) == floors[e]:
-                out.append(e)
-                declared |= 1 << e
-                todo &= ~(1 << e)
-                added += floors[e]
-                progress = True
-    return tuple(out), declared, added
+    while todo:
+        above, progressed = todo, False
+        while True:
+            free = above & todo & ~_union(unmet)
+            if not free:
+                break
+            low = free & -free
+            e = low.bit_length() - 1
+            out.append(e)
+            declared |= low
+            todo &= ~low
+            unmet = cm.declare(unmet, e)
+            added += cm.floor_sum(low)
+            above &= ~((low << 1) - 1)
+            progressed = True
+        if not progressed:
+            break
+    return tuple(out), declared, unmet, added
+
+
+def closed_sources(cm: CostModel, unmet: Unmet, todo: int) -> list[int]:
+    """Every closed source (see the module's note), of every part, as a bitset of its members."""
+    out = []
+    for k, u in enumerate(unmet):
+        a = u & todo
+        if not a:
+            continue
+        # Every witness of an unmet entity is undeclared. One with a witness outside `a` is fed from elsewhere,
+        # and so is everything downstream of it within `a`; the rest is closed under witnesses.
+        pred = {x: cm._mask[k][x] for x in bits(a)}
+        fed = 0
+        for x, p in pred.items():
+            if p & ~a:
+                fed |= 1 << x
+        changed = bool(fed)
+        while changed:
+            changed = False
+            for x, p in pred.items():
+                if not fed >> x & 1 and p & fed:
+                    fed |= 1 << x
+                    changed = True
+        rest = a & ~fed
+        anc = {x: pred[x] for x in bits(rest)}
+        changed = True
+        while changed:
+            changed = False
+            for x, ax in anc.items():
+                grown = ax
+                for y in bits(ax):
+                    grown |= anc[y]
+                if grown != ax:
+                    anc[x] = grown
+                    changed = True
+        seen = 0
+        for x in bits(rest):
+            if seen >> x & 1:
+                continue
+            ax = anc[x]
+            # x lies in a source component iff every ancestor has the same ancestors (x among them).
+            if ax >> x & 1 and all(anc[y] == ax for y in bits(ax)):
+                out.append(ax)
+                seen |= ax
+    return out
 
 
 def components(cm: CostModel, rest: int) -> list[int]:
@@ -63,72 +164,170 @@ def components(cm: CostModel, rest: int) -> list[int]:
     return out
 
 
+def _greedy(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
+            within: int) -> tuple[tuple[int, ...], int]:
+    """common.greedy_completion within a component (the least regret, lowest index first), and its cost."""
+    out, cost = list(order), 0
+    todo = within & ~declared
+    while todo:
+        regret, who = _least_regret(unmet, todo)
+        low = who & -who
+        e = low.bit_length() - 1
+        out.append(e)
+        cost += cm.floor_sum(low) + regret
+        todo &= ~low
+        unmet = cm.declare(unmet, e)
+    return tuple(out), cost
+
+
+class _Bound:
+    """h_closed of the states below one root: the closed sources at the root that no declaration has touched
+    (declaring an entity removes only its own part's source, and no new one ever appears: module note)."""
+
+    def __init__(self, cm: CostModel, comp: int, unmet: Unmet, todo: int):
+        self.cm, self.comp = cm, comp
+        self.sources = closed_sources(cm, unmet, todo)
+        self.parts = len(unmet)
+
+    def __call__(self, declared: int) -> int:
+        return self.cm.floor_sum(self.comp & ~declared) + sum(not (s & declared) for s in self.sources)
+
+    def open_members(self, declared: int) -> int:
+        """Entities whose declaration opens a closed source (one per part it opens, at most one per part)."""
+        out = 0
+        for s in self.sources:
+            if not s & declared:
+                out |= s
+        return out
+
+
+def _free_moves(unmet: Unmet, todo: int, opening: int) -> int:
+    """The entities of todo whose every unmet part is one a closed source of theirs opens: moving any other
+    raises g + h_closed by at least one (waste; module note). With two or more parts an entity may pay one part
+    without opening it and still belong to a source of another, so this keeps any entity with a source."""
+    pays = _union(unmet) & todo
+    return (todo & ~pays) | (pays & opening)
+
+
+def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budget: Budget) -> tuple[int, tuple, int]:
+    """Pass 1: the optimal cost of the component, by A* on g + max(h, h_closed) (admissible) with branch and bound
+    on the incumbent. Returns (cost, an order reaching it, the least f left when the budget ran out, else cost)."""
+    root_order, root_declared, root_unmet, root_g = root
+    best_order = None
+    heap = [(root_g + bound(root_declared), 0, 0, root_g, root_declared, root_order, root_unmet)]
+    best_g = {root_declared: root_g}
+    tie = 0
+    while heap and heap[0][0] < ub:
+        budget.tick()
+        f, _, _, g, declared, order, unmet = heapq.heappop(heap)
+        if g > best_g.get(declared, g):
+            continue
+        todo = comp & ~declared
+        slack = ub - (g + bound(declared))
+        moves = todo if slack > 1 else _free_moves(unmet, todo, bound.open_members(declared))
+        for e in bits(moves):
+            low = 1 << e
+            g1 = g + cm.floor_sum(low) + _regret(unmet, e)
+            order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e), comp)
+            g2 = g1 + forced
+            if declared2 & comp == comp:
+                if g2 < ub:
+                    ub, best_order = g2, order2
+                continue
+            if declared2 in best_g and best_g[declared2] <= g2:
+                continue
+            todo2 = comp & ~declared2
+            f2 = g2 + max(bound(declared2), cm.floor_sum(todo2) + _least_regret(unmet2, todo2)[0])
+            if f2 >= ub:
+                continue
+            best_g[declared2] = g2
+            tie += 1
+            heapq.heappush(heap, (f2, -len(order2), tie, g2, declared2, order2, unmet2))
+    return ub, best_order, ub
+
+
 def solve_component(
     cm: CostModel, comp: int, base: int, budget: Budget
 ) -> tuple[tuple[int, ...], int, int, str | None]:
-    """Optimal order of one component given `base` declared. Returns (order, cost, lower bound, stop reason)."""
-    floors = cm.floors()
+    """Optimal order of one component given `base` declared. Returns (order, cost, lower bound, stop reason).
 
-    def h(declared: int) -> int:
+    The answer is the one the plain A* (f = g + h, deeper first among equal f, then first pushed) finds: its first
+    improvement on the greedy incumbent that reaches the optimum. Pass 1 finds the optimum's cost with the closed
+    group bound; pass 2 replays the plain A* but drops every node whose g + h_closed exceeds that cost, which
+    (h_closed being consistent) keeps the nodes on the way to that first optimal improvement in the same order.
+    """
+
+    def h(declared: int, unmet: Unmet) -> int:
         todo = comp & ~declared
         if not todo:
             return 0
-        least_regret = min(cm.delta(e, declared) - floors[e] for e in bits(todo))
-        return sum(floors[e] for e in bits(todo)) + least_regret
+        return cm.floor_sum(todo) + _least_regret(unmet, todo)[0]
 
-    root_order, root_declared, root_g = closure(cm, (), base, comp)
+    root = closure(cm, (), base, cm.unmet(base), comp)
+    root_order, root_declared, root_unmet, root_g = root
     if root_declared & comp == comp:
         return root_order, root_g, root_g, None
-    ub_order = greedy_completion(cm, root_order, root_declared, within=comp)
-    ub = _cost_from(cm, ub_order, base)
-    heap = [(root_g + h(root_declared), 0, 0, root_g, root_declared, root_order)]
+    ub_order, rest = _greedy(cm, root_order, root_declared, root_unmet, comp)
+    ub = root_g + rest
+    bound = _Bound(cm, comp, root_unmet, comp & ~root_declared)
+    if root_g + bound(root_declared) >= ub:
+        return ub_order, ub, ub, None  # the greedy incumbent meets the bound
+    try:
+        opt, opt_order, _ = _optimum(cm, comp, root, ub, bound, budget)
+    except BudgetExhausted as stop:
+        return ub_order, ub, root_g + bound(root_declared), stop.reason
+    if opt == ub:
+        return ub_order, ub, ub, None  # no improvement on the incumbent exists
+    heap = [(root_g + h(root_declared, root_unmet), 0, 0, root_g, root_declared, root_order, root_unmet)]
     best_g = {root_declared: root_g}
     tie = 0
     try:
         while heap and heap[0][0] < ub:
             budget.tick()
-            f, _, _, g, declared, order = heapq.heappop(heap)
+            f, _, _, g, declared, order, unmet = heapq.heappop(heap)
             if g > best_g.get(declared, g):
                 continue
-            for e in bits(comp & ~declared):
-                g1 = g + cm.delta(e, declared)
-                order2, declared2, forced = closure(cm, order + (e,), declared | (1 << e), comp)
+            todo = comp & ~declared
+            slack = opt - (g + bound(declared))  # how much this node may still waste and reach the optimum
+            if slack < 0:
+                continue
+            moves = todo if slack > 0 else _free_moves(unmet, todo, bound.open_members(declared))
+            for e in bits(todo):
+                if not moves >> e & 1:
+                    continue
+                low = 1 << e
+                g1 = g + cm.floor_sum(low) + _regret(unmet, e)
+                order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e),
+                                                            comp)
                 g2 = g1 + forced
                 if declared2 & comp == comp:
                     if g2 < ub:
                         ub, ub_order = g2, order2
+                        if ub == opt:
+                            return ub_order, ub, ub, None
                     continue
                 if declared2 in best_g and best_g[declared2] <= g2:
                     continue
-                f2 = g2 + h(declared2)
-                if f2 >= ub:
+                f2 = g2 + h(declared2, unmet2)
+                if f2 >= ub or g2 + bound(declared2) > opt:
                     continue
                 best_g[declared2] = g2
                 tie += 1
-                heapq.heappush(heap, (f2, -len(order2), tie, g2, declared2, order2))
-        return ub_order, ub, ub, None
+                heapq.heappush(heap, (f2, -len(order2), tie, g2, declared2, order2, unmet2))
+        raise AssertionError("the replay lost the optimum")  # pass 1 proved a program of cost opt exists
     except BudgetExhausted as stop:
-        lb = min(heap[0][0], ub) if heap else ub
-        return ub_order, ub, lb, stop.reason
-
-
-def _cost_from(cm: CostModel, order: tuple[int, ...], base: int) -> int:
-    declared, total = base, 0
-    for e in order:
-        total += cm.delta(e, declared)
-        declared |= 1 << e
-    return total
+        return opt_order, opt, opt, stop.reason
 
 
 def auto(cm: CostModel, budget: Budget) -> SearchResult:
-    order, declared, lb = closure(cm, (), 0, cm.all)
+    order, declared, unmet, lb = closure(cm, (), 0, cm.unmet(0), cm.all)
     stopped: str | None = None
     for comp in components(cm, cm.all & ~declared):
         if stopped is None:
             sub, _cost, sub_lb, stopped = solve_component(cm, comp, declared, budget)
         else:
             # Out of budget: later components get a greedy order and the floor bound.
-            sub = greedy_completion(cm, (), declared, within=comp)
+            sub, _ = _greedy(cm, (), declared, cm.unmet(declared), comp)
             sub_lb = floor_bound(cm, comp)
         order += sub
         lb += sub_lb

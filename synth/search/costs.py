@@ -47,6 +47,47 @@ class CostModel:
                 for e in range(n)
             ]
         self._floors: list[int] | None = None
+        if oracle.complete:
+            self._bitsets()
+
+    def _bitsets(self) -> None:
+        """The witness relation as bitsets per part, for searches that keep c(e, E) up to date incrementally:
+        lonely[k] (no witness at all: part k always costs 1), ego_fed[k] (ego witnesses part k) and fed_by[k][r]
+        (the entities whose part k r witnesses)."""
+        n, all_ = self.n, self.all
+        self.lonely, self.ego_fed, self.fed_by = [], [], []
+        for k in range(self.kinds):
+            ego = sum(1 << e for e in range(n) if self._ego[k][e])
+            fed = [0] * n
+            lonely = 0
+            for e in range(n):
+                if not self._ego[k][e] and not self._mask[k][e]:
+                    lonely |= 1 << e
+                for r in bits(self._mask[k][e]):
+                    fed[r] |= 1 << e
+            self.lonely.append(lonely & all_)
+            self.ego_fed.append(ego)
+            self.fed_by.append(fed)
+
+    # ------------------------------------------------------------------------------------- incremental costs
+    def unmet(self, declared: int) -> tuple[int, ...]:
+        """Per part, the entities that have a witness but none among ego and `declared`: c(e, E) is floor(e) plus
+        the number of parts whose unmet set holds e."""
+        out = []
+        for k in range(self.kinds):
+            fed = self.ego_fed[k] | self.lonely[k]
+            for r in bits(declared):
+                fed |= self.fed_by[k][r]
+            out.append(self.all & ~fed)
+        return tuple(out)
+
+    def declare(self, unmet: tuple[int, ...], e: int) -> tuple[int, ...]:
+        """unmet after declaring e: only the entities e witnesses change."""
+        return tuple(u & ~fed[e] for u, fed in zip(unmet, self.fed_by))
+
+    def floor_sum(self, todo: int) -> int:
+        """Sum of floors over a set: the parts that can never have a witness."""
+        return sum((todo & lonely).bit_count() for lonely in self.lonely)
 
     # ------------------------------------------------------------------------------------- witnesses
     def _ask(self, kind: int, r: int, e: int) -> bool:
