@@ -191,6 +191,24 @@ class MotionPart(Part):
             bad = (gap < q(printed(clause.speed.lo)), gap > q(printed(clause.speed.hi)))
         return [backend.And(*box, *box_r, b) for b in bad]
 
+    # ------------------------------------------------------------------------------- exact, without a solver
+    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        # formula() is linear in the speeds, whose terms are rationals of floats and printed bounds: exact.
+        if e.speed is None or (ref is not None and ref.speed is None):
+            return None  # formula's own business (the solver path reports it)
+        se = Fraction(e.speed)
+        if isinstance(clause, Stationary):
+            return se <= Fraction(config.v_stop)
+        if isinstance(clause, AbsoluteSpeed):
+            return printed(clause.speed.lo) <= se <= printed(clause.speed.hi)
+        gap = se - Fraction(ref.speed)
+        if isinstance(clause, MovingLike):
+            return -Fraction(config.dv) <= gap <= Fraction(config.dv)
+        return printed(clause.speed.lo) <= gap <= printed(clause.speed.hi)
+
+    def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        return self.float_measure(quantity, target, ref)  # already exact: a difference of two floats
+
     # ------------------------------------------------------------------------------- Alg. 4
     def quantity(self, code: int) -> str | None:
         return None if code != NONE else "speed_offset"
