@@ -6,13 +6,21 @@ uniformly in Scenic's own parameterisation (synth.parameters), conditioned on th
 rejecting whole scenes, which fails exponentially in the number of entities; this chain changes one statement
 part at a time instead:
 
-- a move redraws one part's parameters uniformly from their box (the prior) and re-evaluates the entity and
-  everything that depends on it, as the program says (a reference that moves carries its dependants along);
-- the move is accepted if and only if no box it moved now overlaps a box it may not overlap. The target density
-  is constant on the allowed set and the proposal does not depend on the current value, so this acceptance is
-  the Metropolis-Hastings ratio and each move leaves the target invariant (the parameters of a part are
-  redrawn from the exact conditional where the rule does not bind);
-- a sweep moves every part of every statement once, in declaration order;
+- a move redraws one clause's parameters uniformly from their box (the prior) and re-evaluates the entity and
+  everything that depends on it, as the program says (a reference that moves carries its dependants along,
+  Parameterisation.moved_by), and is kept if no box it moved now overlaps a box it may not overlap. The target
+  density is constant on the allowed set and the first draw does not depend on the current value, so this is
+  Metropolis-Hastings with the prior as proposal. On a rejection the box shrinks toward the current value and
+  the clause is drawn again (Neal's hyperrectangle shrinkage for slice sampling, up to MAX_DRAWS draws): each
+  draw's transition is symmetric, so the target stays invariant, and a clause boxed in by its neighbours still
+  moves a little instead of being stuck;
+- a re-anchoring move then moves the entity alone: a random-walk step in the same clause, with the clauses
+  that read it re-expressed so that the entities that refer to it stay where they are, accepted with the
+  Jacobian of that re-expression (Draws.area) if every re-expressed parameter stays in its box and the rule
+  holds. Without it a reference with a large subtree (a row of barriers placed one after another) mixes only
+  as fast as the whole subtree can move at once (at 141 entities it shortens the slowest autocorrelation times
+  two- to fivefold, bench/results/variants.md);
+- a sweep moves every clause of every statement once, in declaration order;
 - the chain starts at the recorded scene, whose parameters are read back exactly (Parameterisation.start):
   the program contains the scene, and the rule holds there by definition. It then runs `burn_in` sweeps and
   keeps a variant every `thin` sweeps (defaults from the autocorrelation measured in bench/bench_variants.py).
@@ -20,7 +28,7 @@ part at a time instead:
 If the given scene is not a valid start (a program that does not contain it), the chain first descends to a
 state that satisfies the rule (moves accepted when they do not add violations), and gives up after
 `start_sweeps` sweeps with NoVariant naming the pairs that still collide. Without a rule (collisions allowed)
-every move is accepted and each sweep is an exact independent draw from the program.
+every draw is accepted, there is no re-anchoring, and each sweep is an exact independent draw from the program.
 
 Pure and deterministic: numpy's PCG64 seeded with the seed, no I/O, no global state; variant k depends only on
 the program, the scene, the tolerances, the settings and the seed (never on how many variants are asked for).
@@ -38,13 +46,14 @@ from synth.collision_rule import CollisionRule, collision_rule
 from synth.config import SynthConfig
 from synth.dsl import Program
 from synth.overlap import box_radius, boxes_overlap
-from synth.parameters import Parameterisation, Pose, parameterise
+from synth.parameters import Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
 
 DEFAULT_BURN_IN = 20  # sweeps from the recorded scene to the first variant
 DEFAULT_THIN = 10  # sweeps between variants
 DEFAULT_START_SWEEPS = 200  # sweeps to find a valid start when the given scene is not one
 MAX_DRAWS = 8  # draws per move: the first from the whole box, each next from a box shrunk after a rejection
+REANCHOR_SCALES = (0.02, 0.1, 0.5)  # random-walk steps of a re-anchoring move, as shares of the box (a mixture)
 FEW_PAIRS = 24  # up to this many candidate pairs are tested one by one in floats (numpy's per-call cost dominates)
 
 
@@ -123,6 +132,7 @@ class Chain:
         # that only face k, a position move those that only turn with k).
         self.moves = [[np.array(p.moved_by(k, j, self.dependants[k])) for j in range(len(p.draws[k]))]
                       for k in range(n)]
+        self.readers = [[self._readers(k, j) for j in range(len(p.draws[k]))] for k in range(n)]
         self.proposals = self.accepted = 0
         self.moved = np.zeros(n, dtype=bool)
         self.moved[0] = True
@@ -194,11 +204,61 @@ class Chain:
                 else:
                     hi[d] = v
 
+    def _readers(self, k: int, part: int) -> list[tuple[int, int]]:
+        """(m, clause) of the other entities whose clauses read what a redraw of k's clause `part` changes."""
+        p = self.params_of
+        changed = {p.draws[k][part].writes}
+        for c in range(part + 1, len(p.draws[k])):
+            if changed & set(p.draws[k][c].reads_own):
+                changed.add(p.draws[k][c].writes)
+        return [(m, c) for m in self.dependants[k] for c, (d, r) in enumerate(zip(p.draws[m], p.refs[m]))
+                if r == k and changed & set(d.reads)]
+
+    def _reanchor(self, k: int, part: int) -> None:
+        """Move k alone: a random-walk step in one of its clauses, its readers' parameters re-expressed so that
+        they stay where they are. Metropolis-Hastings with the Jacobian of that re-expression (Draws.area):
+        accepted with probability min(1, prod area(old) / area(new)) if every re-expressed parameter stays in its
+        box and k's box keeps the rule. Lets a reference move without carrying its whole subtree along."""
+        p = self.params_of
+        draws = p.draws[k][part]
+        scale = REANCHOR_SCALES[int(self.rng.integers(len(REANCHOR_SCALES)))]
+        steps = self.rng.random(len(draws.lo))
+        new = tuple(_reflect(v + scale * (b - a) * (2 * t - 1), a, b)
+                    for v, a, b, t in zip(self.params[k][part], draws.lo, draws.hi, steps))
+        row = list(self.params[k])
+        row[part] = new
+        trial = list(self.poses)
+        trial[k] = Pose()
+        p.evaluate_into(k, row, trial)
+        self.proposals += 1
+        weight, updates = 1.0, []
+        for m, c in self.readers[k][part]:
+            d = p.draws[m][c]
+            value = d.invert(self.poses[m], trial[k])
+            if not inside(d, value) or d.area(value) <= 0.0:
+                return
+            weight *= d.area(self.params[m][c]) / d.area(value)
+            updates.append((m, c, value))
+        if weight < 1.0 and self.rng.random() >= weight:
+            return
+        x, y, h = self.x.copy(), self.y.copy(), self.h.copy()
+        x[k], y[k], h[k] = trial[k].x, trial[k].y, trial[k].heading
+        if self._violations(np.array([k]), x, y, h):
+            return
+        self.accepted += 1
+        self.moved[k] = True
+        self.poses, self.x, self.y, self.h = trial, x, y, h
+        self.params[k] = row
+        for m, c, value in updates:
+            self.params[m] = [*self.params[m][:c], value, *self.params[m][c + 1:]]
+
     def sweep(self, descend: bool = False) -> None:
-        """Move every part of every statement once, in declaration order."""
+        """Move every part of every statement once, in declaration order (and re-anchor it, where it is read)."""
         for k in range(1, len(self.poses)):
             for part in range(len(self.params_of.draws[k])):
                 self._move(k, part, descend)
+                if not descend and self.rule is not None and self.readers[k][part]:  # without a rule, no need
+                    self._reanchor(k, part)
 
     def draw_from_prior(self) -> None:
         """Every parameter drawn afresh from its box, the rule ignored: one of Scenic's rejection proposals."""
@@ -288,3 +348,12 @@ def autocorrelation_time(trace: np.ndarray, window: float = 5.0) -> float:
     m = np.arange(1, n)
     ok = np.nonzero(m >= window * taus)[0]
     return float(taus[ok[0]] if ok.size else taus[-1])
+
+
+def _reflect(v: float, lo: float, hi: float) -> float:
+    """v folded back into [lo, hi] at its edges (a symmetric random walk stays symmetric)."""
+    if hi <= lo:
+        return lo
+    while v < lo or v > hi:
+        v = 2 * lo - v if v < lo else 2 * hi - v
+    return v

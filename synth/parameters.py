@@ -12,7 +12,11 @@ of synth.parts: position, heading, ...) has its `Draws` here, built by the DRAWS
   starts under MIN_DISTANCE is drawn from MIN_DISTANCE, as the emitted text says (see synth.emit_scenic);
 - `evaluate`: the entity's fields from its parameters and its reference's (and its own earlier parts') values;
 - `invert`: the parameters that give a placed entity (how a recorded scene, or a scene Scenic sampled, is read
-  back as parameters: the start of the sampler in synth.gibbs, and the distribution tests);
+  back as parameters: the start of the sampler in synth.gibbs, and the distribution tests), possibly outside
+  the box (`clipped`, `inside`);
+- `area`: the plane area (or angle) a unit box of parameters covers at p, relative to the entity's field: the
+  Jacobian of the map from parameters to placement (a sector's distance, polar coordinates; 1 otherwise), which
+  a move that re-expresses a placed entity in new parameters must weigh (synth.gibbs);
 - `reach`: a sound bound on every value the part can take over the whole box, given its reference's bound: a
   disc for the centre, an arc for the heading. The collision rule (synth.collision_rule) uses it to keep only
   the pairs of boxes that can ever meet.
@@ -101,6 +105,8 @@ class Draws(Protocol):
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]: ...
 
+    def area(self, p: Sequence[float]) -> float: ...
+
     def reach(self, own: Reach, ref: Reach | None) -> Reach: ...
 
 
@@ -156,7 +162,10 @@ class SectorDraws:
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         d = math.hypot(own.x - ref.x, own.y - ref.y)
         u = signed(bearing(ref.x, ref.y, own.x, own.y) - ref.heading - self.phi) if d > 0 else 0.0
-        return (_clip(d, self.lo[0], self.hi[0]), _clip(u, self.lo[1], self.hi[1]))
+        return (d, u)
+
+    def area(self, p: Sequence[float]) -> float:
+        return p[0]  # polar coordinates: a step in (distance, angle) sweeps distance times as much plane
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = ref.heading.half + self.hi[1]
@@ -180,8 +189,10 @@ class RelativeXYDraws:
         own.x, own.y = ref.x + dx, ref.y + dy
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        lx, ly = to_local(own.x - ref.x, own.y - ref.y, ref.heading)
-        return (_clip(lx, self.lo[0], self.hi[0]), _clip(ly, self.lo[1], self.hi[1]))
+        return to_local(own.x - ref.x, own.y - ref.y, ref.heading)
+
+    def area(self, p: Sequence[float]) -> float:
+        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
@@ -209,7 +220,10 @@ class AbsoluteXYDraws:
         own.x, own.y = p[0], p[1]
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        return (_clip(own.x, self.lo[0], self.hi[0]), _clip(own.y, self.lo[1], self.hi[1]))
+        return (own.x, own.y)
+
+    def area(self, p: Sequence[float]) -> float:
+        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
@@ -239,7 +253,10 @@ class FacingDraws:
         own.heading = normalize(self._target(own, ref) + p[0])
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        return (_clip(signed(own.heading - self._target(own, ref)), self.lo[0], self.hi[0]),)
+        return (signed(own.heading - self._target(own, ref)),)
+
+    def area(self, p: Sequence[float]) -> float:
+        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         d = math.hypot(own.x - ref.x, own.y - ref.y)
@@ -266,7 +283,10 @@ class RelativeHeadingDraws:
         own.heading = normalize(ref.heading + p[0])
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        return (_angle_in(own.heading - ref.heading, self.lo[0], self.hi[0]),)
+        return (_angle_near(own.heading - ref.heading, self.lo[0], self.hi[0]),)
+
+    def area(self, p: Sequence[float]) -> float:
+        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = ref.heading.half + (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
@@ -289,19 +309,28 @@ class AbsoluteHeadingDraws:
         own.heading = normalize(p[0])
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        return (_angle_in(own.heading, self.lo[0], self.hi[0]),)
+        return (_angle_near(own.heading, self.lo[0], self.hi[0]),)
+
+    def area(self, p: Sequence[float]) -> float:
+        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
         return Reach(own.x, own.y, own.r, Arc(normalize((self.lo[0] + self.hi[0]) / 2), min(180.0, half)))
 
 
-def _angle_in(angle: float, lo: float, hi: float) -> float:
-    """The representative of `angle` (mod 360) in [lo, hi]; just outside (rounding): the nearer bound."""
+def _angle_near(angle: float, lo: float, hi: float) -> float:
+    """The representative of `angle` (mod 360) in [lo, hi], or outside it the one nearest to it."""
     a = lo + normalize(angle - lo)
-    if a <= hi:
-        return a
-    return hi if a - hi < (lo + 360.0) - a else lo
+    return a if a <= hi or a - hi < (lo + 360.0) - a else a - 360.0
+
+
+def clipped(draws: Draws, values: Sequence[float]) -> tuple[float, ...]:
+    return tuple(_clip(v, lo, hi) for v, lo, hi in zip(values, draws.lo, draws.hi))
+
+
+def inside(draws: Draws, values: Sequence[float]) -> bool:
+    return all(lo <= v <= hi for v, lo, hi in zip(values, draws.lo, draws.hi))
 
 
 # ------------------------------------------------------------------------------------------------- programs
@@ -351,7 +380,7 @@ class Parameterisation:
             row = []
             for part, r in zip(self.draws[k], self.refs[k]):
                 # Invert against the recorded entity and its already re-evaluated reference, then evaluate.
-                p = part.invert(recorded[k], None if r is None else poses[r])
+                p = clipped(part, part.invert(recorded[k], None if r is None else poses[r]))
                 part.evaluate(p, poses[k], None if r is None else poses[r])
                 row.append(p)
             params.append(row)

@@ -24,7 +24,7 @@ from synth.dsl import parse_program
 from synth.geometry import angular_difference
 from synth.gibbs import Chain, ChainSettings, NoVariant, autocorrelation_time, sample_variants
 from synth.overlap import boxes_overlap, scene_overlaps
-from synth.parameters import Pose, parameterise
+from synth.parameters import Pose, SectorDraws, inside, parameterise
 from synth.scene import scene_from_dict
 from synth.semantics import check
 from synth.synthesize import synthesize
@@ -193,6 +193,45 @@ def test_without_the_rule_every_draw_is_accepted():
 TWO_CARS = scene_from_dict({"frame_id": "two", "entities": [
     {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
     {"id": "car1", "type": "Car", "x": 0, "y": 9.0, "heading": 0}]})
+
+
+def _reexpressed_distance_means(seed: int) -> tuple[float, float]:
+    """ped2 stays put while re-anchoring moves ped1 (nothing else moves): the mean of ped2's sector distance as the
+    chain draws it, and exactly, by weighting uniform draws of ped1 with the Jacobian the move must respect."""
+    scene = scene_from_dict({"frame_id": "anchor", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+        {"id": "ped1", "type": "Pedestrian", "x": 0, "y": 7, "heading": 0},
+        {"id": "ped2", "type": "Pedestrian", "x": -0.6, "y": 7, "heading": 0}]})
+    program = parse_program(
+        "ped1 = new Pedestrian ahead of ego by Range(5, 10), facing Range(-5, 5) deg relative to ego\n"
+        "ped2 = new Pedestrian left of ped1 by Range(0.1, 3), facing Range(-5, 5) deg relative to ego\n")
+    chain = Chain(program, scene, SynthConfig(), seed=seed, allow_collisions=True)
+    drawn = []
+    for i in range(40000):
+        chain._reanchor(1, 0)
+        if i % 4 == 0:
+            drawn.append(chain.params[2][0][0])
+    # Exact: ped1 uniform in its box; the pair is valid where ped2's re-expressed parameters are in their box, and
+    # ped2's density at its fixed place is 1 / (its distance) there (polar coordinates).
+    p, rng = chain.params_of, np.random.default_rng(seed)
+    ped2, sector = chain.poses[2], p.draws[2][0]
+    weights, values = [], []
+    for d, u in zip(rng.uniform(5, 10, 100000), rng.uniform(-10, 10, 100000)):
+        poses = [chain.poses[0], Pose(), ped2]
+        p.evaluate_into(1, [(d, u), chain.params[1][1]], poses)
+        v = sector.invert(ped2, poses[1])
+        if inside(sector, v):
+            weights.append(1 / v[0])
+            values.append(v[0])
+    return float(np.mean(drawn)), float(np.average(values, weights=weights))
+
+
+def test_re_anchoring_weighs_its_jacobian(monkeypatch):
+    drawn, exact = _reexpressed_distance_means(seed=3)
+    assert abs(drawn - exact) < 0.05  # seeds 1-5 give -0.03 .. +0.02; without the Jacobian it is ~ +0.26
+    monkeypatch.setattr(SectorDraws, "area", lambda self, p: 1.0)  # the bug: a re-expression taken as volume-preserving
+    drawn, exact_again = _reexpressed_distance_means(seed=3)
+    assert drawn - exact > 0.15
 
 
 def test_a_program_that_always_collides_is_no_variant_naming_the_pair():
