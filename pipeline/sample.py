@@ -42,7 +42,6 @@ from synth.emit_scenic import (
     MIN_DISTANCE,
     MOTION_PARAM,
     NotGenerated,
-    has_motion,
     read_source,
     rebuild_from_source,
     render_scenic,
@@ -283,12 +282,6 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
 
 def _sample(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions, sampler: str,
             text: str | None, filename: str, progress: Progress | None) -> Samples:
-    if has_motion(program):
-        # The chain (synth.gibbs) draws positions and headings only; Scenic draws every speed the text gives.
-        if options.sampler == "gibbs":
-            raise UserError(f"{filename}: the program says how fast entities move, and --sampler gibbs does not "
-                            "draw speeds yet: use --sampler scenic")
-        sampler = "scenic"
     if sampler == "gibbs":
         from synth.gibbs import NoVariant, sample_variants
 

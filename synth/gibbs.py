@@ -46,7 +46,7 @@ from synth.collision_rule import CollisionRule, collision_rule
 from synth.config import SynthConfig
 from synth.dsl import Program
 from synth.overlap import box_radius, boxes_overlap
-from synth.parameters import Parameterisation, Pose, inside, parameterise
+from synth.parameters import SPEED, Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
 
 DEFAULT_BURN_IN = 20  # sweeps from the recorded scene to the first variant
@@ -130,8 +130,13 @@ class Chain:
                 self.dependants[r] = sorted(set(self.dependants[r]) | {k} | set(self.dependants[k]))
         # moves[k][part]: the entities a redraw of that part changes, k first (a heading move leaves alone those
         # that only face k, a position move those that only turn with k).
-        self.moves = [[np.array(p.moved_by(k, j, self.dependants[k])) for j in range(len(p.draws[k]))]
-                      for k in range(n)]
+        changes = [[p.moved_by(k, j, self.dependants[k]) for j in range(len(p.draws[k]))] for k in range(n)]
+        self.moves = [[np.array(moved) for moved, _ in row] for row in changes]
+        # Does a redraw of that clause move any box? (A speed alone does not: no collision test.)
+        self.geometric = [[bool(fields - {SPEED}) for _, fields in row] for row in changes]
+        # required[m]: m's clauses with a requirement beyond their box (Draws.allowed).
+        self.required = [[c for c, d in enumerate(p.draws[m]) if d.requires] for m in range(n)]
+        self.motion = any(d.writes == SPEED for row in p.draws for d in row)
         self.readers = [[self._readers(k, j) for j in range(len(p.draws[k]))] for k in range(n)]
         self.proposals = self.accepted = 0
         self.moved = np.zeros(n, dtype=bool)
@@ -175,7 +180,7 @@ class Chain:
         now = self.params[k][part]
         idx = self.moves[k][part]
         moved = idx.tolist()
-        before = self._violations(idx, self.x, self.y, self.h) if descend else 0
+        before = self._unmet(moved, self.poses) + self._violations(idx, self.x, self.y, self.h) if descend else 0
         for _ in range(1 if descend else MAX_DRAWS):
             new = tuple(a + (b - a) * t for a, b, t in zip(lo, hi, self.rng.random(len(lo))))
             row = list(self.params[k])
@@ -190,7 +195,7 @@ class Chain:
                 trial[m] = Pose()
                 p.evaluate_into(m, self.params[m], trial)
                 x[m], y[m], h[m] = trial[m].x, trial[m].y, trial[m].heading
-            after = self._violations(idx, x, y, h)
+            after = self._unmet(moved, trial) + (self._violations(idx, x, y, h) if self.geometric[k][part] else 0)
             if not after or (descend and after <= before):
                 self.accepted += 1
                 self.moved[k] = True
@@ -203,6 +208,11 @@ class Chain:
                     lo[d] = v
                 else:
                     hi[d] = v
+
+    def _unmet(self, moved, poses: list[Pose]) -> int:
+        """How many requirements beyond the boxes (Draws.allowed) the moved entities' clauses fail at poses."""
+        p = self.params_of
+        return sum(not p.draws[m][c].allowed(poses[p.refs[m][c]]) for m in moved for c in self.required[m])
 
     def _readers(self, k: int, part: int) -> list[tuple[int, int]]:
         """(m, clause) of the other entities whose clauses read what a redraw of k's clause `part` changes."""
@@ -235,15 +245,17 @@ class Chain:
         for m, c in self.readers[k][part]:
             d = p.draws[m][c]
             value = d.invert(self.poses[m], trial[k])
-            if not inside(d, value) or d.area(value) <= 0.0:
+            if not inside(d, value) or d.area(value, trial[k]) <= 0.0:
                 return
-            weight *= d.area(self.params[m][c]) / d.area(value)
+            weight *= d.area(self.params[m][c], self.poses[k]) / d.area(value, trial[k])
             updates.append((m, c, value))
         if weight < 1.0 and self.rng.random() >= weight:
             return
+        if self._unmet([k, *(m for m, _, _ in updates)], trial):
+            return
         x, y, h = self.x.copy(), self.y.copy(), self.h.copy()
         x[k], y[k], h[k] = trial[k].x, trial[k].y, trial[k].heading
-        if self._violations(np.array([k]), x, y, h):
+        if self.geometric[k][part] and self._violations(np.array([k]), x, y, h):
             return
         self.accepted += 1
         self.moved[k] = True
@@ -279,7 +291,9 @@ class Chain:
 
     def scene(self, frame_id: str) -> Scene:
         p = self.params_of
-        ents = [Entity(i, t, float(q.x) + 0.0, float(q.y) + 0.0, float(q.heading) + 0.0, float(length), float(width))
+        # With motion every entity has a speed (0 without a motion clause, as Scenic's default), else none.
+        ents = [Entity(i, t, float(q.x) + 0.0, float(q.y) + 0.0, float(q.heading) + 0.0, float(length), float(width),
+                       speed=float(q.speed) + 0.0 if self.motion else None)
                 for i, t, q, length, width in zip(p.ids, p.types, self.poses, self.length, self.width)]
         return make_scene(frame_id, ents)
 
@@ -290,9 +304,16 @@ def sample_variants(program: Program, scene: Scene, config: SynthConfig, n: int,
     """n variants of `scene` from `program` (the scene's program, or any program declaring entities of it)."""
     chain = Chain(program, scene, config, seed, allow_collisions)
     start = 0
-    while chain.violated_pairs():
+    everyone = range(1, len(chain.poses))
+    while chain.violated_pairs() or chain._unmet(everyone, chain.poses):
         if start == settings.start_sweeps:
-            pairs = tuple(chain.rule.named(tuple(chain.violated_pairs())))
+            pairs = tuple(chain.rule.named(tuple(chain.violated_pairs()))) if chain.rule else ()
+            if not pairs:  # only a speed requirement: a reference too slow for a relative Range below 0
+                p = chain.params_of
+                slow = sorted({p.ids[p.refs[m][c]] for m in everyone for c in chain.required[m]
+                               if not p.draws[m][c].allowed(chain.poses[p.refs[m][c]])})
+                raise NoVariant(f"no variant found in {start} sweeps: {', '.join(slow)} never fast enough for the "
+                                "relative speeds below it", ())
             shown = ", ".join(f"{a} and {b}" for a, b in pairs[:5])
             raise NoVariant(f"no variant found in {start} sweeps: {len(pairs)} pair{'s' if len(pairs) > 1 else ''} "
                             f"of boxes that do not overlap in the scene always collide ({shown}"

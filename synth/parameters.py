@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 from synth.config import SynthConfig
 from synth.dsl import (
@@ -43,6 +42,7 @@ from synth.dsl import (
     RelativeHeading,
 )
 from synth.geometry import bearing, normalize, signed, to_local
+from synth.parts.motion import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary
 from synth.parts.position import sampled_distance
 from synth.scene import EGO_ID, Entity, Scene
 
@@ -57,6 +57,7 @@ class Pose:
     x: float = 0.0
     y: float = 0.0
     heading: float = 0.0
+    speed: float = 0.0  # m/s (motion); 0 for an entity without a motion clause, as Scenic's default
 
 
 @dataclass(frozen=True)
@@ -84,30 +85,42 @@ class Reach:
     heading: Arc
 
 
-XY, HEADING = "xy", "heading"  # the fields of a Pose that clauses write and read
+XY, HEADING, SPEED = "xy", "heading", "speed"  # the fields of a Pose that clauses write and read
 
 
-class Draws(Protocol):
+class Draws:
     """One clause of a statement: the parameters Scenic draws for it and what they make of the entity.
 
     `writes` is the Pose field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
     entity (set by an earlier clause of the statement): what a sampler must re-evaluate when something moves.
+    `lo` / `hi` bound the box of its parameters.
     """
 
     ref: str | None
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     writes: str
-    reads: tuple[str, ...]
-    reads_own: tuple[str, ...]
+    reads: tuple[str, ...] = ()
+    reads_own: tuple[str, ...] = ()
 
-    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None: ...
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        raise NotImplementedError
 
-    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]: ...
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        raise NotImplementedError
 
-    def area(self, p: Sequence[float]) -> float: ...
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        raise NotImplementedError
 
-    def reach(self, own: Reach, ref: Reach | None) -> Reach: ...
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
+        """Jacobian of the map from parameters to the field it writes (1: volume-preserving)."""
+        return 1.0
+
+    requires = False  # does the emitted text add a requirement beyond the box (`allowed`)?
+
+    def allowed(self, ref: Pose | None) -> bool:
+        """That requirement (Scenic rejects a draw that fails it)."""
+        return True
 
 
 def _clip(v: float, lo: float, hi: float) -> float:
@@ -144,7 +157,7 @@ def _disc_plus(ref: Reach, dx: float, dy: float, r: float, heading: Arc) -> Reac
 # ------------------------------------------------------------------------------------------------ positions
 
 @dataclass(frozen=True)
-class SectorDraws:
+class SectorDraws(Draws):
     """`DIR of REF by Range(a, b)`: dsl__sector draws (distance, angle offset in +-delta1)."""
 
     ref: str
@@ -153,7 +166,6 @@ class SectorDraws:
     hi: tuple[float, ...]
     writes = XY
     reads = (XY, HEADING)
-    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         dx, dy = _offset(ref.heading + self.phi + p[1], 0.0, p[0])
@@ -164,7 +176,7 @@ class SectorDraws:
         u = signed(bearing(ref.x, ref.y, own.x, own.y) - ref.heading - self.phi) if d > 0 else 0.0
         return (d, u)
 
-    def area(self, p: Sequence[float]) -> float:
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
         return p[0]  # polar coordinates: a step in (distance, angle) sweeps distance times as much plane
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
@@ -174,7 +186,7 @@ class SectorDraws:
 
 
 @dataclass(frozen=True)
-class RelativeXYDraws:
+class RelativeXYDraws(Draws):
     """`on Range @ Range relative to REF`: dsl__relative_xy draws (lateral, forward) in REF's frame."""
 
     ref: str
@@ -182,7 +194,6 @@ class RelativeXYDraws:
     hi: tuple[float, ...]
     writes = XY
     reads = (XY, HEADING)
-    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         dx, dy = _offset(ref.heading, p[0], p[1])
@@ -190,9 +201,6 @@ class RelativeXYDraws:
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         return to_local(own.x - ref.x, own.y - ref.y, ref.heading)
-
-    def area(self, p: Sequence[float]) -> float:
-        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
@@ -206,7 +214,7 @@ class RelativeXYDraws:
 
 
 @dataclass(frozen=True)
-class AbsoluteXYDraws:
+class AbsoluteXYDraws(Draws):
     """`on Range @ Range`: x and y drawn in the scene frame."""
 
     lo: tuple[float, ...]
@@ -214,16 +222,12 @@ class AbsoluteXYDraws:
     ref = None
     writes = XY
     reads = ()
-    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.x, own.y = p[0], p[1]
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         return (own.x, own.y)
-
-    def area(self, p: Sequence[float]) -> float:
-        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
@@ -233,7 +237,7 @@ class AbsoluteXYDraws:
 # ------------------------------------------------------------------------------------------------- headings
 
 @dataclass(frozen=True)
-class FacingDraws:
+class FacingDraws(Draws):
     """`facing toward | away from REF`: dsl__facing_* draws an offset in +-delta2 about the bearing."""
 
     ref: str
@@ -255,9 +259,6 @@ class FacingDraws:
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         return (signed(own.heading - self._target(own, ref)),)
 
-    def area(self, p: Sequence[float]) -> float:
-        return 1.0
-
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         d = math.hypot(own.x - ref.x, own.y - ref.y)
         spread = own.r + ref.r
@@ -269,7 +270,7 @@ class FacingDraws:
 
 
 @dataclass(frozen=True)
-class RelativeHeadingDraws:
+class RelativeHeadingDraws(Draws):
     """`facing Range(a, b) deg relative to REF`: the angle added to REF's heading."""
 
     ref: str
@@ -277,16 +278,12 @@ class RelativeHeadingDraws:
     hi: tuple[float, ...]
     writes = HEADING
     reads = (HEADING,)
-    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.heading = normalize(ref.heading + p[0])
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         return (_angle_near(own.heading - ref.heading, self.lo[0], self.hi[0]),)
-
-    def area(self, p: Sequence[float]) -> float:
-        return 1.0
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = ref.heading.half + (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
@@ -295,7 +292,7 @@ class RelativeHeadingDraws:
 
 
 @dataclass(frozen=True)
-class AbsoluteHeadingDraws:
+class AbsoluteHeadingDraws(Draws):
     """`facing Range(a, b) deg`: the heading drawn directly."""
 
     lo: tuple[float, ...]
@@ -303,7 +300,6 @@ class AbsoluteHeadingDraws:
     ref = None
     writes = HEADING
     reads = ()
-    reads_own = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.heading = normalize(p[0])
@@ -311,12 +307,57 @@ class AbsoluteHeadingDraws:
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
         return (_angle_near(own.heading, self.lo[0], self.hi[0]),)
 
-    def area(self, p: Sequence[float]) -> float:
-        return 1.0
-
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
         return Reach(own.x, own.y, own.r, Arc(normalize((self.lo[0] + self.hi[0]) / 2), min(180.0, half)))
+
+
+# ------------------------------------------------------------------------------------------------- motion
+
+@dataclass(frozen=True)
+class SpeedDraws(Draws):
+    """A motion clause (synth.parts.motion): Scenic draws the speed uniformly in [a, b], a and b following the
+    reference's speed and clamped at 0 (`Range(0, dsl__V_STOP)`, dsl__speed_like, dsl__speed_relative, an
+    absolute Range). The parameter is that uniform draw t in [0, 1], speed = a + (b - a) t: a fixed box, while
+    the interval moves with the reference."""
+
+    ref: str | None
+    offsets: tuple[float, float]  # added to the reference's speed (0 without one), then clamped at 0
+    lo: tuple[float, ...] = (0.0,)
+    hi: tuple[float, ...] = (1.0,)
+    writes = SPEED
+
+    @property
+    def reads(self) -> tuple[str, ...]:
+        return () if self.ref is None else (SPEED,)
+
+    def interval(self, ref: Pose | None) -> tuple[float, float]:
+        base = 0.0 if ref is None else ref.speed
+        return (max(0.0, base + self.offsets[0]), max(0.0, base + self.offsets[1]))
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        a, b = self.interval(ref)
+        own.speed = a + (b - a) * p[0]
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        a, b = self.interval(ref)
+        return ((own.speed - a) / (b - a) if b > a else 0.0,)
+
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
+        a, b = self.interval(ref)
+        return b - a
+
+    @property
+    def requires(self) -> bool:
+        # A relative Range wholly below 0 holds no speed unless the reference is fast enough: the emitted text
+        # requires it (MotionPart.scenic_requirements), so Scenic rejects such draws.
+        return self.ref is not None and self.offsets[1] < 0.0
+
+    def allowed(self, ref: Pose | None) -> bool:
+        return not self.requires or ref.speed >= -self.offsets[1]
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        return own  # a speed places nothing
 
 
 def _angle_near(angle: float, lo: float, hi: float) -> float:
@@ -356,8 +397,21 @@ def heading_draws(head, config: SynthConfig) -> Draws:
     raise TypeError(f"not a DSL heading: {head!r}")
 
 
+def motion_draws(motion, config: SynthConfig) -> Draws:
+    if isinstance(motion, Stationary):
+        return SpeedDraws(None, (0.0, config.v_stop))
+    if isinstance(motion, MovingLike):
+        return SpeedDraws(motion.ref, (-config.dv, config.dv))
+    if isinstance(motion, RelativeSpeed):
+        return SpeedDraws(motion.ref, (motion.speed.lo, motion.speed.hi))
+    if isinstance(motion, AbsoluteSpeed):
+        return SpeedDraws(None, (motion.speed.lo, motion.speed.hi))
+    raise TypeError(f"not a DSL motion: {motion!r}")
+
+
 # A clause's Draws, by the name of its part (synth.parts): a new part is one more entry.
-DRAWS: dict[str, Callable[[object, SynthConfig], Draws]] = {"position": position_draws, "heading": heading_draws}
+DRAWS: dict[str, Callable[[object, SynthConfig], Draws]] = {"position": position_draws, "heading": heading_draws,
+                                                             "motion": motion_draws}
 
 
 @dataclass(frozen=True)
@@ -373,8 +427,8 @@ class Parameterisation:
     def start(self, scene: Scene) -> tuple[list[Pose], list[list[tuple[float, ...]]]]:
         """The parameters of a placed scene (clipped into their boxes), and the poses they evaluate to."""
         by_id = scene.by_id()
-        recorded = [Pose(by_id[i].x, by_id[i].y, by_id[i].heading) for i in self.ids]
-        poses = [Pose(self.ego.x, self.ego.y, self.ego.heading)] + [Pose() for _ in self.ids[1:]]
+        recorded = [Pose(by_id[i].x, by_id[i].y, by_id[i].heading, by_id[i].speed or 0.0) for i in self.ids]
+        poses = [Pose(self.ego.x, self.ego.y, self.ego.heading, self.ego.speed or 0.0)] + [Pose() for _ in self.ids[1:]]
         params: list[list[tuple[float, ...]]] = [[]]
         for k in range(1, len(self.ids)):
             row = []
@@ -391,9 +445,10 @@ class Parameterisation:
         for part, r, p in zip(self.draws[k], self.refs[k], params):
             part.evaluate(p, poses[k], None if r is None else poses[r])
 
-    def moved_by(self, k: int, part: int, dependants: list[int]) -> list[int]:
-        """Every entity whose value changes when part `part` of entity k is redrawn (k first, then in order), of
-        k's dependants (the entities that refer to k through any chain of references, in order)."""
+    def moved_by(self, k: int, part: int, dependants: list[int]) -> tuple[list[int], set[str]]:
+        """Every entity whose value changes when clause `part` of entity k is redrawn (k first, then in order), of
+        k's dependants (the entities that refer to k through any chain of references, in order), and which Pose
+        fields change (a speed that changes moves no box)."""
         changed = {(k, self.draws[k][part].writes)}
         moved = [k]
         for m in [k, *dependants]:
@@ -406,7 +461,7 @@ class Parameterisation:
                     hit = True
             if hit and m != k:
                 moved.append(m)
-        return moved
+        return moved, {f for _, f in changed}
 
     def reaches(self) -> list[Reach]:
         ego = self.ego

@@ -52,6 +52,28 @@ def all_relation_kinds():
     return scene, program, SynthConfig(delta1=4.0, delta2=2.0, oracle="closed-form")
 
 
+def every_motion_clause():
+    """(scene, program) with clauses a synthesized program rarely needs: like a moving reference, a relative Range
+    wholly below the reference (the reference must then be fast enough), an absolute Range, a Range reaching
+    below 0. The program contains the scene under SynthConfig(motion=True)."""
+    from synth.dsl import parse_program
+
+    scene = scene_from_dict({"frame_id": "kinds", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0, "speed": 2.0},
+        {"id": "car1", "type": "Car", "x": 0, "y": 15, "heading": 0, "speed": 9.0},
+        {"id": "car2", "type": "Car", "x": 0, "y": 30, "heading": 0, "speed": 8.5},
+        {"id": "car3", "type": "Car", "x": 4, "y": 30, "heading": 0, "speed": 1.0},
+        {"id": "car4", "type": "Car", "x": 8, "y": 30, "heading": 0, "speed": 0.3},
+        {"id": "car5", "type": "Car", "x": 12, "y": 30, "heading": 0, "speed": 4.0}]})
+    program = parse_program(
+        "car1 = new Car ahead of ego by Range(12.5, 17.5), facing Range(-5, 5) deg, moving Range(6, 12) m/s\n"
+        "car2 = new Car ahead of car1 by Range(12.5, 17.5), facing Range(-5, 5) deg, moving like car1\n"
+        "car3 = new Car on Range(2, 6) @ Range(28, 32), facing Range(-5, 5) deg, moving Range(-8.5, -7) m/s relative to car2\n"
+        "car4 = new Car on Range(6, 10) @ Range(28, 32), facing Range(-5, 5) deg, stationary\n"
+        "car5 = new Car on Range(10, 14) @ Range(28, 32), facing Range(-5, 5) deg, moving Range(-3, 5) m/s relative to car4\n")
+    return scene, program
+
+
 @pytest.fixture(scope="session")
 def real_frames() -> list[Scene]:
     return shipped_frames()

@@ -8,15 +8,14 @@ import random
 from dataclasses import replace
 
 import pytest
-from conftest import assert_one_line_error, run_r2s, shipped_frames
+from conftest import every_motion_clause, run_r2s, shipped_frames
 
 pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: the Scenic tests need the compiler")
 
 from pipeline.sample import SampleOptions, sample_program, sample_scenic  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
-from synth.dsl import parse_program  # noqa: E402
 from synth.emit_scenic import rebuild_from_source  # noqa: E402
-from synth.scene import Scene, scene_from_dict  # noqa: E402
+from synth.scene import Scene  # noqa: E402
 from synth.semantics import check  # noqa: E402
 from synth.synthesize import synthesize  # noqa: E402
 
@@ -66,24 +65,13 @@ def test_speeds_at_the_printed_bounds_are_still_inside(motion_frames, ranges_at_
             _speeds_inside(result.program, recorded, s)
 
 
-def test_every_motion_clause_samples_inside_and_never_negative():
-    # Hand-written clauses a synthesized program rarely needs: like a moving reference, a relative Range wholly
-    # below the reference (the reference must then be fast enough), an absolute Range, a Range reaching below 0.
-    scene = scene_from_dict({"frame_id": "kinds", "entities": [
-        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0, "speed": 2.0},
-        {"id": "car1", "type": "Car", "x": 0, "y": 15, "heading": 0, "speed": 9.0},
-        {"id": "car2", "type": "Car", "x": 0, "y": 30, "heading": 0, "speed": 8.5},
-        {"id": "car3", "type": "Car", "x": 4, "y": 30, "heading": 0, "speed": 1.0},
-        {"id": "car4", "type": "Car", "x": 8, "y": 30, "heading": 0, "speed": 0.3},
-        {"id": "car5", "type": "Car", "x": 12, "y": 30, "heading": 0, "speed": 4.0}]})
-    program = parse_program(
-        "car1 = new Car ahead of ego by Range(12.5, 17.5), facing Range(-5, 5) deg, moving Range(6, 12) m/s\n"
-        "car2 = new Car ahead of car1 by Range(12.5, 17.5), facing Range(-5, 5) deg, moving like car1\n"
-        "car3 = new Car on Range(2, 6) @ Range(28, 32), facing Range(-5, 5) deg, moving Range(-8.5, -7) m/s relative to car2\n"
-        "car4 = new Car on Range(6, 10) @ Range(28, 32), facing Range(-5, 5) deg, stationary\n"
-        "car5 = new Car on Range(10, 14) @ Range(28, 32), facing Range(-5, 5) deg, moving Range(-3, 5) m/s relative to car4\n")
+@pytest.mark.parametrize("sampler", ["scenic", "gibbs"])
+def test_every_motion_clause_samples_inside_and_never_negative(sampler):
+    # Hand-written clauses a synthesized program rarely needs (see conftest.every_motion_clause).
+    scene, program = every_motion_clause()
     assert check(program, scene, MOTION_ON).ok
-    samples = sample_program(program, scene, MOTION_ON, SampleOptions(n=30, seed=3, **SCENIC)).scenes
+    options = SampleOptions(n=30, seed=3, sampler=sampler, allow_collisions=True)
+    samples = sample_program(program, scene, MOTION_ON, options).scenes
     for s in samples:
         _speeds_inside(program, scene, s)
     speeds = {e.id: [s.by_id()[e.id].speed for s in samples] for e in scene.others}
@@ -106,9 +94,15 @@ def test_r2s_sample_writes_speeds_and_r2s_check_accepts_them(motion_frames, tmp_
         ok = run_r2s("check", str(tmp_path / "v" / f"sample_{k:03d}.json"), str(tmp_path / "p.dsl"),
                      "--config", str(config))
         assert ok.returncode == 0, ok.stdout + ok.stderr
-    # The chain does not draw speeds (yet): asked for explicitly, it is refused in one line.
-    proc = run_r2s("sample", str(tmp_path / "p.scenic"), "--sampler", "gibbs", "--out", str(tmp_path / "g"))
-    assert_one_line_error(proc, 2, "--sampler scenic")
+    # The chain (the default sampler) draws speeds too, keeping the recording's gaps.
+    proc = run_r2s("sample", str(tmp_path / "p.scenic"), "--n", "3", "--seed", "4", "--out", str(tmp_path / "g"))
+    assert proc.returncode == 0, proc.stderr
+    for k in range(3):
+        doc = json.loads((tmp_path / "g" / f"sample_{k:03d}.json").read_text())
+        assert all(isinstance(e["speed"], float) and e["speed"] >= 0 for e in doc["entities"])
+        ok = run_r2s("check", str(tmp_path / "g" / f"sample_{k:03d}.json"), str(tmp_path / "p.dsl"),
+                     "--config", str(config))
+        assert ok.returncode == 0, ok.stdout + ok.stderr
 
 
 def test_static_programs_write_no_speed(tmp_path):

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 from _distribution import ALPHA, N_DRAWS, TIGHT, TIGHT_PROGRAM, compare, ks_critical, scenic_draws
-from conftest import all_relation_kinds, assert_one_line_error, run_r2s
+from conftest import all_relation_kinds, assert_one_line_error, every_motion_clause, run_r2s
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
@@ -96,7 +96,7 @@ def test_parts_invert_what_they_evaluate(programs):
         chain = Chain(program, scene, config, seed=3)
         p = chain.params_of
         for c in _draws(chain, 20):
-            poses = [Pose(q.x, q.y, q.heading) for q in c.poses]
+            poses = [Pose(q.x, q.y, q.heading, q.speed) for q in c.poses]
             for k in range(1, len(p.ids)):
                 for part, r, values in zip(p.draws[k], p.refs[k], c.params[k]):
                     back = part.invert(poses[k], None if r is None else poses[r])
@@ -104,7 +104,7 @@ def test_parts_invert_what_they_evaluate(programs):
 
 
 def _placed(p, params) -> list[Pose]:
-    poses = [Pose(p.ego.x, p.ego.y, p.ego.heading)] + [Pose() for _ in p.ids[1:]]
+    poses = [Pose(p.ego.x, p.ego.y, p.ego.heading, p.ego.speed or 0.0)] + [Pose() for _ in p.ids[1:]]
     for k in range(1, len(p.ids)):
         p.evaluate_into(k, params[k], poses)
     return poses
@@ -229,7 +229,7 @@ def _reexpressed_distance_means(seed: int) -> tuple[float, float]:
 def test_re_anchoring_weighs_its_jacobian(monkeypatch):
     drawn, exact = _reexpressed_distance_means(seed=3)
     assert abs(drawn - exact) < 0.05  # seeds 1-5 give -0.03 .. +0.02; without the Jacobian it is ~ +0.26
-    monkeypatch.setattr(SectorDraws, "area", lambda self, p: 1.0)  # the bug: a re-expression taken as volume-preserving
+    monkeypatch.setattr(SectorDraws, "area", lambda self, p, ref: 1.0)  # the bug: a re-expression taken as volume-preserving
     drawn, exact_again = _reexpressed_distance_means(seed=3)
     assert drawn - exact > 0.15
 
@@ -323,6 +323,26 @@ def test_the_chain_draws_scenics_distribution_where_the_rule_binds(tight_referen
     assert 0.3 < meets / 200 < 0.9  # the rule binds: it turns away this share of the program's own scenes
     result = compare(TIGHT_PROGRAM, TIGHT, SynthConfig(), tight_reference)
     assert result.same, (result.pvalues.argmin(), result.pvalues.min())
+
+
+def test_the_chain_draws_scenics_speeds(scenic_installed):
+    # Every motion clause, a relative speed Range below 0 (Scenic rejects a reference too slow for it) and boxes
+    # side by side that the rule keeps apart.
+    scene, program = every_motion_clause()
+    config = SynthConfig(motion=True)
+    reference = scenic_draws(program, scene, config)[0]
+    assert all(s.by_id()["car2"].speed >= 7 for s in reference)
+    result = compare(program, scene, config, reference)
+    assert result.same, (result.pvalues.argmin(), result.pvalues.min())
+
+
+def test_variants_carry_speeds_inside_their_clauses():
+    scene, program = every_motion_clause()
+    config = SynthConfig(motion=True)
+    v = sample_variants(program, scene, config, 20, seed=1)
+    _assert_variants(program, scene, v.scenes, config)
+    assert all(s.ego.speed == 2.0 and s.by_id()["car2"].speed >= 7 for s in v.scenes)
+    assert len({s.by_id()["car5"].speed for s in v.scenes}) == 20
 
 
 @pytest.mark.parametrize("bug", ["half the sector width", "rule ignored"])
