@@ -12,12 +12,11 @@ import os
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
-import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from synth.scene import EGO_ID, ENTITY_TYPES, Scene, SceneError, check_identifier, make_scene
+from synth.scene import EGO_ID, Scene, SceneError, make_scene
 
 FRAMES_SCHEMA = pa.schema(
     [
@@ -113,71 +112,37 @@ def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str
     return table.num_rows
 
 
-def read_parquet_table(
-    path: str | os.PathLike, required: Iterable[str], optional: Iterable[str], what: str, error: type[ValueError]
-) -> pa.Table:
-    """The required (and present optional) columns of a Parquet file; a missing file, a directory, a file that is
-    not Parquet or lacks a column is an `error` naming the file (shared by the frames and programs readers, whose
-    files come from anyone)."""
-    required, optional = list(required), list(optional)
-    if not os.path.exists(path):
-        raise error(f"{path} does not exist")
-    if os.path.isdir(path):
-        raise error(f"{path} is a directory, not a {what} Parquet file")
-    try:
-        pf = pq.ParquetFile(path)
-        names = set(pf.schema_arrow.names)
-        missing = [c for c in required if c not in names]
-        if missing:
-            raise error(f"{path} is not a {what} file: it lacks column(s) {', '.join(missing)}")
-        return pf.read(columns=required + [c for c in optional if c in names])
-    except error:
-        raise
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise error(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
-
-
 def read_frames(path: str | os.PathLike) -> pd.DataFrame:
-    """Read and validate a frames file; any problem is a FramesError naming the file."""
-    df = read_parquet_table(path, FRAMES_COLUMNS, OPTIONAL_COLUMNS, "frames", FramesError).to_pandas()
-    try:
-        validate_frames(df)
-    except FramesError as exc:
-        raise FramesError(f"{path}: {exc}") from None
-    return df
+    """Read and validate a frames file or dataset directory, whole (small data: `r2s run` streams instead); any
+    problem is a FramesError naming the file."""
+    from extractors.frames_dataset import FramesDataset
+
+    return FramesDataset.open(path).read_all().to_pandas()
 
 
 def validate_frames(df: pd.DataFrame) -> None:
+    """The rules every frames table obeys (finite positions, known types, one ego per frame, ids fit to print
+    into programs, unique per frame, frames contiguous); the same check streams over datasets
+    (extractors.frames_dataset.FramesCheck), so both refuse with the same words."""
+    from extractors.frames_dataset import check_table
+
     missing = [c for c in FRAMES_COLUMNS if c not in df.columns]
     if missing:
         raise FramesError(f"lacks column(s) {', '.join(missing)}")
     if df.empty:
         return
+    check = ["frame_id", "entity_id", "type", "x", "y", "heading", "is_ego"]
+    df = df[check].copy()
     for c in ("x", "y", "heading"):
-        v = pd.to_numeric(df[c], errors="coerce")
-        if not np.isfinite(v.to_numpy(dtype=float)).all():
-            bad = df.loc[~np.isfinite(v.to_numpy(dtype=float)), "frame_id"].iloc[0]
-            raise FramesError(f"column {c} has a missing or non-finite value (frame {bad})")
-    unknown = sorted(set(df["type"].astype(str)) - set(ENTITY_TYPES))
-    if unknown:
-        raise FramesError(f"unknown entity type(s) {', '.join(map(repr, unknown[:5]))}")
-    egos = df.groupby("frame_id", sort=False)["is_ego"].sum()
-    if (egos != 1).any():
-        raise FramesError(f"frame {egos.index[(egos != 1).to_numpy()][0]!r} does not have exactly one ego row")
-    # Ids are printed into generated programs: the whole file is refused before any frame is synthesized.
-    for eid in pd.unique(df["entity_id"].astype(str)):
-        try:
-            check_identifier(eid, "entity id")
-        except SceneError as exc:
-            frame = df.loc[df["entity_id"].astype(str) == eid, "frame_id"].iloc[0]
-            raise FramesError(f"{exc} (frame {frame})") from None
-    ego_named = (df["entity_id"].astype(str) == EGO_ID).to_numpy() != df["is_ego"].astype(bool).to_numpy()
-    if ego_named.any():
-        raise FramesError(f"frame {df.loc[ego_named, 'frame_id'].iloc[0]!r}: the id 'ego' belongs to the ego row only")
-    dup = df.duplicated(["frame_id", "entity_id"]).to_numpy()
-    if dup.any():
-        row = df.loc[dup].iloc[0]
-        raise FramesError(f"frame {row['frame_id']!r} has entity id {row['entity_id']!r} twice")
+        df[c] = pd.to_numeric(df[c], errors="coerce")  # text where a number belongs is a missing value
+    try:
+        table = pa.Table.from_pandas(df, preserve_index=False)
+    except (pa.ArrowException, TypeError, ValueError) as exc:
+        raise FramesError(f"a column has values of the wrong type ({str(exc)[:120]})") from None
+    for name in ("frame_id", "entity_id", "type"):
+        if not pa.types.is_string(table.schema.field(name).type) and table.column(name).null_count < len(table):
+            table = table.set_column(table.schema.get_field_index(name), name, table.column(name).cast(pa.string()))
+    check_table(table)
 
 
 def _dim(v: Any) -> float | None:

@@ -1,0 +1,491 @@
+"""Frames at dataset scale: one frames Parquet file or a directory of them, read in row groups, never whole.
+
+The frames schema (extractors.frames) is one row per entity per frame, and a frame's rows are contiguous: every
+extractor writes a frame's rows together (FramesWriter), and so does `r2s extract --jobs` (a frame never spans
+two part files). Readers rely on that to cut the data into frames without a global sort, so it is checked: a
+frame id that occurs in two places is refused, never silently split into two frames.
+
+`FramesDataset.open` reads only footers (files, schemas, row-group sizes). `check` streams every row group
+once, dictionary-encoded, and refuses the whole dataset on the first bad row, with the same one-line messages
+as extractors.frames.validate_frames (ids are printed into generated programs, so a bad id refuses the input
+before any frame is synthesized). `runs` streams only the frame_id column and yields where each frame is.
+Workers read their own rows with `read_rows` (a file and a row range), so frame data need not pass through the
+process that plans the work.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from extractors.frame_index import FrameIndex, frame_hashes
+from extractors.frames import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
+
+# What the check reads: the columns validate_frames looks at. String columns are read dictionary-encoded:
+# a frame id or entity id repeats on many rows, so the work is per distinct value, not per row.
+CHECK_COLUMNS = ("frame_id", "entity_id", "type", "x", "y", "heading", "is_ego")
+DICTIONARY_COLUMNS = ("frame_id", "entity_id", "type")
+
+
+# ------------------------------------------------------------------------------------------- files and schemas
+
+def filesystem(path: str):
+    """(pyarrow filesystem, path inside it) for a local path or a URL (s3://, gs://, file://, or any fsspec
+    protocol), so that a cluster's workers can read a path they all see."""
+    from pyarrow import fs
+
+    if "://" not in str(path):
+        return fs.LocalFileSystem(), os.path.abspath(path)
+    try:
+        return fs.FileSystem.from_uri(path)
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, ValueError):
+        import fsspec
+
+        fsspec_fs, inner = fsspec.core.url_to_fs(path)
+        return fs.PyFileSystem(fs.FSSpecHandler(fsspec_fs)), inner
+
+
+def dataset_files(path: str, what: str, error: type[ValueError]) -> tuple[object, list[str]]:
+    """The Parquet files of a dataset: the file itself, or every *.parquet under a directory (sorted, hidden and
+    _-prefixed names skipped, as pyarrow.dataset, DuckDB globs and Spark skip them)."""
+    from pyarrow import fs
+
+    try:
+        pafs, inner = filesystem(str(path))
+        info = pafs.get_file_info(inner)
+    except (OSError, ValueError, ImportError) as exc:
+        raise error(f"{path}: cannot open ({str(exc)[:120]})") from None
+    if info.type == fs.FileType.NotFound:
+        raise error(f"{path} does not exist")
+    if info.type == fs.FileType.File:
+        return pafs, [inner]
+    selector = fs.FileSelector(inner, recursive=True)
+    files = sorted(
+        f.path for f in pafs.get_file_info(selector)
+        if f.type == fs.FileType.File and f.path.endswith(".parquet")
+        and not any(part.startswith((".", "_")) for part in os.path.relpath(f.path, inner).split(os.sep))
+    )
+    if not files:
+        raise error(f"{path} is a directory without {what} Parquet files (*.parquet)")
+    return pafs, files
+
+
+def _kind(t: pa.DataType) -> str:
+    if pa.types.is_dictionary(t):
+        t = t.value_type
+    if pa.types.is_string(t) or pa.types.is_large_string(t):
+        return "string"
+    if pa.types.is_integer(t):
+        return "integer"
+    if pa.types.is_floating(t):
+        return "float"
+    if pa.types.is_boolean(t):
+        return "bool"
+    return str(t)
+
+
+def check_column_types(schema: pa.Schema, expected: pa.Schema, where: str, error: type[ValueError]) -> None:
+    """Refuse a column of another kind than the schema's (text where a number belongs, ...); widths may differ
+    (pandas writes int64 where the schema says int32), a float column may hold integers."""
+    for field in expected:
+        if field.name not in schema.names:
+            continue
+        want, got = _kind(field.type), _kind(schema.field(field.name).type)
+        if got != want and not (want == "float" and got == "integer") and not pa.types.is_null(
+                schema.field(field.name).type):
+            raise error(f"{where}: column {field.name} is {schema.field(field.name).type}, not {field.type} "
+                        "(a column does not have the schema's type)")
+
+
+@dataclass(frozen=True)
+class FramesPart:
+    path: str  # inside the dataset's filesystem
+    rows: int
+    row_groups: tuple[int, ...]  # rows per row group
+    optional: tuple[str, ...]  # optional columns this file has
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return FRAMES_COLUMNS + self.optional
+
+
+@dataclass(frozen=True)
+class FramesDataset:
+    source: str  # as the user gave it
+    parts: tuple[FramesPart, ...]
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> FramesDataset:
+        pafs, files = dataset_files(str(path), "frames", FramesError)
+        parts = []
+        for f in files:
+            where = f if len(files) > 1 else str(path)
+            meta = _metadata(pafs, f, where, FramesError)
+            schema = meta.schema.to_arrow_schema()
+            missing = [c for c in FRAMES_COLUMNS if c not in schema.names]
+            if missing:
+                raise FramesError(f"{where} is not a frames file: it lacks column(s) {', '.join(missing)}")
+            check_column_types(schema, FRAMES_SCHEMA, where, FramesError)
+            optional = tuple(c for c in OPTIONAL_COLUMNS if c in schema.names)
+            parts.append(FramesPart(f, meta.num_rows,
+                                    tuple(meta.row_group(i).num_rows for i in range(meta.num_row_groups)), optional))
+        return cls(str(path), tuple(parts))
+
+    @property
+    def rows(self) -> int:
+        return sum(p.rows for p in self.parts)
+
+    @property
+    def url(self) -> str:
+        """How workers name this dataset's filesystem (local paths stay paths)."""
+        return self.source if "://" in self.source else ""
+
+    def where(self, part: FramesPart) -> str:
+        return part.path if len(self.parts) > 1 else self.source
+
+    def row_groups(self, part: FramesPart, columns: tuple[str, ...]) -> Iterator[pa.Table]:
+        pf = _open(self.url, part.path, tuple(c for c in DICTIONARY_COLUMNS if c in columns))
+        for i in range(len(part.row_groups)):
+            yield pf.read_row_group(i, columns=list(columns))
+
+    def check(self) -> tuple[int, FrameIndex]:
+        """Validate every row (streaming); return the number of frames and the index of their ids."""
+        checker = FramesCheck()
+        for part in self.parts:
+            try:
+                for table in self.row_groups(part, CHECK_COLUMNS):
+                    checker.feed(table)
+                checker.end_part()
+            except FramesError as exc:
+                raise FramesError(f"{self.where(part)}: {exc}") from None
+            except (pa.ArrowException, OSError) as exc:
+                raise FramesError(f"{self.where(part)} is not a readable Parquet file "
+                                  f"({type(exc).__name__}: {str(exc)[:120]})") from None
+        index = checker.index()
+        if checker.frames == 0:
+            raise FramesError(f"{self.source} has no frames")
+        hi, lo = index.duplicated()
+        if len(hi):
+            raise FramesError(f"{self.source}: {self._split_frame_message(hi[:1], lo[:1])}")
+        if checker.ego_problem:
+            raise FramesError(f"{self.source}: {checker.ego_problem}")
+        return checker.frames, index
+
+    def _split_frame_message(self, hi: np.ndarray, lo: np.ndarray) -> str:
+        wanted = FrameIndex(hi, lo)
+        places = []
+        for runs in self.runs():
+            h = frame_hashes(runs.ids)
+            for i in np.flatnonzero(wanted.contains(*h)):
+                places.append((runs.ids[i], self.where(self.parts[runs.part]), int(runs.starts[i])))
+                if len(places) == 2:
+                    fid, f1, r1 = places[0]
+                    _, f2, r2 = places[1]
+                    return (f"frame {fid!r} occurs in two places ({f1} row {r1}, {f2 if f2 != f1 else 'and'} row "
+                            f"{r2}): a frame's rows must be contiguous (one frame, one block of rows)")
+        return "a frame id occurs in two places: a frame's rows must be contiguous"
+
+    def runs(self) -> Iterator[FrameRuns]:
+        """Where each frame is: per row group, the frames that end in it (a frame that continues into the next
+        row group is given once, whole). Reads only the frame_id column."""
+        for k, part in enumerate(self.parts):
+            stitch = _Stitch()
+            offset = 0
+            for table in self.row_groups(part, ("frame_id",)):
+                ids = _dictionary(table.column("frame_id"))
+                starts, run_ids = _run_starts(ids)
+                done = stitch.add(starts + offset, run_ids, table.num_rows)
+                offset += table.num_rows
+                if done is not None:
+                    yield FrameRuns(k, *done)
+            last = stitch.finish(offset)
+            if last is not None:
+                yield FrameRuns(k, *last)
+
+    def read_all(self) -> pa.Table:
+        """Every row, checked, as one table (small data: tests, `r2s eval-frontend`; runs stream instead)."""
+        self.check()
+        optional = [c for c in OPTIONAL_COLUMNS if any(c in p.optional for p in self.parts)]
+        schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in optional])
+        tables = []
+        for part in self.parts:
+            table = _open(self.url, part.path).read(columns=list(part.columns))
+            for c in optional:
+                if c not in part.optional:
+                    table = table.append_column(c, pa.nulls(table.num_rows, OPTIONAL_COLUMNS[c]))
+            tables.append(table.select(schema.names).cast(schema))
+        return pa.concat_tables(tables)
+
+    def find(self, frame_id: str) -> pa.Table | None:
+        """The rows of one frame (row-group statistics skip most of a large dataset), or None."""
+        import pyarrow.dataset as ds
+
+        pafs, _ = filesystem(self.source)
+        dataset = ds.dataset([p.path for p in self.parts], format="parquet", filesystem=pafs)
+        columns = list(FRAMES_COLUMNS) + [c for c in OPTIONAL_COLUMNS if c in dataset.schema.names]
+        table = dataset.to_table(columns=columns, filter=ds.field("frame_id") == frame_id)
+        return table if table.num_rows else None
+
+
+@dataclass(frozen=True)
+class FrameRuns:
+    """Consecutive frames of one part: frame i has rows starts[i] .. starts[i] + lengths[i] of the part."""
+
+    part: int
+    starts: np.ndarray  # int64
+    lengths: np.ndarray  # int64
+    ids: np.ndarray  # object (str)
+
+
+def _metadata(pafs, path: str, where: str, error: type[ValueError]):
+    try:
+        with pafs.open_input_file(path) as f:
+            return pq.ParquetFile(f).metadata
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise error(f"{where} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+
+
+# ------------------------------------------------------------------------------------------------ runs of frames
+
+def _dictionary(column: pa.ChunkedArray | pa.Array) -> pa.DictionaryArray:
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    if not pa.types.is_dictionary(arr.type):
+        arr = pc.dictionary_encode(arr)
+    return arr
+
+
+def _run_starts(ids: pa.DictionaryArray) -> tuple[np.ndarray, np.ndarray]:
+    """First row of each run of equal frame ids, and the id of each run."""
+    if ids.null_count:
+        raise FramesError("column frame_id has a missing value")
+    idx = ids.indices.to_numpy()
+    if len(idx) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, object)
+    starts = np.concatenate(([0], np.flatnonzero(idx[1:] != idx[:-1]) + 1)).astype(np.int64)
+    return starts, ids.dictionary.take(pa.array(idx[starts])).to_numpy(zero_copy_only=False)
+
+
+class _Stitch:
+    """Joins a frame that continues from one row group into the next: the last run of a row group is held
+    back until the next one shows whether it goes on."""
+
+    def __init__(self) -> None:
+        self.open: tuple[int, str] | None = None  # (start row, id) of the held-back run
+
+    def add(self, starts: np.ndarray, ids: np.ndarray, n_rows: int):
+        if len(starts) == 0:
+            return None
+        if self.open is not None and ids[0] == self.open[1]:
+            starts = starts.copy()
+            starts[0] = self.open[0]
+        elif self.open is not None:
+            starts = np.concatenate(([self.open[0]], starts))
+            ids = np.concatenate((np.array([self.open[1]], dtype=object), ids))
+        self.open = (int(starts[-1]), ids[-1])
+        if len(starts) == 1:
+            return None
+        return starts[:-1], np.diff(starts), ids[:-1]
+
+    def finish(self, n_rows: int):
+        if self.open is None:
+            return None
+        start, fid = self.open
+        self.open = None
+        return np.array([start], np.int64), np.array([n_rows - start], np.int64), np.array([fid], dtype=object)
+
+
+# ------------------------------------------------------------------------------------------------------ checking
+
+def _used(codes: np.ndarray, size: int) -> np.ndarray:
+    """The dictionary codes that occur (a dictionary may hold values no row uses)."""
+    return np.flatnonzero(np.bincount(codes, minlength=size)) if len(codes) else np.zeros(0, np.int64)
+
+
+class FramesCheck:
+    """validate_frames for a stream of tables (row groups) whose frames are contiguous: the same rules and the
+    same messages, in bounded memory. Frame ids go into a FrameIndex so that a frame occurring twice is found."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self._hashes: list[tuple[np.ndarray, np.ndarray]] = []
+        self._open: tuple[str, int, set[str]] | None = None  # frame continuing into the next table
+        self._good_ids: set[str] = set()
+        self.ego_problem: str | None = None
+
+    def feed(self, table: pa.Table) -> None:
+        n = table.num_rows
+        if n == 0:
+            return
+        fid = _dictionary(table.column("frame_id"))
+        starts, ids = _run_starts(fid)
+        lengths = np.diff(np.append(starts, n))
+
+        def frame_at(row: int) -> str:
+            return str(ids[np.searchsorted(starts, row, side="right") - 1])
+
+        for c in ("x", "y", "heading"):
+            values = table.column(c).to_numpy()
+            bad = ~np.isfinite(values.astype(float, copy=False))
+            if bad.any():
+                raise FramesError(f"column {c} has a missing or non-finite value (frame {frame_at(int(np.argmax(bad)))})")
+        types = _dictionary(table.column("type"))
+        codes = types.indices.drop_null().to_numpy()
+        used = set(types.dictionary.take(pa.array(_used(codes, len(types.dictionary)))).to_pylist())
+        unknown = sorted(used - set(ENTITY_TYPES)) + (["None"] if types.null_count else [])
+        if unknown:
+            raise FramesError(f"unknown entity type(s) {', '.join(map(repr, unknown[:5]))}")
+
+        ego = pc.fill_null(table.column("is_ego"), False).to_numpy().astype(bool)
+        egos = np.add.reduceat(ego.astype(np.int64), starts)
+        continues = self._open is not None and ids[0] == self._open[0]
+        if continues:
+            egos[0] += self._open[1]
+        elif self._open is not None:
+            self._close()
+        closed = egos[:-1]
+        if (closed != 1).any():
+            self._no_ego(ids[int(np.argmax(closed != 1))])
+
+        entities = _dictionary(table.column("entity_id"))
+        if entities.null_count:
+            raise FramesError(f"entity id missing (frame {frame_at(int(np.argmax(np.asarray(entities.is_null()))))})")
+        ent = entities.indices.to_numpy()
+        names = entities.dictionary.to_pylist()
+        for k in _used(ent, len(names)):
+            name = names[k]
+            if name not in self._good_ids:
+                try:
+                    check_identifier(name, "entity id")
+                except SceneError as exc:
+                    raise FramesError(f"{exc} (frame {frame_at(int(np.argmax(ent == k)))})") from None
+                self._good_ids.add(name)
+        ego_code = names.index(EGO_ID) if EGO_ID in names else -1
+        mismatch = (ent == ego_code) != ego
+        if mismatch.any():
+            raise FramesError(f"frame {frame_at(int(np.argmax(mismatch)))!r}: the id 'ego' belongs to the ego row only")
+        self._check_unique_entities(ent, names, starts, lengths, ids, continues)
+
+        first_new = 1 if continues else 0
+        if continues:
+            self._open[2].update(names[k] for k in ent[: lengths[0]])
+        self._hashes.append(frame_hashes(ids[first_new:]))
+        self.frames += len(ids) - first_new
+        last = len(starts) - 1
+        if last > 0 or not continues:
+            self._open = (str(ids[-1]), int(egos[-1]), {names[k] for k in ent[starts[-1]:]})
+        else:
+            self._open = (self._open[0], int(egos[-1]), self._open[2])
+
+    def _check_unique_entities(self, ent, names, starts, lengths, ids, continues) -> None:
+        run = np.repeat(np.arange(len(starts), dtype=np.int64), lengths)
+        width = len(names) + 1
+        key = run * width + ent
+        if len(starts) * width <= 4 * len(ent) + 10**6:
+            counts = np.bincount(key, minlength=len(starts) * width)
+            twice = np.flatnonzero(counts > 1)
+            dup = int(twice[0]) if len(twice) else None
+        else:
+            sk = np.sort(key)
+            same = np.flatnonzero(sk[1:] == sk[:-1])
+            dup = int(sk[same[0]]) if len(same) else None
+        if dup is not None:
+            raise FramesError(f"frame {ids[dup // width]!r} has entity id {names[dup % width]!r} twice")
+        if continues:
+            seen = self._open[2]
+            for k in ent[: lengths[0]]:
+                if names[k] in seen:
+                    raise FramesError(f"frame {ids[0]!r} has entity id {names[k]!r} twice")
+
+    def _close(self) -> None:
+        fid, egos, _ = self._open
+        self._open = None
+        if egos != 1:
+            self._no_ego(fid)
+
+    def _no_ego(self, fid: str) -> None:
+        # Said at the end: a frame whose rows are in two places has an ego in one half only, and "two places"
+        # is the message that tells what is wrong.
+        if self.ego_problem is None:
+            self.ego_problem = f"frame {fid!r} does not have exactly one ego row"
+
+    def end_part(self) -> None:
+        """A frame never continues into another file (it would be a frame id in two places)."""
+        if self._open is not None:
+            self._close()
+
+    def index(self) -> FrameIndex:
+        self.end_part()
+        return FrameIndex.of(self._hashes)
+
+
+def check_table(table: pa.Table) -> None:
+    """validate_frames for one in-memory table (a writer's batch of whole frames)."""
+    checker = FramesCheck()
+    checker.feed(table)
+    hi, lo = checker.index().duplicated()
+    if len(hi):
+        dup = FrameIndex(hi[:1], lo[:1])
+        ids = _run_starts(_dictionary(table.column("frame_id")))[1]
+        fid = next(i for i in ids if dup.contains(*frame_hashes([i]))[0])
+        raise FramesError(f"frame {fid!r} occurs in two places: a frame's rows must be contiguous")
+    if checker.ego_problem:
+        raise FramesError(checker.ego_problem)
+
+
+# ------------------------------------------------------------------------------------------------ worker reads
+
+# Per process: open files and the row groups read last. Workers take neighbouring chunks one after another,
+# so a row group (64,000 rows) is decoded about once per worker, not once per chunk.
+_FILES: OrderedDict = OrderedDict()
+_GROUPS: OrderedDict = OrderedDict()
+_CACHED_FILES, _CACHED_GROUPS = 8, 4
+
+
+def _open(url: str, path: str, dictionary: tuple[str, ...] = ()) -> pq.ParquetFile:
+    return _open_with_bounds(url, path, dictionary)[0]
+
+
+def _open_with_bounds(url: str, path: str, dictionary: tuple[str, ...] = ()) -> tuple[pq.ParquetFile, np.ndarray]:
+    """An open file and the first row of each of its row groups (plus the row count at the end)."""
+    key = (url, path, dictionary)
+    hit = _FILES.get(key)
+    if hit is None:
+        pafs, _ = filesystem(url) if url else filesystem(path)
+        pf = pq.ParquetFile(pafs.open_input_file(path), read_dictionary=list(dictionary) or None)
+        sizes = [pf.metadata.row_group(i).num_rows for i in range(pf.metadata.num_row_groups)]
+        hit = _FILES[key] = (pf, np.concatenate(([0], np.cumsum(sizes, dtype=np.int64))))
+        while len(_FILES) > _CACHED_FILES:
+            _FILES.popitem(last=False)
+    else:
+        _FILES.move_to_end(key)
+    return hit
+
+
+def read_rows(url: str, path: str, start: int, stop: int, columns: tuple[str, ...]) -> pa.Table:
+    """Rows [start, stop) of one file, read through the row groups that hold them."""
+    pf, bounds = _open_with_bounds(url, path)
+    first = int(np.searchsorted(bounds, start, side="right") - 1)
+    tables = []
+    for g in range(first, len(bounds) - 1):
+        if bounds[g] >= stop:
+            break
+        key = (url, path, g, columns)
+        table = _GROUPS.get(key)
+        if table is None:
+            table = pf.read_row_group(g, columns=list(columns))
+            _GROUPS[key] = table
+            while len(_GROUPS) > _CACHED_GROUPS:
+                _GROUPS.popitem(last=False)
+        else:
+            _GROUPS.move_to_end(key)
+        lo, hi = max(start - bounds[g], 0), min(stop, bounds[g + 1]) - bounds[g]
+        tables.append(table.slice(lo, hi - lo))
+    return pa.concat_tables(tables) if len(tables) > 1 else tables[0]
