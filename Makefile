@@ -36,8 +36,8 @@ DEMO_FRAME  := scene-0103/0
 demo: setup
 	@mkdir -p $(DEMO)
 	$(R2S) extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out $(DEMO)/excerpt-frames.parquet
-	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs.parquet --jobs $(JOBS)
-	$(R2S) report $(DEMO)/programs.parquet --out $(DEMO)/report
+	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs --jobs $(JOBS)
+	$(R2S) report $(DEMO)/programs --out $(DEMO)/report
 	$(R2S) query $(DEMO_FRAMES) data/patterns/queue-of-three.dsl --out $(DEMO)/matches.parquet
 	$(R2S) scene $(DEMO_FRAMES) $(DEMO_FRAME) --out $(DEMO)/scene.json
 	$(R2S) synth $(DEMO)/scene.json --out $(DEMO)/scene.dsl
@@ -62,9 +62,9 @@ corpus: setup
 	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB]"; exit 2; }
 	@mkdir -p $(OUT)
 	test -f $(OUT)/frames.parquet || $(R2S) extract $(SOURCE) $(INPUT) --categories $(CATEGORIES) --out $(OUT)/frames.parquet
-	$(R2S) run $(OUT)/frames.parquet --out $(OUT)/programs.parquet --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT)
-	$(R2S) report $(OUT)/programs.parquet --out $(OUT)/report
-	@echo "corpus done: $(OUT)/programs.parquet, report at $(OUT)/report/report.html"
+	$(R2S) run $(OUT)/frames.parquet --out $(OUT)/programs --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT)
+	$(R2S) report $(OUT)/programs --out $(OUT)/report
+	@echo "corpus done: $(OUT)/programs/ (a Parquet dataset), report at $(OUT)/report/report.html"
 
 lint: setup
 	$(VENV)/bin/ruff check synth extractors pipeline bench tests

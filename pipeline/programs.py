@@ -75,25 +75,58 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
     return pa.Table.from_pylist([{c: r.get(c) for c in PROGRAMS_COLUMNS} for r in rows], schema=PROGRAMS_SCHEMA)
 
 
-def read_programs_table(path: str | os.PathLike) -> pa.Table:
-    """Read and validate a programs file as a table of exactly PROGRAMS_SCHEMA; any problem (a column of another
-    type, a missing frame id or status, an unknown status) is a ProgramsError naming the file."""
-    from extractors.frames import read_parquet_table
+def check_programs_schema(schema: pa.Schema, where: str) -> None:
+    """Refuse a file that lacks a programs column or has one of another kind (text where a number belongs)."""
+    from extractors.frames_dataset import check_column_types
 
-    table = read_parquet_table(path, PROGRAMS_COLUMNS, (), "programs", ProgramsError).select(list(PROGRAMS_COLUMNS))
-    try:
-        table = table.cast(PROGRAMS_SCHEMA)
-    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError) as exc:
-        raise ProgramsError(f"{path}: a column does not have the programs schema's type ({str(exc)[:120]})") from None
+    missing = [c for c in PROGRAMS_COLUMNS if c not in schema.names]
+    if missing:
+        raise ProgramsError(f"{where} is not a programs file: it lacks column(s) {', '.join(missing)}")
+    check_column_types(schema, PROGRAMS_SCHEMA, where, ProgramsError)
+
+
+def check_programs_values(table: pa.Table, where: str) -> None:
     for column in ("frame_id", "status", "config_hash"):
-        if table.column(column).null_count:
-            raise ProgramsError(f"{path}: column {column} has a missing value")
-    bad = sorted(set(table.column("status").to_pylist()) - set(STATUSES))
-    if bad:
-        raise ProgramsError(f"{path}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
-    return table
+        if column in table.column_names and table.column(column).null_count:
+            raise ProgramsError(f"{where}: column {column} has a missing value")
+    if "status" in table.column_names:
+        import pyarrow.compute as pc
+
+        bad = sorted(set(pc.unique(table.column("status")).to_pylist()) - set(STATUSES))
+        if bad:
+            raise ProgramsError(f"{where}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
+
+
+def programs_files(path: str | os.PathLike) -> list[str]:
+    """The Parquet files of a programs file or dataset directory (ProgramsError if there are none)."""
+    from extractors.frames_dataset import dataset_files
+
+    return dataset_files(str(path), "programs", ProgramsError)[1]
+
+
+def read_programs_table(path: str | os.PathLike) -> pa.Table:
+    """Read and validate a programs file or dataset directory, whole, as a table of exactly PROGRAMS_SCHEMA; any
+    problem (a column of another type, a missing frame id or status, an unknown status) is a ProgramsError naming
+    the file. For small data and tests: the report and the runner stream instead."""
+    import pyarrow.parquet as pq
+
+    files = programs_files(path)
+    tables = []
+    for f in files:
+        where = f if len(files) > 1 else str(path)
+        try:
+            pf = pq.ParquetFile(f)
+            check_programs_schema(pf.schema_arrow, where)
+            table = pf.read(columns=list(PROGRAMS_COLUMNS)).select(list(PROGRAMS_COLUMNS)).cast(PROGRAMS_SCHEMA)
+        except ProgramsError:
+            raise
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise ProgramsError(f"{where} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+        check_programs_values(table, where)
+        tables.append(table)
+    return pa.concat_tables(tables) if len(tables) > 1 else tables[0]
 
 
 def read_programs(path: str | os.PathLike):
-    """read_programs_table as a DataFrame (for the report and users' pandas)."""
+    """read_programs_table as a DataFrame (for users' pandas and the tests)."""
     return read_programs_table(path).to_pandas()

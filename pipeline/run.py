@@ -1,67 +1,29 @@
-"""Pure logic of `r2s run`: what is already done, what to compute, how rows merge, what the summary says.
-
-No files and no processes here (those are pipeline.run_store and pipeline.run_pool), so resume and merge
-rules are tested on plain lists.
+"""Pure logic of `r2s run`: how frames are grouped into chunks, when finished rows become a part file, what the
+summary says. No files and no processes here (those are pipeline.run_store and pipeline.run_pool), so the rules
+are tested on plain values.
 """
 
 from __future__ import annotations
 
-from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
 
-Row = dict[str, Any]
+import numpy as np
+import pyarrow as pa
 
+from pipeline.programs import STATUSES
 
-@dataclass(frozen=True)
-class RunPlan:
-    order: tuple[str, ...]  # every frame id of the input, in input order
-    kept: tuple[Row, ...]  # rows already computed with this config hash (not recomputed)
-    todo: tuple[str, ...]  # frames to compute, in input order
-    stale: tuple[str, ...]  # frames whose existing row has another config hash (recomputed, row replaced)
-    foreign: int  # existing rows of frames that are not in the input (dropped from the output)
-
-
-def plan_run(order: Sequence[str], existing: Iterable[Row], config_hash: str) -> RunPlan:
-    """Skip a frame only when a row exists for the same frame id AND the same config hash: the hash covers
-    everything that decides the program (SynthConfig.semantic_hash), so a kept row is the row a rerun makes."""
-    latest = latest_rows(existing)
-    wanted = set(order)
-    kept, todo, stale = [], [], []
-    for fid in order:
-        row = latest.get(fid)
-        if row is not None and row.get("config_hash") == config_hash:
-            kept.append(row)
-        else:
-            todo.append(fid)
-            if row is not None:
-                stale.append(fid)
-    foreign = sum(1 for fid in latest if fid not in wanted)
-    return RunPlan(tuple(order), tuple(kept), tuple(todo), tuple(stale), foreign)
-
-
-def latest_rows(rows: Iterable[Row]) -> dict[str, Row]:
-    """One row per frame id: the last one wins (sources are read oldest first: output, then parts in order)."""
-    out: dict[str, Row] = {}
-    for row in rows:
-        out[row["frame_id"]] = row
-    return out
-
-
-def merge_rows(order: Sequence[str], rows: Iterable[Row]) -> list[Row]:
-    """The final table: one row per input frame that has one, in input order; never a duplicate."""
-    latest = latest_rows(rows)
-    return [latest[fid] for fid in order if fid in latest]
+Frame = tuple[str, int, int]  # (frame id, first row in its file, rows)
 
 
 @dataclass(frozen=True)
 class Summary:
-    frames: int
-    computed: int
-    kept: int
+    frames: int  # rows in the output: one per frame done, now or before
+    computed: int  # frames computed by this run
+    kept: int  # frames whose row an earlier run wrote with the same config
     statuses: tuple[tuple[str, int], ...]
     seconds: float
+    first_result_s: float | None = None  # seconds from the start to the first finished frame
 
     def line(self) -> str:
         counts = dict(self.statuses)
@@ -71,30 +33,74 @@ class Summary:
                 f"{others}, {counts.get('error', 0)} errors, {self.seconds:.1f} s")
 
 
-def summarize(rows: Sequence[Row], computed: int, seconds: float) -> Summary:
-    statuses = Counter(str(r["status"]) for r in rows)
-    return Summary(len(rows), computed, len(rows) - computed, tuple(sorted(statuses.items())), seconds)
+def summarize(counts: Mapping[str, int], computed: int, seconds: float, first_result_s: float | None = None) -> Summary:
+    frames = sum(counts.values())
+    return Summary(frames, computed, frames - computed, tuple(sorted((s, int(n)) for s, n in counts.items())),
+                   seconds, first_result_s)
 
 
-class ChunkBuffer:
-    """Finished rows waiting for their part file: a chunk is due at `size` rows, or after `max_age_s` seconds
-    so that slow frames are not held back (a kill loses what is buffered, besides the frames in flight)."""
+def status_counts(table: pa.Table) -> dict[str, int]:
+    values, counts = np.unique(table.column("status").to_numpy(zero_copy_only=False).astype(str), return_counts=True)
+    return {str(v): int(c) for v, c in zip(values, counts)}
 
-    def __init__(self, size: int, max_age_s: float) -> None:
-        self.size, self.max_age_s = size, max_age_s
-        self.rows: list[Row] = []
+
+def chunk_size_for(todo: int, slots: int, largest: int) -> int:
+    """Frames per task: `largest`, but small enough that every worker gets several tasks (a small run keeps
+    its parallelism and a death names one frame sooner)."""
+    return max(1, min(largest, todo // (4 * max(slots, 1))))
+
+
+def chunks(runs: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]], size: int,
+           max_span_rows: int) -> Iterator[tuple[int, list[Frame]]]:
+    """Group the frames to compute into chunks of at most `size` frames of one file, spanning at most
+    `max_span_rows` rows (a worker reads the row groups under the span). `runs` yields (part, starts, lengths,
+    ids, todo mask) in file order."""
+    part, chunk = None, []
+    for k, starts, lengths, ids, todo in runs:
+        if k != part and chunk:
+            yield part, chunk
+            chunk = []
+        part = k
+        for i in np.flatnonzero(todo):
+            start, n = int(starts[i]), int(lengths[i])
+            if chunk and start + n - chunk[0][1] > max_span_rows:
+                yield part, chunk
+                chunk = []
+            chunk.append((str(ids[i]), start, n))
+            if len(chunk) == size:
+                yield part, chunk
+                chunk = []
+    if chunk:
+        yield part, chunk
+
+
+class PartBuffer:
+    """Finished rows waiting for their part file: a part is due at `rows` rows, or `max_age_s` seconds after its
+    first row so that slow frames do not hold finished ones back (a kill loses what is buffered, besides the
+    frames in flight)."""
+
+    def __init__(self, rows: int, max_age_s: float) -> None:
+        self.rows, self.max_age_s = rows, max_age_s
+        self.tables: list[pa.Table] = []
+        self.count = 0
         self._since: float | None = None
 
-    def add(self, row: Row, now: float) -> None:
-        if not self.rows:
+    def add(self, table: pa.Table, now: float) -> None:
+        if not self.tables:
             self._since = now
-        self.rows.append(row)
+        self.tables.append(table)
+        self.count += table.num_rows
 
     def due(self, now: float) -> bool:
-        if not self.rows:
+        if not self.tables:
             return False
-        return len(self.rows) >= self.size or (self._since is not None and now - self._since >= self.max_age_s)
+        return self.count >= self.rows or (self._since is not None and now - self._since >= self.max_age_s)
 
-    def take(self) -> list[Row]:
-        rows, self.rows, self._since = self.rows, [], None
-        return rows
+    def take(self) -> pa.Table:
+        table = pa.concat_tables(self.tables)
+        self.tables, self.count, self._since = [], 0, None
+        return table
+
+
+def status_line(counts: Mapping[str, int]) -> str:
+    return ", ".join(f"{counts[s]:,} {s}" for s in STATUSES if counts.get(s))

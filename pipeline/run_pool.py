@@ -1,42 +1,75 @@
 """Workers of `r2s run`: a loky process pool (joblib's) or a dask.distributed cluster, and the rule that keeps
 a run going when a worker dies.
 
-When a worker dies (killed at its memory limit, by the OOM killer, a segfault in a native library), every
-frame in flight fails with it and nobody says which frame was to blame. A lone suspect is the culprit; several
-are retried one at a time, so a second death names its frame exactly and the innocent ones get their programs.
-The culprit is recorded (memout when the worker was killed, else error, with the reason) and the run goes on
-with a fresh pool.
+The unit of work is a chunk of frames (pipeline.run_task.ChunkTask); the unit of blame is still one frame.
+When a worker dies (killed at its memory limit, by the OOM killer, a segfault in a native library), the chunks
+it ran fail with it and nobody says which frame was to blame. Each chunk's progress marker names the frame it
+was running: the frames before it (finished, rows lost) and after it (not started) are innocent and go back
+in the queue; the running frames are the suspects. A lone suspect is the culprit; several are retried one at
+a time, so a second death names its frame exactly and the innocent ones get their programs. The culprit is
+recorded (memout when the worker was killed, else error, with the reason) and the run goes on with a fresh
+pool. On dask, where a death is pinned on a task (KilledWorker) but a remote worker's marker cannot be read,
+the chunk is split into single frames, each of which dask pins on its own.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import time
-import uuid
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from pipeline.run import Row
-from pipeline.run_task import FrameTask, one_line, run_frame
+import pyarrow as pa
+
+from pipeline.run_task import ChunkTask, one_line, run_chunk
 
 
 class WorkerLost(Exception):
-    """Frames lost with their worker. `known`: these frames are to blame (not merely in flight)."""
+    """Every chunk in flight was lost with the pool. `in_flight`: (task, index of the frame it was running, -1
+    when it had not started, None when unknown). `blamed`: keys of the tasks whose running frame is to blame
+    (empty when nobody knows which worker died first)."""
 
-    def __init__(self, frame_ids: Sequence[str], reason: str, status: str, known: bool = False) -> None:
+    def __init__(self, in_flight, reason: str, status: str, blamed: frozenset[str] = frozenset()) -> None:
         super().__init__(reason)
-        self.frame_ids, self.reason, self.status, self.known = tuple(frame_ids), reason, status, known
+        self.in_flight, self.reason, self.status, self.blamed = tuple(in_flight), reason, status, blamed
+
+
+@dataclass(frozen=True)
+class Lost:
+    """One chunk whose death is pinned on it (dask's KilledWorker): the other chunks in flight go on."""
+
+    task: ChunkTask
+    reason: str
+    status: str
+
+
+class TaskQueue:
+    """Chunks still to run: retries first, then the (lazy, possibly huge) stream of planned chunks."""
+
+    def __init__(self, tasks: Iterable[ChunkTask]) -> None:
+        self._retries: deque[ChunkTask] = deque()
+        self._planned = iter(tasks)
+
+    def retry(self, task: ChunkTask) -> None:
+        self._retries.append(task)
+
+    def next(self) -> ChunkTask | None:
+        if self._retries:
+            return self._retries.popleft()
+        return next(self._planned, None)
 
 
 class Pool(Protocol):
-    def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row | None]:
-        """Rows as frames finish, None as a heartbeat while none does; raises WorkerLost naming the frames
-        whose worker died."""
+    def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
+        """Tables as chunks finish, Lost for a chunk whose death is pinned on it, None as a heartbeat while
+        nothing finishes; raises WorkerLost when the pool broke with chunks in flight."""
 
 
-# How often a pool wakes up when no frame finishes, so that a waiting chunk can be written on time.
+# How often a pool wakes up when no chunk finishes, so that a waiting part can be written on time.
 HEARTBEAT_S = 5.0
 
 
@@ -52,75 +85,116 @@ def wall_guard_s(time_limit: float | None) -> float | None:
     return None if time_limit is None else 3.0 * time_limit + 60.0
 
 
-def _bounded(
-    tasks: Sequence[FrameTask],
-    slots: int,
-    submit: Callable[[FrameTask], Any],
-    wait_first: Callable[[list, float | None], Iterable],
-    death: Callable[[BaseException], tuple[str, bool] | None],
-    guard_s: float | None = None,
-    kill: Callable[[], None] | None = None,
-    abandon: Callable[[list], None] | None = None,
-) -> Iterator[Row | None]:
-    """At most `slots` frames submitted at once, so that "in flight" means running and a death names few frames.
+@dataclass(frozen=True)
+class _Hooks:
+    """What differs between loky and dask in the bounded loop."""
 
-    `death(exc)` tells a worker death (reason, and whether the death is pinned on this frame) from a bug, which
-    propagates. Frames running longer than `guard_s` are taken for hung: `kill()` ends the pool's workers.
+    submit: Callable[[ChunkTask], Any]
+    wait_first: Callable[[list, float | None], Iterable]
+    death: Callable[[BaseException], tuple[str, bool] | None]  # (reason, pinned on this task) or None: a bug
+    started: Callable[[ChunkTask], int | None] = lambda task: None  # index of the frame running, -1, None
+    frame_since: Callable[[ChunkTask], float | None] = lambda task: None  # wall clock when it started
+    guard_s: float | None = None
+    kill: Callable[[], None] | None = None
+    abandon: Callable[[list], None] | None = None
+
+
+def _bounded(queue: TaskQueue, slots: int, hooks: _Hooks) -> Iterator[pa.Table | Lost | None]:
+    """At most `slots` chunks submitted at once, so that "in flight" means running and a death names few frames.
+
     When the run itself stops (SIGTERM, Ctrl-C, a bug, the consumer closing us), `abandon(futures)` stops the
-    frames in flight at once: a scheduler's grace period is seconds, and their rows are lost either way.
+    chunks in flight at once: a scheduler's grace period is seconds, and their rows are lost either way.
     """
-    running: dict[Any, tuple[FrameTask, float]] = {}
+    running: dict[Any, ChunkTask] = {}
     try:
-        yield from _bounded_loop(tasks, slots, submit, wait_first, death, guard_s, kill, running)
+        yield from _bounded_loop(queue, slots, hooks, running)
     except WorkerLost:
         raise
     except BaseException:
-        if abandon is not None and running:
-            abandon(list(running))
+        if hooks.abandon is not None and running:
+            hooks.abandon(list(running))
         raise
 
 
-def _bounded_loop(tasks, slots, submit, wait_first, death, guard_s, kill, running) -> Iterator[Row | None]:
-    pending = list(reversed(tasks))
-    poll_s = HEARTBEAT_S if guard_s is None else min(HEARTBEAT_S, guard_s / 4)
-    while pending or running:
-        while pending and len(running) < slots:
-            task = pending.pop()
-            running[submit(task)] = (task, time.monotonic())
-        done = wait_first(list(running), poll_s)
+def _bounded_loop(queue: TaskQueue, slots: int, hooks: _Hooks, running: dict) -> Iterator[pa.Table | Lost | None]:
+    poll_s = HEARTBEAT_S if hooks.guard_s is None else min(HEARTBEAT_S, hooks.guard_s / 4)
+    while True:
+        while len(running) < slots and (task := queue.next()) is not None:
+            running[hooks.submit(task)] = task
+        if not running:
+            return
+        done = hooks.wait_first(list(running), poll_s)
         if not done:
-            yield None  # the caller may write a chunk that has waited long enough
+            yield None  # the caller may write a part that has waited long enough
         for future in done:
-            task, _ = running.pop(future)
+            task = running.pop(future)
             try:
-                row = future.result()
+                table = future.result()
             except Exception as exc:
-                died = death(exc)
+                died = hooks.death(exc)
                 if died is None:
                     raise
                 reason, pinned = died
-                lost = [task.frame_id] + ([] if pinned else [t.frame_id for t, _ in running.values()])
-                raise WorkerLost(lost, reason, death_status(reason), known=pinned) from None
-            yield row
-        now = time.monotonic()
-        overdue = [t.frame_id for t, started in running.values() if guard_s is not None and now - started > guard_s]
-        if overdue:
-            if kill is not None:
-                kill()
-            raise WorkerLost(overdue, f"no answer after {guard_s:.0f} s (wall-clock guard); worker killed",
-                             "timeout", known=True)
+                if pinned:
+                    yield Lost(task, reason, death_status(reason))
+                    continue
+                lost = [(task, hooks.started(task))] + [(t, hooks.started(t)) for t in running.values()]
+                running.clear()
+                raise WorkerLost(lost, reason, death_status(reason)) from None
+            yield table
+        if hooks.guard_s is not None:
+            now = time.time()
+            overdue = [t for t in running.values()
+                       if (since := hooks.frame_since(t)) is not None and now - since > hooks.guard_s]
+            if overdue:
+                lost = [(t, hooks.started(t)) for t in running.values()]
+                running.clear()
+                if hooks.kill is not None:
+                    hooks.kill()
+                raise WorkerLost(lost, f"no answer after {hooks.guard_s:.0f} s (wall-clock guard); worker killed",
+                                 "timeout", blamed=frozenset(t.key for t in overdue))
+
+
+def _read_marker(task: ChunkTask) -> tuple[int, float] | None:
+    path = task.marker()
+    if path is None:
+        return None
+    try:
+        with open(path) as f:
+            return int(f.read() or -1), os.fstat(f.fileno()).st_mtime
+    except (FileNotFoundError, ValueError):
+        return None
+
+
+def _started(task: ChunkTask) -> int | None:
+    if task.progress_dir is None:
+        return None
+    mark = _read_marker(task)
+    if mark is None:
+        return -1  # no marker: the chunk never started, or finished (a finished chunk's rows came back)
+    marker = task.marker()
+    try:
+        os.unlink(marker)  # the chunk is over: a retry of its frames writes markers of its own
+    except FileNotFoundError:
+        pass
+    return mark[0]
+
+
+def _frame_since(task: ChunkTask) -> float | None:
+    mark = _read_marker(task)
+    return None if mark is None else mark[1]
 
 
 @dataclass(frozen=True)
 class LokyPool:
     """joblib's loky executor, used directly rather than through joblib.Parallel: Parallel runs n_jobs=1 in the
-    calling process (no memory isolation: one bad frame would end the run) and does not say which frames were
+    calling process (no memory isolation: one bad frame would end the run) and does not say which tasks were
     in flight when a worker died."""
 
     jobs: int
     guard_s: float | None = None
 
-    def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row]:
+    def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from joblib.externals.loky import get_reusable_executor
 
         executor = get_reusable_executor(max_workers=self.jobs)  # a fresh one after a death or a kill
@@ -137,8 +211,9 @@ class LokyPool:
             # The process is on its way out: no pool follows, so nothing can override kill_workers.
             executor.shutdown(wait=False, kill_workers=True)
 
-        yield from _bounded(tasks, self.jobs, lambda t: executor.submit(run_frame, t), wait_first, _loky_death,
-                            self.guard_s, kill, abandon)
+        yield from _bounded(queue, self.jobs, _Hooks(
+            submit=lambda t: executor.submit(run_chunk, t), wait_first=wait_first, death=_loky_death,
+            started=_started, frame_since=_frame_since, guard_s=self.guard_s, kill=kill, abandon=abandon))
 
 
 def _loky_death(exc: BaseException) -> tuple[str, bool] | None:
@@ -146,7 +221,7 @@ def _loky_death(exc: BaseException) -> tuple[str, bool] | None:
 
     if not isinstance(exc, BrokenProcessPool):
         return None
-    # The whole pool breaks with one worker, and the message does not say which frame it ran: not pinned.
+    # The whole pool breaks with one worker, and the message does not say which task it ran: not pinned.
     # Only the exit code is kept: the rest of the message speculates about memory.
     codes = re.search(r"exit codes of the workers are \{([^}]*)\}", str(exc))
     return (f"worker died (exit code {codes.group(1)})" if codes else one_line(f"worker died: {exc}")), False
@@ -159,20 +234,21 @@ class DaskPool:
     Not through joblib's dask backend, deliberately: joblib 1.6's backend never calls the completion callback
     of a task whose future errs (KilledWorker after a worker death), so Parallel waits for it forever, in every
     return_as mode. Dask itself retries a task whose worker died on other workers; after `allowed-failures`
-    deaths it raises KilledWorker for that task alone, so the death is pinned on its frame.
+    deaths it raises KilledWorker for that task alone, so the death is pinned on its chunk.
     """
 
     client: Any
     jobs: int | None = None
 
-    def map_unordered(self, tasks: Sequence[FrameTask]) -> Iterator[Row]:
+    def slots(self) -> int:
+        return self.jobs or max(1, sum(self.client.nthreads().values()))
+
+    def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from distributed import KilledWorker
         from distributed import wait as dask_wait
 
-        slots = self.jobs or max(1, sum(self.client.nthreads().values()))
-
-        def submit(task: FrameTask) -> Any:
-            return self.client.submit(run_frame, task, key=f"r2s-run-{uuid.uuid4().hex}", pure=False)
+        def submit(task: ChunkTask) -> Any:
+            return self.client.submit(run_chunk, task, key=f"r2s-run-{task.key}", pure=False)
 
         def wait_first(futures: list, timeout: float | None) -> Iterable:
             try:
@@ -187,40 +263,67 @@ class DaskPool:
             return (f"worker died (dask: each of the {tries.group(1)} workers that ran it died)" if tries
                     else one_line(f"worker died: {exc}")), True
 
-        yield from _bounded(tasks, slots, submit, wait_first, death, abandon=self.client.cancel)
+        yield from _bounded(queue, self.slots(), _Hooks(submit=submit, wait_first=wait_first, death=death,
+                                                        abandon=self.client.cancel))
 
 
-def compute(pool: Pool, tasks: Sequence[FrameTask], log: Callable[[str], None]) -> Iterator[Row | None]:
-    """One row per task, in completion order, whatever happens to the workers (None: a heartbeat)."""
-    queue = {t.frame_id: t for t in tasks}
-    while queue:
+def compute(pool: Pool, tasks: Iterable[ChunkTask], log: Callable[[str], None]) -> Iterator[pa.Table | None]:
+    """One row per planned frame, in tables as chunks finish, whatever happens to the workers (None: a heartbeat)."""
+    queue = TaskQueue(tasks)
+    while True:
         try:
-            for row in pool.map_unordered(list(queue.values())):
-                if row is not None:
-                    queue.pop(row["frame_id"], None)
-                yield row
+            for item in pool.map_unordered(queue):
+                if isinstance(item, Lost):
+                    yield from _pinned(item, queue, log)
+                else:
+                    yield item
+            return
         except WorkerLost as lost:
-            suspects = [queue.pop(fid) for fid in lost.frame_ids if fid in queue]
-            if lost.known or len(suspects) <= 1:
+            suspects = []
+            for task, started in lost.in_flight:
+                if started is None:  # progress unknown: every frame of the chunk is a suspect
+                    suspects.extend(task.singles())
+                elif started < 0 or (lost.blamed and task.key not in lost.blamed):
+                    queue.retry(task)  # never started, or killed by us together with a hung frame: innocent
+                else:
+                    culprit, rest = task.split_at(started)
+                    if rest is not None:  # finished before the death (rows lost with it) or not yet started
+                        queue.retry(rest)
+                    if task.key in lost.blamed:
+                        log(f"frame {culprit.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
+                        yield _lost_rows(culprit, lost.status, lost.reason)
+                    else:
+                        suspects.append(culprit)
+            if len(suspects) == 1:
+                log(f"frame {suspects[0].frames[0][0]}: {lost.reason}; recorded as {lost.status}")
+                yield _lost_rows(suspects[0], lost.status, lost.reason)
+            elif suspects:
+                log(f"{lost.reason} with {len(suspects)} frames in flight; retrying them one at a time")
                 for task in suspects:
-                    log(f"frame {task.frame_id}: {lost.reason}; recorded as {lost.status}")
-                    yield _lost_row(task, lost)
-                continue
-            log(f"{lost.reason} with {len(suspects)} frames in flight; retrying them one at a time")
-            for task in suspects:
-                yield from _alone(pool, task, log)
+                    yield from _alone(pool, task, log)
 
 
-def _alone(pool: Pool, task: FrameTask, log: Callable[[str], None]) -> Iterator[Row | None]:
+def _pinned(lost: Lost, queue: TaskQueue, log: Callable[[str], None]) -> Iterator[pa.Table]:
+    if len(lost.task.frames) == 1:
+        log(f"frame {lost.task.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
+        yield _lost_rows(lost.task, lost.status, lost.reason)
+        return
+    log(f"a chunk of {len(lost.task.frames)} frames: {lost.reason}; retrying its frames one by one")
+    for single in lost.task.singles():
+        queue.retry(single)
+
+
+def _alone(pool: Pool, task: ChunkTask, log: Callable[[str], None]) -> Iterator[pa.Table | None]:
     try:
-        yield from pool.map_unordered([task])
+        for item in pool.map_unordered(TaskQueue([task])):
+            yield _lost_rows(item.task, item.status, item.reason) if isinstance(item, Lost) else item
     except WorkerLost as lost:
-        log(f"frame {task.frame_id}: {lost.reason}; recorded as {lost.status}")
-        yield _lost_row(task, lost)
+        log(f"frame {task.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
+        yield _lost_rows(task, lost.status, lost.reason)
 
 
-def _lost_row(task: FrameTask, lost: WorkerLost) -> Row:
-    from pipeline.programs import failure_row
+def _lost_rows(task: ChunkTask, status: str, reason: str) -> pa.Table:
+    from pipeline.programs import failure_row, programs_table
 
-    return failure_row(task.frame_id, lost.status, lost.reason, len(task.scene.others), task.config,
-                       task.config_hash)
+    return programs_table([failure_row(fid, status, reason, n - 1, task.config, task.config_hash)
+                           for fid, _, n in task.frames])

@@ -1,48 +1,92 @@
-"""Where `r2s run` keeps its rows: part files in `<out>.parts/`, each written atomically as a chunk finishes,
-consolidated into `<out>` atomically at the end (ScenarioNet's temp-file-then-rename discipline).
+"""Where `r2s run` keeps its rows: part files, each written atomically as soon as it is full (ScenarioNet's
+temp-file-then-rename discipline), never all rows in memory.
 
-A kill at any moment leaves only whole files: the output of an earlier run, whole parts, and maybe a
-temporary file that the next start removes. Reading them back oldest first (output, then parts in order)
-and letting the last row of a frame win makes a resumed run exact, with never a duplicate row.
+Two layouts, chosen by --out:
+- a dataset directory (any --out not ending in .parquet): `<out>/part-000000.parquet`, ... The directory is the
+  result, readable as one table by pandas, pyarrow.dataset, DuckDB and polars while the run goes on, and after.
+- one file (--out ending in .parquet, as before): parts go to `<out>.parts/`, and at the end they are merged
+  into `<out>` by streaming row batches (bounded memory), after the rows of an earlier `<out>`.
+
+A kill at any moment leaves only whole files. On start, the rows already there are read two columns at a time
+(frame_id, config_hash: column projection), hashed (extractors.frame_index), and sorted out: the last row of a
+frame wins (output file, then parts in order), rows of frames not in the input or computed with another config
+are dropped (their files rewritten without them, atomically), and the frames left are done. So a resumed run
+computes each frame once, and the output holds every frame of the input exactly once when the run ends.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from extractors.atomic import atomic_path
+from extractors.frame_index import FrameIndex, frame_hashes
 from pipeline.errors import UserError
-from pipeline.programs import ProgramsError, programs_table, read_programs_table
-from pipeline.run import Row
+from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, check_programs_schema, check_programs_values
 
 PART_PREFIX, PART_SUFFIX = "part-", ".parquet"
+TMP_PREFIX = ".part-"
+# Rows per row group in a merged single file: a programs row carries ~10 KB of text, so readers that go one
+# row group at a time (the report, the merge itself) stay within a few tens of MB.
+MERGE_BATCH_ROWS = 2048
+
+
+@dataclass(frozen=True)
+class ResumePlan:
+    done: FrameIndex  # frames whose row is kept (computed earlier with this config)
+    stale: int  # frames whose row had another config hash: recomputed, row dropped
+    stale_example: str | None
+    foreign: int  # rows of frames that are not in the input: dropped
+    superseded: int  # older rows of a frame that has a later one (a kill during the merge): dropped
+    drops: dict[Path, np.ndarray] = field(default_factory=dict)  # rows (indices) to drop, per file
+    warnings: tuple[str, ...] = ()
+
+
+def is_single_file(out: str | os.PathLike) -> bool:
+    out = Path(out)
+    return out.suffix == ".parquet" and not out.is_dir()
 
 
 class RunStore:
     def __init__(self, out: str | os.PathLike) -> None:
         self.out = Path(out)
-        self.parts = Path(f"{self.out}.parts")
+        self.single_file = is_single_file(out)
+        self.parts = Path(f"{self.out}.parts") if self.single_file else self.out
         self._next = 0
         self._lock_fd: int | None = None
+        self._unreadable: list[Path] = []
+
+    def describe(self) -> str:
+        return str(self.out) if not self.single_file else f"{self.out} (parts in {self.parts})"
 
     def check_writable(self) -> None:
         """Refuse, before anything is written, an output that a run must not overwrite or cannot create."""
-        if self.out.is_dir():
-            raise UserError(f"--out {self.out} is a directory, not a programs file")
-        if self.parts.exists() and not self.parts.is_dir():
-            raise UserError(f"{self.parts} exists and is not a directory (it holds the parts of a run)")
+        if self.single_file:
+            if self.parts.exists() and not self.parts.is_dir():
+                raise UserError(f"{self.parts} exists and is not a directory (it holds the parts of a run)")
+        elif self.out.exists():
+            if not self.out.is_dir():
+                raise UserError(f"--out {self.out} is a file; a dataset output is a directory "
+                                "(name a .parquet file for one file)")
+            foreign = sorted(p.name for p in self.out.iterdir() if not _ours(p.name))
+            if foreign:
+                raise UserError(f"--out {self.out} holds files that are not parts of a run "
+                                f"({', '.join(foreign[:3])}); choose an empty or new directory")
         parent = self.out.parent
         if parent.exists() and not os.access(parent, os.W_OK):
             raise UserError(f"cannot write in {parent}")
 
     def lock(self) -> None:
         """Hold `<out>`'s lock for the rest of this process, or refuse: two runs on one output would overwrite
-        each other's parts and consolidate under each other. The lock is an flock on an empty file in the temp
+        each other's parts and merge under each other. The lock is an flock on an empty file in the temp
         directory named by the output's resolved path (nothing appears beside the output, so refused input still
         writes nothing there); the kernel drops it when the process ends, however it ends: no stale lock."""
         import fcntl
@@ -60,58 +104,157 @@ class RunStore:
                             "wait for it or choose another --out") from None
         self._lock_fd = fd  # kept open: closing it would release the lock
 
-    def existing_rows(self) -> tuple[list[Row], list[str]]:
-        """Rows of an earlier run (output first, then parts in order) and warnings about unreadable parts."""
-        rows: list[Row] = []
-        if self.out.exists():
-            try:
-                rows.extend(_rows(self.out))
-            except ProgramsError as exc:  # never overwrite a file we did not write
-                raise UserError(f"--out {exc}; remove it or choose another --out") from None
-        warnings = []
-        for part in self.part_files():
-            try:
-                rows.extend(_rows(part))
-            except ProgramsError as exc:  # parts are renamed whole, so this is outside damage: recompute
-                warnings.append(f"ignoring unreadable part {part.name} ({exc}); its frames are recomputed")
-            self._next = max(self._next, _part_number(part) + 1)
-        return rows, warnings
-
     def part_files(self) -> list[Path]:
         if not self.parts.is_dir():
             return []
-        return sorted(p for p in self.parts.iterdir() if p.name.startswith(PART_PREFIX) and p.suffix == PART_SUFFIX)
+        parts = [p for p in self.parts.iterdir() if p.name.startswith(PART_PREFIX) and p.suffix == PART_SUFFIX]
+        return sorted(parts, key=lambda p: (_part_number(p), p.name))
+
+    def sources(self) -> list[Path]:
+        """Files holding rows, oldest first: the single output file (if any), then the parts in order."""
+        head = [self.out] if self.single_file and self.out.is_file() else []
+        return head + self.part_files()
+
+    # ------------------------------------------------------------------------------------------------ resume
+
+    def plan(self, frames: FrameIndex, config_hash: str) -> ResumePlan:
+        """What the rows already written mean for this run (see the module docstring)."""
+        his, los, src, rows, same = [], [], [], [], []
+        warnings = []
+        sources = self.sources()
+        for s, path in enumerate(sources):
+            try:
+                table = _read_keys(path)
+            except ProgramsError as exc:
+                # Never overwrite or delete a file we may not have written: an unreadable output file, or a part
+                # of a dataset directory, refuses the run. Parts beside a single file are ours alone (they
+                # were renamed into place whole, so the damage came from outside): recompute their frames.
+                if not self.single_file or path == self.out:
+                    raise UserError(f"--out {exc}; remove it or choose another --out") from None
+                warnings.append(f"ignoring unreadable part {path.name} ({exc}); its frames are recomputed")
+                self._unreadable.append(path)
+                continue
+            hi, lo = frame_hashes(table.column("frame_id").to_numpy(zero_copy_only=False))
+            his.append(hi)
+            los.append(lo)
+            src.append(np.full(len(hi), s, np.int32))
+            rows.append(np.arange(len(hi), dtype=np.int64))
+            same.append(np.asarray(pc.equal(table.column("config_hash"), config_hash).to_numpy(zero_copy_only=False)))
+        for p in self.part_files():
+            self._next = max(self._next, _part_number(p) + 1)
+        if not his:
+            return ResumePlan(FrameIndex.of([]), 0, None, 0, 0, {}, tuple(warnings))
+        hi, lo, src, rows, same = (np.concatenate(a) for a in (his, los, src, rows, same))
+        del his, los
+        order = np.lexsort((rows, src, lo, hi))  # by frame, then oldest first
+        h, lw = hi[order], lo[order]
+        last = np.ones(len(order), dtype=bool)
+        last[:-1] = (h[1:] != h[:-1]) | (lw[1:] != lw[:-1])
+        in_input = frames.contains(h, lw)
+        ok = same[order]
+        keep = last & in_input & ok
+        stale = last & in_input & ~ok
+        foreign = last & ~in_input
+        drop = order[~keep]
+        drops = {}
+        for s in np.unique(src[drop]):
+            drops[sources[s]] = np.sort(rows[drop][src[drop] == s])
+        example = None
+        if stale.any():
+            first = order[int(np.argmax(stale))]
+            example = str(_read_keys(sources[src[first]]).column("frame_id")[int(rows[first])])
+        return ResumePlan(FrameIndex(h[keep], lw[keep]), int(stale.sum()), example, int(foreign.sum()),
+                          int((~last).sum()), drops, tuple(warnings))
+
+    def apply(self, plan: ResumePlan) -> None:
+        """Rewrite the files that hold dropped rows without them (each atomically; an emptied part goes)."""
+        for path in self._unreadable:
+            path.unlink(missing_ok=True)
+        for path, drop in plan.drops.items():
+            keep = np.ones(pq.ParquetFile(path).metadata.num_rows, dtype=bool)
+            keep[drop] = False
+            if not keep.any() and path != self.out:
+                path.unlink()
+                continue
+            with atomic_path(path) as tmp:
+                _copy_rows(path, tmp, keep)
 
     def remove_temporaries(self) -> None:
-        """Temporary files of a killed run: only inside the parts directory, which only `r2s run` writes."""
+        """Temporary files of a killed run: only our own names, inside the parts directory."""
         if self.parts.is_dir():
             for p in self.parts.iterdir():
-                if p.name.startswith(".") and p.name.endswith(".tmp"):
+                if p.name.startswith((TMP_PREFIX, f".{self.out.name}.")) and p.name.endswith(".tmp"):
                     p.unlink(missing_ok=True)
 
-    def write_part(self, rows: list[Row]) -> Path:
+    # ------------------------------------------------------------------------------------------------ writing
+
+    def write_part(self, table: pa.Table) -> Path:
         self.parts.mkdir(parents=True, exist_ok=True)
         path = self.parts / f"{PART_PREFIX}{self._next:06d}{PART_SUFFIX}"
         self._next += 1
-        _write(programs_table(rows), path)
+        with atomic_path(path) as tmp:  # .part-NNNNNN.parquet.*.tmp: hidden from dataset readers
+            pq.write_table(table, tmp, compression="zstd")
         return path
 
-    def consolidate(self, rows: list[Row]) -> None:
-        """The final file first (atomically), then the parts: a kill in between leaves parts whose rows are
-        also in the output, which the next start reads as the same rows."""
-        _write(programs_table(rows), self.out)
+    def finish(self) -> None:
+        """One file: the earlier output and the parts, merged into `<out>` (atomically), then the parts go. A kill
+        in between leaves parts whose rows are also in the output; the next start drops the older copies."""
+        if not self.single_file:
+            return
+        sources = self.sources()
+        if sources == [self.out]:
+            return
+        with atomic_path(self.out) as tmp:
+            with pq.ParquetWriter(tmp, PROGRAMS_SCHEMA, compression="zstd") as writer:
+                for path in sources:
+                    for batch in _batches(path):
+                        writer.write_batch(batch, row_group_size=MERGE_BATCH_ROWS)
         if self.parts.is_dir():
             shutil.rmtree(self.parts)
 
+    def status_counts(self) -> Counter:
+        counts: Counter = Counter()
+        for path in self.sources():
+            status = pq.read_table(path, columns=["status"]).column("status")
+            counts.update(dict(zip(*np.unique(status.to_numpy(zero_copy_only=False).astype(str),
+                                              return_counts=True))))
+        return Counter({k: int(v) for k, v in counts.items()})
 
-def _write(table: pa.Table, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+
+def _ours(name: str) -> bool:
+    return (name.startswith(PART_PREFIX) and name.endswith(PART_SUFFIX)) or (
+        name.startswith(TMP_PREFIX) and name.endswith(".tmp"))
 
 
-def _rows(path: Path) -> list[Row]:
-    # Arrow rows, not pandas: nullable integers come back as int or None, not NaN.
-    return read_programs_table(path).to_pylist()
+def _read_keys(path: Path) -> pa.Table:
+    """frame_id and config_hash of a programs file, and status to check it: a resume reads three short columns
+    (column projection), never the programs' text."""
+    try:
+        pf = pq.ParquetFile(path, read_dictionary=["status", "config_hash"])
+        check_programs_schema(pf.schema_arrow, str(path))
+        table = pf.read(columns=["frame_id", "config_hash", "status"])
+    except ProgramsError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise ProgramsError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    check_programs_values(table, str(path))
+    return table
+
+
+def _batches(path: Path):
+    names = list(PROGRAMS_SCHEMA.names)
+    for batch in pq.ParquetFile(path).iter_batches(batch_size=MERGE_BATCH_ROWS, columns=names):
+        yield batch.select(names).cast(PROGRAMS_SCHEMA)  # an older writer's int64 where the schema has int32
+
+
+def _copy_rows(source: Path, target: Path, keep: np.ndarray) -> None:
+    with pq.ParquetWriter(target, PROGRAMS_SCHEMA, compression="zstd") as writer:
+        offset = 0
+        for batch in _batches(source):
+            mask = keep[offset: offset + batch.num_rows]
+            offset += batch.num_rows
+            if mask.any():
+                writer.write_batch(batch.filter(pa.array(mask)), row_group_size=MERGE_BATCH_ROWS)
 
 
 def _part_number(path: Path) -> int:

@@ -1,4 +1,10 @@
-"""The worker side of `r2s run`: one frame in, one programs row out, never an exception.
+"""The worker side of `r2s run`: a chunk of frames in (a file and a row range), one programs row per frame out.
+
+A chunk task reads its own rows (extractors.frames_dataset.read_rows), so frame data never passes through the
+process that plans the run, on one machine or on a cluster. Each frame runs under its own time and memory
+limits (run_frame), and becomes a row whatever happens to it; only a dead worker loses rows. Before each frame
+the task writes the frame's index to its progress marker, so that when a worker dies the run knows which frame
+it was running: that frame is the suspect, the others of the chunk are innocent.
 
 Everything a worker needs is imported at module level on purpose: unpickling the task imports this module
 before the task runs, so the imports are paid once per worker and are not counted against a frame's hard
@@ -13,9 +19,13 @@ import signal
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from pipeline.programs import failure_row, result_row
+import pyarrow as pa
+
+from extractors.frames import FramesError, frame_to_scene
+from extractors.frames_dataset import read_rows
+from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.scene import Scene
 from synth.search.budget import current_rss_mb, peak_rss_mb
@@ -43,6 +53,74 @@ class FrameTask:
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
     test_hook: str | None = None  # see TEST_HOOK_ENV
+
+
+@dataclass(frozen=True)
+class ChunkTask:
+    """Frames of one file to synthesize in one go: frame i is `frames[i] = (frame_id, first row, rows)`."""
+
+    key: str  # unique within the run: names the progress marker and the dask task
+    url: str  # the filesystem of a dataset given as a URL ("" for local paths)
+    path: str
+    frames: tuple[tuple[str, int, int], ...]
+    columns: tuple[str, ...]
+    config: SynthConfig
+    config_hash: str
+    hard_cap: bool = False
+    test_hook: str | None = None
+    progress_dir: str | None = None  # where the marker goes; None: progress is not tracked (remote workers)
+
+    @property
+    def frame_ids(self) -> list[str]:
+        return [f[0] for f in self.frames]
+
+    def only(self, indices, tag: str) -> ChunkTask:
+        return replace(self, key=f"{self.key}.{tag}", frames=tuple(self.frames[i] for i in indices))
+
+    def split_at(self, i: int) -> tuple[ChunkTask, ChunkTask | None]:
+        """(frame i alone, the other frames or None)."""
+        rest = [k for k in range(len(self.frames)) if k != i]
+        return self.only([i], f"s{i}"), (self.only(rest, f"r{i}") if rest else None)
+
+    def singles(self) -> list[ChunkTask]:
+        return [self.only([i], f"s{i}") for i in range(len(self.frames))]
+
+    def marker(self) -> str | None:
+        return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
+
+
+class ChunkUnreadable(Exception):
+    """A worker could not read its chunk (the file moved, or a cluster worker does not see the path)."""
+
+
+def run_chunk(task: ChunkTask) -> pa.Table:
+    """Programs rows of every frame of the chunk, in its order. Never raises for a frame, only when the rows
+    cannot be read at all (ChunkUnreadable)."""
+    first = min(f[1] for f in task.frames)
+    stop = max(f[1] + f[2] for f in task.frames)
+    try:
+        rows = read_rows(task.url, task.path, first, stop, task.columns).to_pandas()
+    except (OSError, pa.ArrowException) as exc:
+        raise ChunkUnreadable(one_line(f"cannot read {task.url or ''}{task.path}: {exc}", 400)) from None
+    marker = task.marker()
+    out = []
+    for i, (frame_id, start, n) in enumerate(task.frames):
+        if marker is not None:
+            with open(marker, "w") as f:  # its mtime is when this frame started (the wall-clock guard reads it)
+                f.write(str(i))
+        try:
+            scene = frame_to_scene(rows.iloc[start - first: start - first + n])
+        except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
+            out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, task.config_hash))
+            continue
+        out.append(run_frame(FrameTask(frame_id, scene, task.config, task.config_hash, task.hard_cap,
+                                       task.test_hook)))
+    if marker is not None:
+        try:
+            os.unlink(marker)
+        except FileNotFoundError:
+            pass
+    return programs_table(out)
 
 
 def run_frame(task: FrameTask) -> dict:

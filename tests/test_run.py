@@ -16,10 +16,10 @@ from conftest import ROOT, assert_one_line_error, run_r2s
 
 from extractors.frames import frame_to_scene, read_frames, scene_to_rows, write_frames
 from pipeline import run_pool
-from pipeline.programs import failure_row, read_programs
-from pipeline.run import ChunkBuffer, merge_rows, plan_run, summarize
+from pipeline.programs import failure_row, programs_table, read_programs
+from pipeline.run import PartBuffer, summarize
 from pipeline.run_pool import LokyPool, compute
-from pipeline.run_task import TEST_HOOK_ENV, FrameTask
+from pipeline.run_task import TEST_HOOK_ENV, ChunkTask
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check
@@ -40,7 +40,10 @@ def _frame_ids(path: Path) -> list[str]:
 
 
 def _programs(out: Path):
-    return read_programs(out).set_index("frame_id", drop=False)
+    """One row per frame, indexed by frame id, in frame-id order (rows come in the order frames finished)."""
+    df = read_programs(out)
+    assert df["frame_id"].is_unique, df["frame_id"][df["frame_id"].duplicated()].tolist()
+    return df.set_index("frame_id", drop=False).sort_index()
 
 
 def _summary(stderr: str) -> str:
@@ -88,7 +91,7 @@ def test_extract_then_run_with_two_jobs(tmp_path):
     assert proc.returncode == 0, proc.stderr
     order = _frame_ids(frames)
     df = read_programs(out)
-    assert list(df["frame_id"]) == order  # every frame once, in input order
+    assert sorted(df["frame_id"]) == sorted(order)  # every frame once
     assert set(df["status"]) == {"optimal"}
     assert set(df["config_hash"]) == {SynthConfig().semantic_hash()}
     assert (df["cost"] == df["lower_bound"]).all()
@@ -123,7 +126,7 @@ def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp
     env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=0.4@*"})  # slow every frame so the kill lands mid-run
     proc = subprocess.Popen(
         [sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", str(out), "--jobs", "2",
-         "--chunk-size", "1"],
+         "--part-rows", "1"],
         cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
     )
     try:
@@ -139,12 +142,11 @@ def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp
     order = _frame_ids(json_frames)
     assert 1 <= len(saved) < len(order)
 
-    proc = run_r2s("run", str(json_frames), "--out", str(out), "--jobs", "2", "--chunk-size", "1")
+    proc = run_r2s("run", str(json_frames), "--out", str(out), "--jobs", "2", "--part-rows", "1")
     assert proc.returncode == 0, proc.stderr
     assert f"({len(order) - len(saved)} computed, {len(saved)} kept)" in _summary(proc.stderr)
-    df = read_programs(out)
-    assert list(df["frame_id"]) == order  # complete, no duplicate, input order
-    done = _programs(out)
+    done = _programs(out)  # complete, no duplicate
+    assert sorted(done["frame_id"]) == sorted(order)
     for fid, row in saved.items():  # the rows of the killed run, untouched
         assert done.loc[fid, "runtime_s"] == row["runtime_s"]
         assert done.loc[fid, "peak_rss_mb"] == row["peak_rss_mb"]
@@ -237,34 +239,77 @@ def test_a_failing_frame_is_recorded_and_the_run_goes_on(small_frames, tmp_path,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     df = _programs(out)
-    assert list(df["frame_id"]) == order
+    assert sorted(df["frame_id"]) == sorted(order)
     assert df.loc[victim, "status"] == status
     assert message in df.loc[victim, "error"]
     assert "\n" not in df.loc[victim, "error"]
     assert set(df.drop(index=victim)["status"]) == {"optimal"}  # the innocent frames in flight got programs
 
 
-def test_wall_clock_guard_kills_a_hung_frame(real_frames):
-    config = SynthConfig()
-    scenes = sorted(real_frames, key=lambda s: len(s.entities))[:4]
-    hung = scenes[1].frame_id
-    tasks = [FrameTask(s.frame_id, s, config, "h", hard_cap=True, test_hook=f"hang@{hung}") for s in scenes]
+def _chunk_tasks(frames: Path, size: int, hook: str | None = None, progress: Path | None = None,
+                 config: SynthConfig | None = None) -> list[ChunkTask]:
+    """The run's own chunking of a frames file into tasks of `size` frames (progress markers in `progress`)."""
+    from extractors.frames_dataset import FramesDataset
+    from pipeline.run import chunks
+
+    config = config or SynthConfig()
+    dataset = FramesDataset.open(frames)
+    runs = ((r.part, r.starts, r.lengths, r.ids, r.lengths > 0) for r in dataset.runs())
+    return [ChunkTask(f"t{n}", "", dataset.parts[k].path, tuple(fr), dataset.parts[k].columns, config, "h",
+                      hard_cap=True, test_hook=hook, progress_dir=None if progress is None else str(progress))
+            for n, (k, fr) in enumerate(chunks(runs, size, 10**6))]
+
+
+def _rows_of(tables) -> dict[str, dict]:
+    rows = [r for t in tables if t is not None for r in t.to_pylist()]
+    by_id = {r["frame_id"]: r for r in rows}
+    assert len(by_id) == len(rows), "a frame came back twice"
+    return by_id
+
+
+@pytest.mark.parametrize(("hook", "status", "message"), [
+    ("kill", "memout", "SIGKILL"),
+    ("exit", "error", "worker died (exit code"),
+])
+def test_a_death_inside_a_chunk_blames_only_the_frame_it_was_running(small_frames, tmp_path, hook, status,
+                                                                      message):
+    """Chunks of three frames on two workers: the dead chunk's marker names the frame it was running; its other
+    frames, and the other chunk's, are innocent and get their programs."""
+    order = _frame_ids(small_frames)
+    victim = order[4]  # the middle of the second chunk
+    tasks = _chunk_tasks(small_frames, 3, f"{hook}@{victim}", tmp_path)
+    assert [len(t.frames) for t in tasks] == [3, 3]
     log: list[str] = []
-    rows = {r["frame_id"]: r for r in compute(LokyPool(2, guard_s=2.0), tasks, log.append) if r is not None}
-    assert sorted(rows) == sorted(s.frame_id for s in scenes)
+    rows = _rows_of(compute(LokyPool(2), tasks, log.append))
+    assert sorted(rows) == sorted(order)
+    assert rows[victim]["status"] == status and message in rows[victim]["error"]
+    assert all(rows[f]["status"] == "optimal" for f in order if f != victim)
+    blamed = [line for line in log if "recorded as" in line]
+    assert len(blamed) == 1 and victim in blamed[0]
+    # At most one suspect per chunk in flight (two), never the six frames of both chunks.
+    assert not any("6 frames in flight" in line or "3 frames in flight" in line for line in log)
+    assert list(tmp_path.iterdir()) == []  # no marker left behind
+
+
+def test_wall_clock_guard_kills_a_hung_frame(small_frames, tmp_path):
+    order = _frame_ids(small_frames)
+    hung = order[1]
+    tasks = _chunk_tasks(small_frames, 2, f"hang@{hung}", tmp_path)
+    log: list[str] = []
+    rows = _rows_of(compute(LokyPool(2, guard_s=2.0), tasks, log.append))
+    assert sorted(rows) == sorted(order)
     assert rows[hung]["status"] == "timeout"
     assert "wall-clock guard" in rows[hung]["error"]
-    assert all(rows[s.frame_id]["status"] == "optimal" for s in scenes if s.frame_id != hung)
+    assert all(rows[f]["status"] == "optimal" for f in order if f != hung)
     assert any(hung in line for line in log)
 
 
-def test_heartbeats_while_no_frame_finishes(real_frames, monkeypatch):
-    # The run writes a waiting chunk on a heartbeat, so a slow frame does not hold finished rows back.
+def test_heartbeats_while_no_frame_finishes(small_frames, tmp_path, monkeypatch):
+    # The run writes a waiting part on a heartbeat, so a slow frame does not hold finished rows back.
     monkeypatch.setattr(run_pool, "HEARTBEAT_S", 0.1)
-    scene = min(real_frames, key=lambda s: len(s.entities))
-    task = FrameTask(scene.frame_id, scene, SynthConfig(), "h", test_hook="sleep=1.5@*")
+    (task, *_) = _chunk_tasks(small_frames, 1, "sleep=1.5@*", tmp_path)
     out = list(compute(LokyPool(1), [task], print))
-    assert out[-1]["frame_id"] == scene.frame_id
+    assert out[-1].column("frame_id").to_pylist() == [task.frames[0][0]]
     assert None in out[:-1]
 
 
@@ -343,8 +388,8 @@ def test_dask_backend_on_a_running_scheduler(small_frames, tmp_path):
         proc = run_r2s("run", str(small_frames), "--out", str(out), "--backend", "dask",
                        "--scheduler", cluster.scheduler_address)
     assert proc.returncode == 0, proc.stderr
-    df = read_programs(out)
-    assert list(df["frame_id"]) == _frame_ids(small_frames)
+    df = _programs(out)
+    assert sorted(df["frame_id"]) == sorted(_frame_ids(small_frames))
     assert set(df["status"]) == {"optimal"}
     _assert_programs_contain_scenes(small_frames, out, SynthConfig())
 
@@ -369,7 +414,7 @@ def test_dask_local_cluster_replaces_a_dead_worker(small_frames, tmp_path):
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     df = _programs(out)
-    assert list(df["frame_id"]) == order
+    assert sorted(df["frame_id"]) == sorted(order)
     assert df.loc[victim, "status"] == "error"
     assert df.loc[victim, "error"].startswith("worker died")
     assert set(df.drop(index=victim)["status"]) == {"optimal"}
@@ -381,38 +426,40 @@ def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0)
     return dict(failure_row(fid, "error", "x", 1, SynthConfig(), h, runtime_s=runtime), status=status)
 
 
-def test_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames():
-    existing = [_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0"), _row("c", "h1", runtime=2.0)]
-    plan = plan_run(["a", "b", "c", "d"], existing, "h1")
-    assert [r["frame_id"] for r in plan.kept] == ["a", "c"]
-    assert plan.kept[1]["runtime_s"] == 2.0  # the later row of c (a later part) wins
-    assert plan.todo == ("b", "d")
-    assert plan.stale == ("b",)
-    assert plan.foreign == 1
+def test_resume_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames(tmp_path):
+    from extractors.frame_index import FrameIndex, frame_hashes
+    from pipeline.run_store import RunStore
+
+    store = RunStore(tmp_path / "programs")
+    store.write_part(programs_table([_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0")]))
+    store.write_part(programs_table([_row("c", "h1", runtime=2.0)]))
+    plan = RunStore(tmp_path / "programs").plan(FrameIndex(*frame_hashes(["a", "b", "c", "d"])), "h1")
+    done = plan.done.contains(*frame_hashes(["a", "b", "c", "d", "z"]))
+    assert list(done) == [True, False, True, False, False]
+    assert (plan.stale, plan.stale_example, plan.foreign, plan.superseded) == (1, "b", 1, 1)
+    fresh = RunStore(tmp_path / "programs")
+    fresh.plan(FrameIndex(*frame_hashes(["a", "b", "c", "d"])), "h1")
+    fresh.apply(plan)
+    left = read_programs(tmp_path / "programs").set_index("frame_id")
+    assert sorted(left.index) == ["a", "c"]
+    assert left.loc["c", "runtime_s"] == 2.0  # the later row of c (a later part) wins
+    assert fresh.write_part(programs_table([_row("d")])).name == "part-000002.parquet"  # numbering goes on
 
 
-def test_merge_is_input_order_without_duplicates():
-    rows = [_row("b", runtime=1.0), _row("a"), _row("b", runtime=3.0), _row("x")]
-    merged = merge_rows(["a", "b", "c"], rows)
-    assert [(r["frame_id"], r["runtime_s"]) for r in merged] == [("a", 1.0), ("b", 3.0)]
-
-
-def test_chunk_buffer_flushes_by_size_and_by_age():
-    buf = ChunkBuffer(size=2, max_age_s=10.0)
-    buf.add(_row("a"), now=0.0)
+def test_part_buffer_flushes_by_size_and_by_age():
+    buf = PartBuffer(rows=2, max_age_s=10.0)
+    buf.add(programs_table([_row("a")]), now=0.0)
     assert not buf.due(now=5.0)
     assert buf.due(now=10.0)
-    buf.add(_row("b"), now=1.0)
+    buf.add(programs_table([_row("b")]), now=1.0)
     assert buf.due(now=1.0)
-    assert [r["frame_id"] for r in buf.take()] == ["a", "b"]
-    assert not buf.due(now=100.0)
+    assert buf.take().column("frame_id").to_pylist() == ["a", "b"]
+    assert not buf.due(now=100.0) and buf.count == 0
 
 
 def test_summary_line():
-    rows = [_row("a"), _row("b", status="memout"), _row("c", status="error"), _row("d")]
-    line = summarize(rows, computed=3, seconds=2.04).line()
+    line = summarize({"optimal": 2, "memout": 1, "error": 1}, computed=3, seconds=2.04).line()
     assert line == "4 frames (3 computed, 1 kept), 50.0% optimal, 0 feasible, 0 timeout, 1 memout, 1 errors, 2.0 s"
-
 
 
 def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
@@ -430,7 +477,8 @@ def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
     assert run_r2s("run", str(frames), "--out", str(plain), "--jobs", "1").returncode == 0
     proc = run_r2s("run", str(frames), "--out", str(robust), "--jobs", "1", "--uncertainty", "0.3,2")
     assert proc.returncode == 0, proc.stderr
-    a, b = pd.read_parquet(plain), pd.read_parquet(robust)
+    a, b = (pd.read_parquet(p).sort_values("frame_id", ignore_index=True) for p in (plain, robust))
+    assert list(a["frame_id"]) == list(b["frame_id"])
     assert (a["config_hash"] != b["config_hash"]).all()
     config = SynthConfig(pos_uncertainty=0.3, heading_uncertainty=2.0)
     scenes = {s.frame_id: s for s in iter_scenes(read_frames(frames))}
@@ -439,3 +487,140 @@ def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
     assert (b["cost"].to_numpy() >= a["cost"].to_numpy()).all()
     bad = run_r2s("run", str(frames), "--out", str(tmp_path / "x.parquet"), "--uncertainty", "-1,2")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+# ---------------------------------------------------------------------------------------- datasets in and out
+
+def _split_into_files(frames: Path, directory: Path, cuts: int) -> list[str]:
+    """The frames file as `cuts` part files of whole frames (as `r2s extract --jobs` writes them)."""
+    table = pq.read_table(frames)
+    ids = table.column("frame_id").to_pylist()
+    starts = [i for i in range(len(ids)) if i == 0 or ids[i] != ids[i - 1]]
+    bounds = [starts[round(k * len(starts) / cuts)] for k in range(cuts)] + [len(ids)]
+    directory.mkdir()
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        pq.write_table(table.slice(lo, hi - lo), directory / f"part-{k:05d}.parquet")
+    return list(dict.fromkeys(ids))
+
+
+def test_a_dataset_directory_in_and_out_reads_as_one_table_everywhere(small_frames, tmp_path):
+    """Frames split over files in, a programs directory out: pandas, pyarrow.dataset, DuckDB and polars read the
+    output as one table with every frame exactly once."""
+    import duckdb
+    import pandas as pd
+    import polars as pl
+    import pyarrow.dataset as ds
+
+    order = _split_into_files(small_frames, tmp_path / "frames", 3)
+    out = tmp_path / "programs"
+    proc = run_r2s("run", str(tmp_path / "frames"), "--out", str(out), "--jobs", "2", "--part-rows", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "6 frames in 3 files checked" in proc.stderr
+    parts = sorted(p.name for p in out.iterdir())
+    assert len(parts) >= 3 and all(p.startswith("part-") and p.endswith(".parquet") for p in parts)
+    readers = {
+        "pandas": lambda: pd.read_parquet(out)["frame_id"].tolist(),
+        "pyarrow.dataset": lambda: ds.dataset(out, format="parquet").to_table(columns=["frame_id"])
+        .column("frame_id").to_pylist(),
+        "duckdb": lambda: [r[0] for r in duckdb.sql(f"SELECT frame_id FROM read_parquet('{out}/*.parquet')").fetchall()],
+        "polars": lambda: pl.read_parquet(out / "*.parquet")["frame_id"].to_list(),
+    }
+    for name, read in readers.items():
+        assert sorted(read()) == sorted(order), name
+    _assert_programs_contain_scenes(small_frames, out, SynthConfig())
+    again = run_r2s("run", str(tmp_path / "frames"), "--out", str(out), "--jobs", "2")
+    assert again.returncode == 0 and "(0 computed, 6 kept)" in _summary(again.stderr)
+    assert sorted(p.name for p in out.iterdir()) == parts  # nothing rewritten, nothing added
+
+
+def test_a_frame_split_over_two_places_is_refused(small_frames, tmp_path):
+    table = pq.read_table(small_frames)
+    ids = table.column("frame_id").to_pylist()
+    first = ids[0]
+    n = ids.count(first)
+    # The first frame's last row moved to the end of the file: a foreign writer that interleaves frames.
+    rows = list(range(n - 1)) + list(range(n, len(ids))) + [n - 1]
+    interleaved = tmp_path / "interleaved.parquet"
+    pq.write_table(table.take(rows), interleaved)
+    out = tmp_path / "programs"
+    proc = run_r2s("run", str(interleaved), "--out", str(out))
+    assert_one_line_error(proc, 2, "two places")
+    assert first in proc.stderr
+    _assert_nothing_written(out)
+
+
+def test_a_dataset_output_drops_rows_of_another_config_and_of_frames_not_in_the_input(small_frames, tmp_path):
+    out = tmp_path / "programs"
+    assert run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2", "--part-rows", "2").returncode == 0
+    fewer = tmp_path / "fewer.parquet"
+    df = read_frames(small_frames)
+    keep = _frame_ids(small_frames)[:4]
+    write_frames(df[df["frame_id"].isin(keep)], fewer)
+    proc = run_r2s("run", str(fewer), "--out", str(out), "--jobs", "2", "--strategy", "astar-cpa")
+    assert proc.returncode == 0, proc.stderr
+    assert "recomputing 4 frame(s) whose rows have another config hash" in proc.stderr
+    assert "dropping 2 row(s) of frames that are not in" in proc.stderr
+    df = _programs(out)
+    assert sorted(df["frame_id"]) == sorted(keep)
+    assert set(df["strategy"]) == {"astar-cpa"}
+
+
+def test_an_old_single_file_output_resumes_and_stays_one_file(small_frames, tmp_path):
+    """A programs.parquet written by an earlier version (one file, rows in input order) is resumed into."""
+    out = tmp_path / "programs.parquet"
+    assert run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2").returncode == 0
+    first = _programs(out)
+    rows = read_programs(out)
+    pq.write_table(programs_table(rows.iloc[:3].to_dict("records")), out)  # as if only 3 frames were done
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "(3 computed, 3 kept)" in _summary(proc.stderr)
+    again = _programs(out)
+    assert list(again.index) == list(first.index)
+    kept = list(rows["frame_id"][:3])
+    assert list(again.loc[kept, "runtime_s"]) == list(first.loc[kept, "runtime_s"])
+    assert pq.ParquetFile(out).metadata.num_rows == 6 and not Path(f"{out}.parts").exists()
+
+
+def test_progress_lines_without_a_terminal_and_a_stop_says_how_to_resume(small_frames, tmp_path):
+    out = tmp_path / "programs"
+    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=0.5@*"})
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out), "--jobs", "1",
+         "--part-rows", "1", "--log-every", "0.5"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(out.glob("part-*.parquet"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before it could be stopped"
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM
+    lines = stderr.splitlines()
+    progress = [ln for ln in lines if " of 6 frames (" in ln]
+    assert progress and all("frames/s, ETA" in ln for ln in progress)
+    assert any("optimal" in ln for ln in progress)  # counts by status once frames are done
+    saved = len(read_programs(out))
+    assert 2 <= saved < 6
+    assert f"r2s run: stopped: {saved} of 6 frames are saved in {out}; run the same command again to resume" in lines
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0 and f"({6 - saved} computed, {saved} kept)" in _summary(proc.stderr)
+    assert sorted(_programs(out)["frame_id"]) == sorted(_frame_ids(small_frames))
+
+
+def test_the_python_api_is_what_the_cli_runs(small_frames, tmp_path):
+    from pipeline import run_frames
+
+    lines: list[str] = []
+    summary = run_frames(small_frames, tmp_path / "programs", SynthConfig(strategy="astar-cpa"), jobs=2,
+                         log=lines.append, terminal=False)
+    assert (summary.frames, summary.computed, summary.kept) == (6, 6, 0)
+    assert dict(summary.statuses) == {"optimal": 6}
+    assert summary.first_result_s is not None and summary.first_result_s <= summary.seconds
+    assert lines[-1].startswith(summary.line())
+    assert set(_programs(tmp_path / "programs")["strategy"]) == {"astar-cpa"}

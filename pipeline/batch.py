@@ -1,0 +1,232 @@
+"""The batch stage: one program per frame of a frames dataset, in parallel, streaming, resumable.
+
+`run_frames(frames, out, config, jobs=...)` is the Python API of `r2s run` (which only parses its options and
+calls it). The coordinator never holds the dataset: it checks the input in one streaming pass (row groups,
+dictionary-encoded), keeps 16 bytes per frame id for the exactly-once rules, and then walks the frame_id column
+again, lazily, cutting chunks of frames (a file and a row range each) for the workers, which read their rows
+themselves. At most `jobs` chunks are in flight and at most one part file's rows are buffered, whatever the
+input size, so the first rows come back seconds after the check and memory stays flat.
+
+Bad input (a missing or corrupt file, a wrong schema, a bad row anywhere, a frame split in two places, an output
+that is not ours) is refused before anything is written. A stop (SIGTERM, Ctrl-C) keeps every finished row and
+says how to resume: the same call again.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import nullcontext
+from pathlib import Path
+
+from extractors.frame_index import frame_hashes
+from pipeline.errors import UserError
+from pipeline.run import Summary, chunk_size_for, chunks, status_counts, summarize
+from synth.config import SynthConfig
+
+DEFAULT_CHUNK_SIZE = 32  # frames per task
+DEFAULT_PART_ROWS = 2048  # rows per part file (~20 MB of program text at most)
+PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
+MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
+BACKENDS = ("loky", "dask")
+
+
+def run_frames(
+    frames: str | os.PathLike,
+    out: str | os.PathLike,
+    config: SynthConfig | None = None,
+    *,
+    jobs: int | None = None,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    part_rows: int = DEFAULT_PART_ROWS,
+    log: Callable[[str], None] | None = None,
+    log_every_s: float = 30.0,
+    terminal: bool | None = None,
+) -> Summary:
+    """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
+    (a dataset directory, or one file if the name ends in .parquet); frames already in `out` with the same
+    config are kept. Returns the summary; raises UserError / FramesError / ProgramsError on bad input (nothing
+    written then). `log` receives one line at a time (default: stderr); `terminal` forces the progress bar on or
+    off (default: a bar when stderr is a terminal, else a log line every `log_every_s` seconds)."""
+    config = config or SynthConfig()
+    if jobs is not None and jobs < 1:
+        raise UserError(f"--jobs must be at least 1, got {jobs}")
+    if chunk_size < 1:
+        raise UserError(f"--chunk-size must be at least 1, got {chunk_size}")
+    if part_rows < 1:
+        raise UserError(f"--part-rows must be at least 1, got {part_rows}")
+    if backend not in BACKENDS:
+        raise UserError(f"unknown backend {backend!r} (backends: {', '.join(BACKENDS)})")
+    if scheduler and backend != "dask":
+        raise UserError("--scheduler needs --backend dask")
+    _check_apart(str(frames), Path(out))
+    return _Run(str(frames), Path(out), config, jobs, backend, scheduler, chunk_size, part_rows,
+                log or _stderr, log_every_s, terminal).go()
+
+
+def _stderr(line: str) -> None:
+    import sys
+
+    sys.stderr.write(f"r2s run: {line}\n")
+    sys.stderr.flush()
+
+
+def _check_apart(frames: str, out: Path) -> None:
+    """The output must not be the input, nor inside it (a directory input would read our parts as frames)."""
+    if "://" in frames:
+        return
+    src, dst = Path(frames).resolve(), out.resolve()
+    if src == dst:
+        raise UserError("--out is the input frames file; choose another path")
+    if src in dst.parents or dst in src.parents:
+        raise UserError(f"--out {out} and the input {frames} are inside one another; choose another --out")
+
+
+class _Run:
+    """One invocation: check, plan, workers, parts, summary."""
+
+    def __init__(self, frames, out, config, jobs, backend, scheduler, chunk_size, part_rows, log, log_every_s,
+                 terminal) -> None:
+        self.frames, self.out, self.config = frames, out, config
+        self.jobs, self.backend, self.scheduler = jobs, backend, scheduler
+        self.chunk_size, self.part_rows = chunk_size, part_rows
+        self._log, self.log_every_s, self.terminal = log, log_every_s, terminal
+        self.config_hash = config.semantic_hash()
+        self.started = time.monotonic()
+        self.first_result_s: float | None = None
+        self._progress = None
+
+    def log(self, message: str) -> None:
+        if self._progress is not None:
+            self._progress.write(message)
+        else:
+            self._log(message)
+
+    def go(self) -> Summary:
+        from extractors.frames_dataset import FramesDataset
+        from pipeline.run_store import RunStore
+
+        store = RunStore(self.out)
+        store.check_writable()
+        dataset = FramesDataset.open(self.frames)  # bad input is refused before even the lock file is made
+        n_frames, index = dataset.check()
+        store.lock()
+        plan = store.plan(index, self.config_hash)
+        del index  # 16 bytes a frame: not kept while the frames run
+        todo = n_frames - len(plan.done)
+        with self._pool(todo) as pool:  # connects to dask: may refuse, and nothing is written yet
+            for w in plan.warnings:
+                self.log(w)
+            self._log_plan(plan, n_frames, dataset)
+            store.apply(plan)
+            store.remove_temporaries()
+            computed = self._compute(store, pool, dataset, plan.done, n_frames, todo) if todo else 0
+        store.finish()
+        summary = summarize(store.status_counts(), computed, time.monotonic() - self.started, self.first_result_s)
+        self.log(f"{summary.line()} -> {self.out}")
+        return summary
+
+    def _log_plan(self, plan, n_frames: int, dataset) -> None:
+        files = f" in {len(dataset.parts)} files" if len(dataset.parts) > 1 else ""
+        self.log(f"{n_frames:,} frames{files} checked in {time.monotonic() - self.started:.1f} s")
+        if len(plan.done):
+            self.log(f"resuming: {len(plan.done)} of {n_frames} frames already done with this config")
+        if plan.stale:
+            self.log(f"recomputing {plan.stale} frame(s) whose rows have another config hash "
+                     f"(e.g. {plan.stale_example}); their rows are replaced")
+        if plan.foreign:
+            self.log(f"dropping {plan.foreign} row(s) of frames that are not in {self.frames}")
+
+    def _pool(self, todo: int):
+        """A context that yields the pool (None when there is nothing to compute)."""
+        from pipeline.run_pool import LokyPool, wall_guard_s
+
+        if todo == 0:
+            return nullcontext(None)
+        if self.backend == "dask":
+            from pipeline.run_dask import dask_pool
+
+            return dask_pool(self.scheduler, self.jobs)
+        jobs = min(self.jobs or os.cpu_count() or 1, todo)
+        return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
+
+    def _tasks(self, dataset, done, todo: int, slots: int, progress_dir: str | None) -> Iterator:
+        from pipeline.run_task import TEST_HOOK_ENV, ChunkTask
+
+        hook = os.environ.get(TEST_HOOK_ENV) or None
+
+        def runs():
+            for r in dataset.runs():
+                mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
+                yield r.part, r.starts, r.lengths, r.ids, mask
+
+        size = chunk_size_for(todo, slots, self.chunk_size)
+        for n, (k, frames) in enumerate(chunks(runs(), size, MAX_SPAN_ROWS)):
+            part = dataset.parts[k]
+            yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.columns, self.config,
+                            self.config_hash, hard_cap=self.backend == "loky", test_hook=hook,
+                            progress_dir=progress_dir)
+
+    def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
+        from pipeline.run import PartBuffer
+        from pipeline.run_pool import LokyPool, compute
+        from pipeline.run_progress import Progress
+        from pipeline.run_task import ChunkUnreadable
+
+        local = isinstance(pool, LokyPool)
+        slots = pool.jobs if local else pool.slots()
+        progress_dir = tempfile.mkdtemp(prefix="r2s-run-progress-") if local else None
+        buffer = PartBuffer(self.part_rows, PART_MAX_AGE_S)
+        self._progress = Progress(todo, self._log, self.log_every_s, self.terminal, self.started)
+        computed = written = 0
+        stopped = True
+        try:
+            tasks = self._tasks(dataset, done, todo, slots, progress_dir)
+            for table in compute(pool, tasks, self.log):
+                now = time.monotonic()
+                if table is not None:
+                    if self.first_result_s is None:
+                        self.first_result_s = now - self.started
+                        if not self._progress.has_bar:
+                            self.log(f"first frame done after {self.first_result_s:.1f} s")
+                    counts = status_counts(table)
+                    computed += table.num_rows
+                    buffer.add(table, now)
+                    self._progress.update(counts)
+                else:
+                    self._progress.tick()
+                if buffer.due(now):
+                    written += _write_part(store, buffer.take())
+            stopped = False
+            return computed
+        except ChunkUnreadable as exc:
+            raise UserError(f"{exc} (on a cluster, the frames must be at a path every worker sees)") from None
+        finally:
+            if buffer.count:
+                written += _write_part(store, buffer.take())
+            if stopped:
+                saved = n_frames - todo + written
+                where = self.out if not store.single_file else store.parts
+                self.log(f"stopped: {saved:,} of {n_frames:,} frames are saved in {where}; "
+                         "run the same command again to resume")
+            self._progress.close()
+            self._progress = None
+            if progress_dir is not None:
+                shutil.rmtree(progress_dir, ignore_errors=True)
+
+
+def _write_part(store, table) -> int:
+    """Write a part with SIGTERM held back: the rows have left the buffer, so an exit in the middle of the write
+    would lose them; the signal is delivered (and the run ends) right after."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    try:
+        store.write_part(table)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    return table.num_rows
