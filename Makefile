@@ -7,12 +7,14 @@ STAMP  := $(VENV)/.installed
 JOBS   ?= 2
 
 # make corpus SOURCE=scenarionet INPUT=/data/nuscenes/scenarionet OUT=out/nuscenes [CATEGORIES=all] [TIME_LIMIT=60]
+# On a dask cluster: RUN_ARGS="--backend dask --scheduler tcp://HOST:8786" with OUT on a filesystem every worker sees.
 SOURCE     ?=
 INPUT      ?=
 OUT        ?= out/corpus
 CATEGORIES ?= all
 TIME_LIMIT ?= 60
 MEMORY_LIMIT ?= 4096
+RUN_ARGS   ?=
 
 DEMO := demo-out
 
@@ -37,7 +39,7 @@ demo: setup
 	@mkdir -p $(DEMO)
 	$(R2S) extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out $(DEMO)/excerpt-frames.parquet
 	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs --jobs $(JOBS)
-	$(R2S) report $(DEMO)/programs --out $(DEMO)/report
+	$(R2S) report $(DEMO)/programs --frames $(DEMO_FRAMES) --out $(DEMO)/report
 	$(R2S) query $(DEMO_FRAMES) data/patterns/queue-of-three.dsl --out $(DEMO)/matches.parquet
 	$(R2S) scene $(DEMO_FRAMES) $(DEMO_FRAME) --out $(DEMO)/scene.json
 	$(R2S) synth $(DEMO)/scene.json --out $(DEMO)/scene.dsl
@@ -59,11 +61,11 @@ bench: setup
 
 # A whole dataset: frames, programs (resumable: rerun the same command after a stop) and a report.
 corpus: setup
-	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB]"; exit 2; }
+	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB] [RUN_ARGS='--backend dask --scheduler tcp://HOST:8786']"; exit 2; }
 	@mkdir -p $(OUT)
-	test -f $(OUT)/frames.parquet || $(R2S) extract $(SOURCE) $(INPUT) --categories $(CATEGORIES) --out $(OUT)/frames.parquet
-	$(R2S) run $(OUT)/frames.parquet --out $(OUT)/programs --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT)
-	$(R2S) report $(OUT)/programs --out $(OUT)/report
+	test -d $(OUT)/frames || $(R2S) extract $(SOURCE) $(INPUT) --categories $(CATEGORIES) --out $(OUT)/frames --jobs $(JOBS)
+	$(R2S) run $(OUT)/frames --out $(OUT)/programs --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT) $(RUN_ARGS)
+	$(R2S) report $(OUT)/programs --frames $(OUT)/frames --out $(OUT)/report
 	@echo "corpus done: $(OUT)/programs/ (a Parquet dataset), report at $(OUT)/report/report.html"
 
 lint: setup

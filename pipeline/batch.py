@@ -121,6 +121,8 @@ class _Run:
         del index  # 16 bytes a frame: not kept while the frames run
         todo = n_frames - len(plan.done)
         with self._pool(todo) as pool:  # connects to dask: may refuse, and nothing is written yet
+            if pool is not None and hasattr(pool, "check_readable"):
+                pool.check_readable(dataset.url, dataset.parts[0].path)
             for w in plan.warnings:
                 self.log(w)
             self._log_plan(plan, n_frames, dataset)

@@ -16,7 +16,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", choices=tuple(SOURCES), help="what INPUT is")
     p.add_argument("input", help="dataroot (nuscenes), database dir or .pkl (scenarionet), log dir (argoverse2), "
                                  ".mcap file or dir (mcap), .bag file or ROS 2 bag dir (rosbag)")
-    p.add_argument("--out", required=True, metavar="F", help="frames Parquet file to write (atomically)")
+    p.add_argument("--out", required=True, metavar="PATH",
+                   help="frames Parquet file to write (atomically), or a dataset directory (one part file per "
+                        "input file, log or bag) if PATH does not end in .parquet")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="extract N input files (logs, bags) at once, in worker processes (default 1)")
     p.add_argument("--radius", type=float, default=50.0, metavar="M", help="keep objects within M metres of ego (50)")
     p.add_argument("--categories", default="vehicles", metavar="C",
                    help="vehicles (default), all, or a comma list of Scenic classes / raw categories "
@@ -62,7 +66,20 @@ def run(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be at least 1, got {args.jobs}")
     tally = ExtractTally(warn=lambda line: tqdm.write(line, file=sys.stderr))
+    from pipeline.extract_jobs import extract_parallel, is_dataset
+
+    if args.jobs > 1 or is_dataset(args.out):
+        try:
+            frames, rows = extract_parallel(args.source, args.input, args.out, options, args.jobs, tally)
+        except (FramesError, UserError):
+            if hint := wrong_source_hint(args.source, args.input):
+                raise UserError(hint) from None
+            raise
+        _summary(tally, frames, rows, args.out)
+        return 0
     with frames_writer(args.out) as out:
         bar = tqdm(module.extract(args.input, options, tally), desc=f"extract {args.source}", unit=" frames",
                    file=sys.stderr, disable=None, leave=False)
@@ -76,7 +93,11 @@ def run(args: argparse.Namespace) -> int:
             if out.frames == 0 and (hint := wrong_source_hint(args.source, args.input)):
                 raise UserError(hint) from None
             raise
-    notes = tally.notes()
-    sys.stderr.write(f"r2s extract: {tally.scenarios_read} scenarios, {out.frames} frames, {out.rows} rows -> "
-                     f"{args.out}{'; ' + notes if notes else ''}\n")
+    _summary(tally, out.frames, out.rows, args.out)
     return 0
+
+
+def _summary(tally, frames: int, rows: int, out: str) -> None:
+    notes = tally.notes()
+    sys.stderr.write(f"r2s extract: {tally.scenarios_read} scenarios, {frames} frames, {rows} rows -> "
+                     f"{out}{'; ' + notes if notes else ''}\n")

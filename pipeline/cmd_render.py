@@ -15,8 +15,10 @@ from pipeline.cmd_sample import add_sampling_arguments, bounded_int, sample_opti
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene JSON file")
+    p.add_argument("scene", help="scene JSON file, or - for standard input (r2s scene F ID | r2s render - ...)")
     p.add_argument("--program", metavar="P.dsl", help="DSL program of the scene: draw its references")
+    p.add_argument("--programs", metavar="PATH", help="take the scene's program from a programs file or dataset "
+                   "(r2s run's output) by its frame id, instead of --program")
     p.add_argument("--samples", type=bounded_int(0, 1000), default=0, metavar="K",
                    help="overlay K variants sampled from the program (needs --program)")
     p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2)")
@@ -37,17 +39,32 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {args.out}: the file name must end in {', '.join('.' + f for f in FORMATS)}")
     if Path(args.out).is_dir():
         raise UserError(f"--out {args.out} is a directory")
-    if args.samples and args.program is None:
+    if args.program and args.programs:
+        raise UserError("give --program or --programs, not both")
+    if args.samples and args.program is None and args.programs is None:
         raise UserError("--samples needs --program (variants are sampled from the program)")
     config = load_config(args.config)
     scene = read_scene(args.scene)
     program, samples, subtitle = None, (), ""
-    if args.program is not None:
-        program = read_dsl_program(args.program)
+    if args.programs is not None:
+        from pipeline.programs import program_of_frame
+        from synth.dsl import DslError, parse_program
+
+        text = program_of_frame(args.programs, scene.frame_id)
+        if text is None:
+            raise UserError(f"{args.programs} has no program for frame {scene.frame_id!r}")
+        try:
+            program = parse_program(text)
+        except DslError as exc:
+            raise UserError(f"{args.programs}, frame {scene.frame_id}: {exc}") from None
+        where = f"the program of {scene.frame_id} in {args.programs}"
+    elif args.program is not None:
+        program, where = read_dsl_program(args.program), args.program
+    if program is not None:
         ids = {e.id for e in scene.entities}
         missing = next((s.id for s in program.statements if s.id not in ids), None)
         if missing is not None:
-            raise UserError(f"{args.program} declares {missing!r}, which is not an entity of {args.scene}")
+            raise UserError(f"{where} declares {missing!r}, which is not an entity of {args.scene}")
         result = check(program, scene, config)
         subtitle = f"program cost {program.cost}, " + (
             "contains the scene" if result.ok else f"does NOT contain the scene ({len(result.violations)} violations)")

@@ -16,7 +16,9 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("programs", help="programs.parquet written by `r2s run`")
+    p.add_argument("programs", help="programs file or dataset directory written by `r2s run`")
+    p.add_argument("--frames", metavar="PATH", help="the frames the programs came from: fills in the commands "
+                   "that render the frames worth a look")
     p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced if it holds a report)")
     p.add_argument("--max-table-rows", type=int, default=40, metavar="N",
                    help="frames shown in the side-by-side (Table 3) table; more are sampled evenly over N (default 40)")
@@ -68,18 +70,18 @@ def staged_directory(target: Path) -> Iterator[Path]:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.errors import UserError
-    from pipeline.programs import read_programs
+    from pipeline.report_stats import ProgramsDB
 
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
-    df = read_programs(args.programs)  # ProgramsError (exit 2) before anything is written
-    if df.empty:
-        raise UserError(f"{args.programs} has no rows: nothing to report (did `r2s run` process any frame?)")
     target = Path(args.out)
-    _check_replaceable(target)
-    from pipeline.report import HTML_NAME, write_report
+    with ProgramsDB(args.programs) as db:  # ProgramsError (exit 2) before anything is written
+        if db.rows == 0:
+            raise UserError(f"{args.programs} has no rows: nothing to report (did `r2s run` process any frame?)")
+        _check_replaceable(target)
+        from pipeline.report import HTML_NAME, write_report
 
-    with staged_directory(target) as stage:
-        write_report(df, str(args.programs), stage, max_table_rows=args.max_table_rows)
+        with staged_directory(target) as stage:
+            write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db)
     print(target / HTML_NAME)
     return 0

@@ -31,7 +31,16 @@ def read_text_file(path: str, what: str) -> str:
 
 
 def read_scene(path: str, max_entities: int | None = None) -> Scene:
-    text = read_text_file(path, "scene")
+    """A scene JSON file, or standard input for "-" (so `r2s scene F ID | r2s render - ...` works)."""
+    if path == "-":
+        import sys
+
+        text = sys.stdin.read(MAX_TEXT_BYTES + 1)
+        if len(text) > MAX_TEXT_BYTES:
+            raise UserError(f"the scene on standard input is larger than {MAX_TEXT_BYTES // 2**20} MB")
+        path = "standard input"
+    else:
+        text = read_text_file(path, "scene")
     try:
         return scene_from_json(text, max_entities=max_entities or DEFAULT_MAX_ENTITIES)
     except ValueError as exc:

@@ -127,6 +127,21 @@ def read_programs_table(path: str | os.PathLike) -> pa.Table:
     return pa.concat_tables(tables) if len(tables) > 1 else tables[0]
 
 
+def program_of_frame(path: str | os.PathLike, frame_id: str) -> str | None:
+    """The DSL program of one frame in a programs file or dataset (its cheapest, when several configs ran it),
+    read with a filter on frame_id (row-group statistics skip the rest); None if it has none."""
+    import pyarrow.dataset as ds
+
+    files = programs_files(path)
+    try:
+        table = ds.dataset(files, format="parquet").to_table(
+            columns=["frame_id", "program", "cost"], filter=ds.field("frame_id") == frame_id)
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise ProgramsError(f"{path} is not a readable programs dataset ({str(exc)[:120]})") from None
+    rows = sorted((r for r in table.to_pylist() if r["program"] is not None), key=lambda r: r["cost"] is None or r["cost"])
+    return rows[0]["program"] if rows else None
+
+
 def read_programs(path: str | os.PathLike):
     """read_programs_table as a DataFrame (for users' pandas and the tests)."""
     return read_programs_table(path).to_pandas()

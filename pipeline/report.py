@@ -1,16 +1,23 @@
-"""report.md and report.html from a programs DataFrame: one document model, two renderers.
+"""report.md and report.html from a programs file or dataset: one document model, two renderers.
 
-The statistics come from pipeline.report_stats and the pictures from pipeline.report_plots; this module only
-arranges them into sections and tables, then prints that one document as Markdown and as self-contained HTML
-(inline CSS, plots embedded as base64), so the two files can never disagree.
+The statistics come from pipeline.report_stats (DuckDB queries) and the pictures from pipeline.report_plots; this
+module only arranges them into sections and tables, then prints that one document as Markdown and as
+self-contained HTML (inline CSS, plots embedded as base64), so the two files can never disagree.
+
+Sections are built by the functions of SECTIONS, in order, each from the shared ReportContext (the numbers are
+computed once, on first use): a new section is one more function there, or one passed to write_report as
+`extra` (a verb option that adds a section passes its builder).
 """
 
 from __future__ import annotations
 
 import base64
 import html
-from collections.abc import Callable
+import re
+import shlex
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import pandas as pd
@@ -21,13 +28,14 @@ from pipeline.report_stats import (
     ABSOLUTE_COST_PER_ENTITY,
     FailureGroup,
     GroupStats,
-    Prepared,
+    LookFrame,
+    ProgramsDB,
     RelationUsage,
     SideBySide,
     by_bucket,
     by_config,
     failures,
-    prepare,
+    frames_to_look_at,
     relation_usage,
     side_by_side,
 )
@@ -51,9 +59,17 @@ class Table:
 
 
 @dataclass(frozen=True)
+class Details:
+    """A block of text (a program) behind a one-line summary: folded in HTML, a <details> block in Markdown."""
+
+    summary: str
+    code: str
+
+
+@dataclass(frozen=True)
 class Section:
     title: str
-    blocks: tuple[str | Table | Plot, ...]  # a str is one plain-text paragraph
+    blocks: tuple[str | Table | Plot | Details, ...]  # a str is one plain-text paragraph
 
 
 @dataclass(frozen=True)
@@ -163,14 +179,14 @@ def relation_section(usage: RelationUsage, configs: tuple[str, ...], plot: Plot)
     motion = (" Motion: stationary and moving like cost 0, relative speed 1, absolute speed 2."
               if usage.motion else "")
     blocks: list[str | Table | Plot] = [
-        "Counts of each relation in the programs, parsed with the DSL's own parser. "
+        "Counts of each relation in the programs, read from the DSL text (a program the counts do not account for is parsed with the DSL's own parser). "
         "ahead / behind / left / right and toward / away are the cost-0 relations; relative position and "
         "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2." + motion,
         Table(("Relation", *configs, "Total"), rows, "l" + "r" * (len(configs) + 1)),
         plot,
     ]
     if usage.unparsable:
-        blocks.append(f"{len(usage.unparsable)} program(s) are not in the DSL and are not counted, e.g. "
+        blocks.append(f"{usage.unparsable_total} program(s) are not in the DSL and are not counted, e.g. "
                       + "; ".join(f"{c} {f}: {m}" for c, f, m in usage.unparsable[:3]) + ".")
     return Section("Relation usage", tuple(blocks))
 
@@ -188,38 +204,111 @@ def failure_section(groups: list[FailureGroup], limit: int = 20) -> Section:
     return Section("Failures", tuple(blocks))
 
 
-def build_document(p: Prepared, source: str, plots: list[Plot], config_stats: list[GroupStats],
-                   bucket_stats: list[GroupStats], usage: RelationUsage, side: SideBySide | None,
-                   failure_groups: list[FailureGroup]) -> Document:
-    f = p.frame
-    intro = [
-        f"Programs file: {source}. {len(f) + p.duplicates_dropped} row(s): {f['frame_id'].nunique()} distinct frame(s) under "
-        f"{len(p.configs)} strategy configuration(s) ({', '.join(p.configs)}).",
-        f"Oracles: {', '.join(sorted(f['oracle'].dropna().unique())) or MISSING}; solvers: "
-        f"{', '.join(sorted(f['solver'].dropna().unique())) or MISSING}; r2sgen version(s): "
-        f"{', '.join(sorted(f['version'].dropna().unique())) or MISSING}.",
+def _png_name(frame_id: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", frame_id).strip("_") + ".png"
+
+
+def render_command(frames: str, programs: str, frame_id: str) -> str:
+    """The shell line that draws a frame with its program (`r2s render -` reads the scene from stdin)."""
+    q = shlex.quote
+    return (f"r2s scene {q(frames)} {q(frame_id)} | r2s render - --programs {q(programs)} "
+            f"--out {q(_png_name(frame_id))}")
+
+
+def look_section(frames: list[LookFrame], frames_path: str | None, programs: str) -> Section:
+    if not frames:
+        return Section(FRAMES_TITLE, ("No frame stands out: no program, no runtime, no failure.",))
+    where = frames_path or "FRAMES"
+    rows = tuple((f.frame_id, f.reason, f.config, f.status, str(f.n_entities),
+                  MISSING if f.cost is None else str(f.cost), MISSING if f.lower_bound is None else str(f.lower_bound),
+                  fmt_seconds(f.runtime_s), render_command(where, programs, f.frame_id)) for f in frames)
+    blocks: list[str | Table | Plot | Details] = [
+        "Frames worth a look: the largest costs, the slowest, and a few of each way a frame can stop short "
+        "(feasible, timeout, memout, error). Each command draws the frame's scene with its program's references."
+        + ("" if frames_path else " FRAMES stands for the frames the programs came from (`r2s report --frames` "
+                                  "fills it in)."),
+        Table(("Frame", "Why", "Strategy", "Status", "N", "Cost", "Lower bound", "Runtime (s)", "Render"), rows,
+              "llllrrrrl"),
     ]
-    if p.duplicates_dropped:
-        intro.append(f"{p.duplicates_dropped} repeated (frame, strategy) row(s) were dropped; the last one counts.")
-    sections = [config_section(config_stats), bucket_section(bucket_stats)]
-    if side is not None:
-        sections.append(side_by_side_section(side))
-    *general, relations = plots
-    sections.append(Section("Plots", tuple(general)))
-    sections.append(relation_section(usage, p.configs, relations))
-    sections.append(failure_section(failure_groups))
+    for f in frames:
+        text = f.program if f.program else f"(no program) {f.error or ''}".strip()
+        blocks.append(Details(f"{f.frame_id} ({f.config}, {f.status}, cost {MISSING if f.cost is None else f.cost})",
+                              text))
+    return Section(FRAMES_TITLE, tuple(blocks))
+
+
+FRAMES_TITLE = "Frames worth a look"
+
+
+class ReportContext:
+    """What sections are built from: the programs in DuckDB, the options, and the numbers several sections share
+    (each computed on first use)."""
+
+    def __init__(self, db: ProgramsDB, out: Path, programs: str, frames: str | None = None,
+                 max_table_rows: int = 40) -> None:
+        self.db, self.out, self.programs, self.frames, self.max_table_rows = db, out, programs, frames, max_table_rows
+
+    @cached_property
+    def config_stats(self) -> list[GroupStats]:
+        return by_config(self.db)
+
+    @cached_property
+    def bucket_stats(self) -> list[GroupStats]:
+        return by_bucket(self.db)
+
+    @cached_property
+    def usage(self) -> RelationUsage:
+        return relation_usage(self.db)
+
+    @cached_property
+    def plots(self) -> list[Plot]:
+        return all_plots(self.db, self.bucket_stats, self.usage, self.out)  # relation usage last: with its table
+
+
+SectionBuilder = Callable[[ReportContext], "Section | None"]
+
+
+def _side_by_side(ctx: ReportContext) -> Section | None:
+    if len(ctx.db.overview.configs) < 2:
+        return None
+    return side_by_side_section(side_by_side(ctx.db, ctx.max_table_rows))
+
+
+SECTIONS: tuple[SectionBuilder, ...] = (
+    lambda ctx: config_section(ctx.config_stats),
+    lambda ctx: bucket_section(ctx.bucket_stats),
+    _side_by_side,
+    lambda ctx: Section("Plots", tuple(ctx.plots[:-1])),
+    lambda ctx: relation_section(ctx.usage, ctx.db.overview.configs, ctx.plots[-1]),
+    lambda ctx: look_section(frames_to_look_at(ctx.db), ctx.frames, ctx.programs),
+    lambda ctx: failure_section(failures(ctx.db)),
+)
+
+
+def build_document(ctx: ReportContext, extra: Sequence[SectionBuilder] = ()) -> Document:
+    o = ctx.db.overview
+    intro = [
+        f"Programs: {o.source}. {o.rows} row(s): {o.frames} distinct frame(s) under {len(o.configs)} strategy "
+        f"configuration(s) ({', '.join(o.configs)}).",
+        f"Oracles: {', '.join(o.oracles) or MISSING}; solvers: {', '.join(o.solvers) or MISSING}; r2sgen version(s): "
+        f"{', '.join(o.versions) or MISSING}.",
+    ]
+    if o.duplicates_dropped:
+        intro.append(f"{o.duplicates_dropped} repeated (frame, strategy) row(s) were dropped; the last one counts.")
+    sections = [s for build in (*SECTIONS, *extra) if (s := build(ctx)) is not None]
     return Document("r2s report", tuple(intro), tuple(sections))
 
 
 # ------------------------------------------------------------------------------------------------ markdown
 
 def _walk(doc: Document, heading: Callable[[str], str], table: Callable[[Table], str], plot: Callable[[Plot], str],
-          text: Callable[[str], str]) -> list[str]:
+          text: Callable[[str], str], details: Callable[[Details], str]) -> list[str]:
     """The sections' headings and blocks in order, each rendered by the function for its kind."""
     out = []
     for s in doc.sections:
         out.append(heading(s.title))
-        out += [table(b) if isinstance(b, Table) else plot(b) if isinstance(b, Plot) else text(b) for b in s.blocks]
+        out += [table(b) if isinstance(b, Table) else plot(b) if isinstance(b, Plot)
+                else details(b) if isinstance(b, Details) else text(b) for b in s.blocks]
     return out
 
 
@@ -244,7 +333,8 @@ def _md_table(t: Table) -> str:
 def render_markdown(doc: Document) -> str:
     out = [f"# {doc.title}", *doc.intro]
     out += _walk(doc, lambda title: f"## {title}", _md_table,
-                 lambda plot: f"![{plot.title}]({plot.filename})\n\n*{plot.caption}*", lambda text: text)
+                 lambda plot: f"![{plot.title}]({plot.filename})\n\n*{plot.caption}*", lambda text: text,
+                 lambda d: f"<details><summary>{html.escape(d.summary)}</summary>\n\n```\n{d.code}\n```\n\n</details>")
     return "\n\n".join(out) + "\n"
 
 
@@ -275,6 +365,9 @@ tbody tr:nth-child(even) { background: #fafbfc; }
 tbody tr:hover { background: #eef4fa; }
 td.best { font-weight: 700; }
 td.stopped { font-weight: 600; color: #8a3b00; background: #fbefe6; }
+details { margin: 6px 0; border: 1px solid var(--rule); border-radius: 6px; padding: 4px 10px; }
+details summary { cursor: pointer; font-size: 13px; }
+pre { font-size: 12px; line-height: 1.4; overflow-x: auto; max-width: 100%; margin: 6px 0; }
 figure { margin: 18px 0 26px; }
 figure img { max-width: 100%; height: auto; border: 1px solid var(--rule); border-radius: 6px; }
 figcaption { color: var(--muted); font-size: 13px; margin-top: 4px; }
@@ -317,7 +410,9 @@ def render_html(doc: Document, images: dict[str, bytes]) -> str:
              "<nav>" + "".join(f'<a href="#{_anchor(s.title)}">{html.escape(s.title)}</a>' for s in doc.sections)
              + "</nav>"]
     parts += _walk(doc, lambda title: f'<h2 id="{_anchor(title)}">{html.escape(title)}</h2>', _html_table,
-                   lambda plot: _html_figure(plot, images), lambda text: f"<p>{html.escape(text)}</p>")
+                   lambda plot: _html_figure(plot, images), lambda text: f"<p>{html.escape(text)}</p>",
+                   lambda d: f"<details><summary>{html.escape(d.summary)}</summary><pre>{html.escape(d.code)}</pre>"
+                             "</details>")
     body = "\n".join(parts)
     return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">\n'
@@ -327,14 +422,18 @@ def render_html(doc: Document, images: dict[str, bytes]) -> str:
 
 # ------------------------------------------------------------------------------------------------ writing
 
-def write_report(df: pd.DataFrame, source: str, out: Path, max_table_rows: int = 40) -> Path:
+def write_report(programs: str | Path, out: Path, frames: str | None = None, max_table_rows: int = 40,
+                 extra: Sequence[SectionBuilder] = (), db: ProgramsDB | None = None) -> Path:
     """Write report.md, report.html and the PNGs into the (existing, empty) directory out; returns report.html."""
-    p = prepare(df)
-    config_stats, bucket_stats = by_config(p), by_bucket(p)
-    usage = relation_usage(p)
-    plots = all_plots(p, bucket_stats, usage, out)  # the relation-usage plot last: it goes with its table
-    side = side_by_side(p, max_table_rows) if len(p.configs) > 1 else None
-    doc = build_document(p, source, plots, config_stats, bucket_stats, usage, side, failures(p))
+    own = db is None
+    db = db or ProgramsDB(programs)
+    try:
+        ctx = ReportContext(db, out, str(programs), frames, max_table_rows)
+        doc = build_document(ctx, extra)
+        plots = ctx.plots
+    finally:
+        if own:
+            db.close()
     (out / MD_NAME).write_text(render_markdown(doc), encoding="utf-8")
     images = {plot.filename: (out / plot.filename).read_bytes() for plot in plots}
     (out / HTML_NAME).write_text(render_html(doc, images), encoding="utf-8")

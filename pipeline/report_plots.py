@@ -18,9 +18,12 @@ from pipeline.report_stats import (
     MOTION_KINDS,
     POSITION_KINDS,
     GroupStats,
-    Prepared,
+    ProgramsDB,
     RelationUsage,
     bucket_order,
+    cost_counts,
+    per_n,
+    plot_points,
 )
 
 # Okabe & Ito (2008), most distinct first.
@@ -91,11 +94,33 @@ def _points(ax, x, y, i: int, label: str) -> None:
     ax.scatter(x, y, s=36, marker=marker, facecolors="none", edgecolors=colour, linewidths=1.3, label=label)
 
 
-def runtime_vs_n(p: Prepared, path: Path) -> Plot:
+@dataclass(frozen=True)
+class Points:
+    """What the scatter plots draw: every row, or a sample per config past PLOT_POINTS (then per_n adds the
+    line over every row, so the sample shows the spread and the line the trend)."""
+
+    rows: object  # DataFrame: config, status, n_entities, runtime_s, cost
+    totals: dict[str, int]  # rows per config
+    per_n: object  # DataFrame: config, n_entities, runtime_median, mean_cost
+
+    def sampled(self, config: str) -> bool:
+        return int((self.rows["config"] == config).sum()) < self.totals.get(config, 0)
+
+    def note(self, configs) -> str:
+        sampled = [c for c in configs if self.sampled(c)]
+        if not sampled:
+            return ""
+        shown = int((self.rows["config"] == sampled[0]).sum())
+        return (f" Past {shown:,} frames a config is drawn from a fixed sample of {shown:,} frames (the same frames "
+                "for every config); the line follows every frame.")
+
+
+def runtime_vs_n(pts: Points, configs: tuple[str, ...], path: Path) -> Plot:
     fig, (ax,) = _figure()
-    for i, config in enumerate(p.configs):
+    frame = pts.rows
+    for i, config in enumerate(configs):
         colour, _ = _style(i)
-        rows = p.frame[(p.frame["config"] == config) & (p.frame["status"] != "error") & p.frame["runtime_s"].notna()]
+        rows = frame[(frame["config"] == config) & (frame["status"] != "error") & frame["runtime_s"].notna()]
         done = rows[rows["status"] == "optimal"]
         unproven = rows[rows["status"] == "feasible"]
         stopped = rows[rows["status"].isin(("timeout", "memout"))]
@@ -108,6 +133,10 @@ def runtime_vs_n(p: Prepared, path: Path) -> Plot:
         if len(stopped):
             ax.scatter(stopped["n_entities"], stopped["runtime_s"].clip(lower=1e-4), s=60, color=colour, marker="x",
                        linewidths=1.8, label=f"{config}: timeout / memout")
+        line = pts.per_n[(pts.per_n["config"] == config) & pts.per_n["runtime_median"].notna()]
+        if pts.sampled(config) and len(line):
+            ax.plot(line["n_entities"], line["runtime_median"].clip(lower=1e-4), color=colour, linewidth=1.6,
+                    label=f"{config}: median per N (every frame)")
     if not ax.collections:
         _no_data(ax, "no frame ran (every row is an error)")
     ax.set_yscale("log")
@@ -118,20 +147,25 @@ def runtime_vs_n(p: Prepared, path: Path) -> Plot:
     _save(fig, path)
     return Plot(path.name, "Runtime against N",
                 "Wall-clock seconds per frame (log scale): open markers are proven optima, plus signs programs found "
-                "before a limit without a proof, crosses frames stopped by the time or memory limit.")
+                "before a limit without a proof, crosses frames stopped by the time or memory limit."
+                + pts.note(configs))
 
 
-def cost_vs_n(p: Prepared, path: Path) -> Plot:
+def cost_vs_n(pts: Points, configs: tuple[str, ...], path: Path) -> Plot:
     fig, (ax,) = _figure()
-    rows = p.frame[p.frame["cost"].notna()]
+    rows = pts.rows[pts.rows["cost"].notna()]
     n_max = max(int(rows["n_entities"].max()) if len(rows) else 1, 1)
     xs = np.array([0, n_max])
     ax.plot(xs, ABSOLUTE_COST_PER_ENTITY * xs, color=REFERENCE, linestyle="--", linewidth=1.2,
             label=f"absolute coordinates ({ABSOLUTE_COST_PER_ENTITY} N)")
-    for i, config in enumerate(p.configs):
+    for i, config in enumerate(configs):
         r = rows[rows["config"] == config]
         if len(r):
             _points(ax, r["n_entities"], r["cost"], i, config)
+        line = pts.per_n[(pts.per_n["config"] == config) & pts.per_n["mean_cost"].notna()]
+        if pts.sampled(config) and len(line):
+            ax.plot(line["n_entities"], line["mean_cost"], color=_style(i)[0], linewidth=1.6,
+                    label=f"{config}: mean per N (every frame)")
     if rows.empty:
         _no_data(ax, "no frame produced a program")
     ax.set_xlabel("entities in the frame, N (ego excluded)")
@@ -145,31 +179,32 @@ def cost_vs_n(p: Prepared, path: Path) -> Plot:
     _save(fig, path)
     return Plot(path.name, "Cost against N",
                 f"Cost of each synthesized program; the dashed line is the absolute-coordinate program "
-                f"({ABSOLUTE_COST_PER_ENTITY} per entity).")
+                f"({ABSOLUTE_COST_PER_ENTITY} per entity)." + pts.note(configs))
 
 
-def cost_distribution(p: Prepared, path: Path) -> Plot:
+def cost_distribution(counts, configs: tuple[str, ...], path: Path) -> Plot:
+    """Histograms binned from (config, cost, N, rows) counts: every frame counts, none is drawn one by one."""
     fig, (left, right) = _figure(width=9.5, ncols=2)
     from matplotlib.ticker import MaxNLocator
 
-    rows = p.frame[p.frame["cost"].notna()]
-    top = int(rows["cost"].max()) if len(rows) else 1
+    top = int(counts["cost"].max()) if len(counts) else 1
     # Integer costs: one bin per value while that stays readable, else 30 bins of whole costs.
     step = max(1, int(np.ceil((top + 1) / 30)))
     cost_bins = np.arange(0, top + step + 1, step) - 0.5
-    per_entity = (rows["cost"] / rows["n_entities"]).where(rows["n_entities"] > 0)
+    per_entity = (counts["cost"] / counts["n_entities"]).where(counts["n_entities"] > 0)
     ratio_top = max(float(per_entity.max()) if per_entity.notna().any() else 0.0, 0.5)
     ratio_bins = np.linspace(0, min(ABSOLUTE_COST_PER_ENTITY, np.ceil(ratio_top * 4) / 4), 21)
-    shown = [c for c in p.configs if (rows["config"] == c).any()]
-    for ax, values, bins in ((left, rows["cost"], cost_bins), (right, per_entity, ratio_bins)):
+    shown = [c for c in configs if (counts["config"] == c).any()]
+    for ax, values, bins in ((left, counts["cost"], cost_bins), (right, per_entity, ratio_bins)):
         width = (bins[1] - bins[0]) * 0.85 / max(len(shown), 1)
         for j, config in enumerate(shown):
-            colour, _ = _style(p.configs.index(config))
-            v = values[rows["config"] == config].dropna().astype(float)
-            counts, edges = np.histogram(v.clip(upper=bins[-1]), bins=bins)
+            colour, _ = _style(configs.index(config))
+            mine = (counts["config"] == config) & values.notna()
+            hist, edges = np.histogram(values[mine].astype(float).clip(upper=bins[-1]), bins=bins,
+                                       weights=counts["rows"][mine])
             # Side by side within each bin: overlaid histograms of equal programs would hide each other.
             left_edges = edges[:-1] + (bins[1] - bins[0]) * 0.075 + j * width
-            ax.bar(left_edges, counts, width=width, align="edge", color=colour, label=config)
+            ax.bar(left_edges, hist, width=width, align="edge", color=colour, label=config)
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylabel("frames")
     if not shown:
@@ -252,13 +287,16 @@ def versus_absolute(stats: list[GroupStats], configs: tuple[str, ...], path: Pat
                 "per entity): lower is more relational; 100% would be no better than coordinates.")
 
 
-def all_plots(p: Prepared, buckets: list[GroupStats], usage: RelationUsage, out: Path) -> list[Plot]:
+def all_plots(db: ProgramsDB, buckets: list[GroupStats], usage: RelationUsage, out: Path) -> list[Plot]:
     """Write every plot of PLOT_FILES into out; returns them in that order."""
     runtime, cost, dist, absolute, relations = (out / name for name in PLOT_FILES)
+    configs = db.overview.configs
+    rows, totals = plot_points(db)
+    pts = Points(rows, totals, per_n(db))
     return [
-        runtime_vs_n(p, runtime),
-        cost_vs_n(p, cost),
-        cost_distribution(p, dist),
-        versus_absolute(buckets, p.configs, absolute),
-        relation_usage(usage, p.configs, relations),
+        runtime_vs_n(pts, configs, runtime),
+        cost_vs_n(pts, configs, cost),
+        cost_distribution(cost_counts(db), configs, dist),
+        versus_absolute(buckets, configs, absolute),
+        relation_usage(usage, configs, relations),
     ]

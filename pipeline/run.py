@@ -45,9 +45,9 @@ def status_counts(table: pa.Table) -> dict[str, int]:
 
 
 def chunk_size_for(todo: int, slots: int, largest: int) -> int:
-    """Frames per task: `largest`, but small enough that every worker gets several tasks (a small run keeps
-    its parallelism and a death names one frame sooner)."""
-    return max(1, min(largest, todo // (4 * max(slots, 1))))
+    """Frames per task: `largest`, but small enough that every worker gets at least two tasks (a small run keeps
+    its parallelism)."""
+    return max(1, min(largest, -(-todo // (2 * max(slots, 1)))))
 
 
 def chunks(runs: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]], size: int,

@@ -243,6 +243,17 @@ class DaskPool:
     def slots(self) -> int:
         return self.jobs or max(1, sum(self.client.nthreads().values()))
 
+    def check_readable(self, url: str, path: str) -> None:
+        """Every worker must read the frames itself (nothing passes through the coordinator): ask each one
+        before anything is written."""
+        from pipeline.errors import UserError
+
+        answers = self.client.run(_can_read, url, path)
+        blind = sorted(worker for worker, error in answers.items() if error)
+        if blind:
+            raise UserError(f"dask worker {blind[0]} cannot read the frames ({answers[blind[0]]}); on a cluster the "
+                            "frames must be at a path every worker sees (a shared filesystem or an fsspec URL)")
+
     def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from distributed import KilledWorker
         from distributed import wait as dask_wait
@@ -265,6 +276,18 @@ class DaskPool:
 
         yield from _bounded(queue, self.slots(), _Hooks(submit=submit, wait_first=wait_first, death=death,
                                                         abandon=self.client.cancel))
+
+
+def _can_read(url: str, path: str) -> str:
+    from extractors.frames_dataset import filesystem
+
+    try:
+        pafs, _ = filesystem(url) if url else filesystem(path)
+        with pafs.open_input_file(path) as f:
+            f.read(4)
+        return ""
+    except Exception as exc:  # the worker's own words, whatever its filesystem raised
+        return one_line(f"{type(exc).__name__}: {exc}", 200)
 
 
 def compute(pool: Pool, tasks: Iterable[ChunkTask], log: Callable[[str], None]) -> Iterator[pa.Table | None]:

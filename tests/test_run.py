@@ -4,6 +4,7 @@ checked through the statuses they produce, resume through rows that keep their m
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -624,3 +625,78 @@ def test_the_python_api_is_what_the_cli_runs(small_frames, tmp_path):
     assert summary.first_result_s is not None and summary.first_result_s <= summary.seconds
     assert lines[-1].startswith(summary.line())
     assert set(_programs(tmp_path / "programs")["strategy"]) == {"astar-cpa"}
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_dask_cluster_of_real_processes_loses_a_worker_mid_run(small_frames, tmp_path):
+    """`dask scheduler` and two `dask worker` processes on localhost; the workers read their chunks from the
+    frames file themselves. One worker is killed while it runs a chunk: every frame still ends up once."""
+    pytest.importorskip("distributed", reason="dask.distributed is not installed (pip install '.[dask]')")
+    dask = Path(sys.executable).with_name("dask")
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, start_new_session=True)
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], **quiet)]
+    try:
+        for _ in range(2):
+            procs.append(subprocess.Popen([str(dask), "worker", address, "--nthreads", "1", "--no-nanny",
+                                           "--no-dashboard", "--host", "127.0.0.1"], **quiet))
+        out = tmp_path / "programs"
+        env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=1@*"})
+        run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out),
+                                "--backend", "dask", "--scheduler", address, "--part-rows", "1"],
+                               cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not list(out.glob("part-*.parquet")) and run.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert run.poll() is None, "the run ended before a worker could be killed"
+        os.killpg(procs[1].pid, signal.SIGKILL)  # mid-run: the other chunks of its worker are in flight
+        _, stderr = run.communicate(timeout=180)
+        assert run.returncode == 0, stderr
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.wait()
+    df = _programs(out)  # asserts every frame once
+    assert sorted(df["frame_id"]) == sorted(_frame_ids(small_frames))
+    assert set(df["status"]) == {"optimal"}
+    _assert_programs_contain_scenes(small_frames, out, SynthConfig())
+
+
+def test_dask_workers_that_cannot_see_the_frames_are_refused_before_anything_is_written(small_frames, tmp_path):
+    distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    import logging
+
+    frames = tmp_path / "frames.parquet"
+    shutil.copy(small_frames, frames)
+    out = tmp_path / "programs"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        from pipeline.batch import run_frames
+        from pipeline.errors import UserError
+        from pipeline.run_pool import DaskPool
+
+        original = DaskPool.check_readable
+
+        def blind(self, url, path):  # as a worker on another machine would see it: no such file
+            return original(self, url, str(tmp_path / "elsewhere" / "frames.parquet"))
+
+        DaskPool.check_readable = blind
+        try:
+            with pytest.raises(UserError, match="cannot read the frames"):
+                run_frames(frames, out, backend="dask", scheduler=cluster.scheduler_address, terminal=False,
+                           log=lambda line: None)
+        finally:
+            DaskPool.check_readable = original
+    _assert_nothing_written(out)

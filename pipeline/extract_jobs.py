@@ -1,0 +1,180 @@
+"""`r2s extract --jobs N` and dataset outputs: the input's pieces (extractors.units) extracted in parallel worker
+processes, each into its own part file, written atomically.
+
+The parts are staged in a hidden directory beside the output and take its place only when every piece is done
+and the whole dataset passed the frames check (a frame id given by two pieces is refused, as one writer would
+refuse it): a failure or a kill leaves the previous output or none, never part of one. Parts are named by the
+piece's position in the input, so the output is the same whatever the order pieces finish in. Memory: each
+worker streams its frames into its part in row groups (extractors.writer); the coordinator holds a count.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from collections import Counter
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from extractors.base import ExtractOptions, ExtractTally
+from extractors.writer import frames_writer
+from pipeline.errors import UserError
+
+PART = "part-{:06d}.parquet"
+
+
+@dataclass(frozen=True)
+class UnitResult:
+    index: int
+    frames: int
+    rows: int
+    scenes: tuple[str, ...]  # scene names, in order: a name met in an earlier piece is that piece's
+    tally: ExtractTally
+
+
+def extract_unit(source: str, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
+    """One piece into `stage/part-<index>.parquet` (nothing when it has no frame)."""
+    from extractors.registry import source_module
+
+    tally = ExtractTally()
+    scenes: list[str] = []
+    path = Path(stage) / PART.format(index)
+    with frames_writer(path) as out:
+        for rows in source_module(source).extract(unit, options, tally):
+            if not scenes or scenes[-1] != rows[0]["scene"]:
+                scenes.append(rows[0]["scene"])
+            out.write_frame(rows)
+    if out.frames == 0:
+        path.unlink(missing_ok=True)
+    return UnitResult(index, out.frames, out.rows, tuple(scenes), tally)
+
+
+def add_tally(total: ExtractTally, part: ExtractTally) -> None:
+    for f in fields(ExtractTally):
+        value = getattr(part, f.name)
+        if isinstance(value, (int, Counter)) and not isinstance(value, bool) and not f.name.startswith("_"):
+            setattr(total, f.name, getattr(total, f.name) + value)
+
+
+def is_dataset(out: str) -> bool:
+    p = Path(out)
+    return p.is_dir() or p.suffix != ".parquet"
+
+
+def extract_parallel(source: str, input_path: str, out: str, options: ExtractOptions, jobs: int,
+                     tally: ExtractTally) -> tuple[int, int]:
+    """Extract every piece of the input (in `jobs` worker processes when jobs > 1) into `out`: a dataset
+    directory of parts, or one file merged from them. Returns (frames, rows)."""
+    from tqdm import tqdm
+
+    from extractors.units import input_units
+
+    target = Path(out)
+    if is_dataset(out) and target.exists():
+        _check_replaceable(target)
+    units = input_units(source, input_path)
+    stage = target.parent / f".{target.name}.{os.getpid()}.parts.tmp"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir()
+    try:
+        results = []
+        bar = tqdm(total=len(units), desc=f"extract {source}", unit=" inputs", file=sys.stderr, disable=None,
+                   leave=False)
+        for result in _map(source, units, options, str(stage), jobs):
+            results.append(result)
+            bar.update(1)
+        bar.close()
+        frames, rows = _keep_first_scenes(sorted(results, key=lambda r: r.index), units, stage, tally)
+        if frames == 0:
+            raise UserError(f"no frames found in {input_path} (check the source, --categories and --topics)")
+        _check(stage)
+        if is_dataset(out):
+            _replace(stage, target)
+        else:
+            _merge(stage, target)
+        return frames, rows
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _map(source, units, options, stage, jobs):
+    if jobs <= 1:
+        for i, unit in enumerate(units):
+            yield extract_unit(source, unit, i, options, stage)
+        return
+    from concurrent.futures import as_completed
+
+    from joblib.externals.loky import get_reusable_executor
+
+    executor = get_reusable_executor(max_workers=min(jobs, len(units)))
+    futures = [executor.submit(extract_unit, source, unit, i, options, stage) for i, unit in enumerate(units)]
+    try:
+        for future in as_completed(futures):
+            yield future.result()
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        executor.shutdown(wait=False, kill_workers=True)
+        raise
+
+
+def _keep_first_scenes(results: list[UnitResult], units: list[str], stage: Path, tally: ExtractTally):
+    """A scene already given by an earlier piece is that piece's (the same scene converted twice): the later
+    piece is skipped with a warning, as a single reader skips it."""
+    seen: dict[str, int] = {}
+    frames = rows = 0
+    for r in results:
+        clash = next((s for s in r.scenes if s in seen), None)
+        if clash is not None:
+            (stage / PART.format(r.index)).unlink(missing_ok=True)
+            tally.skip("duplicate scenario id", f"r2s extract: skipping {units[r.index]}: scenario {clash!r} was "
+                       f"already read from {units[seen[clash]]}")
+            continue
+        seen.update(dict.fromkeys(r.scenes, r.index))
+        add_tally(tally, r.tally)
+        frames += r.frames
+        rows += r.rows
+    return frames, rows
+
+
+def _check(stage: Path) -> None:
+    """Frame ids unique across the parts (each part was checked as it was written)."""
+    from extractors.frames_dataset import FramesDataset
+
+    FramesDataset.open(stage).check()
+
+
+def _check_replaceable(target: Path) -> None:
+    if not target.is_dir():
+        raise UserError(f"--out {target} exists and is not a directory")
+    foreign = sorted(p.name for p in target.iterdir() if not (p.name.startswith("part-") and p.suffix == ".parquet"))
+    if foreign:
+        raise UserError(f"--out {target} holds files that are not frames parts ({', '.join(foreign[:3])}); "
+                        "choose an empty or new directory")
+
+
+def _replace(stage: Path, target: Path) -> None:
+    retired = stage.with_name(stage.name + ".old")
+    if target.exists():
+        os.replace(target, retired)  # rename aside first: rename(2) will not replace a non-empty directory
+    os.replace(stage, target)
+    shutil.rmtree(retired, ignore_errors=True)
+
+
+def _merge(stage: Path, target: Path) -> None:
+    """The parts, in order, into one file, a row group at a time."""
+    import pyarrow.parquet as pq
+
+    from extractors.atomic import atomic_path
+
+    parts = sorted(stage.glob("part-*.parquet"))
+    schema = pq.ParquetFile(parts[0]).schema_arrow
+    with atomic_path(target) as tmp, pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
+        for part in parts:
+            pf = pq.ParquetFile(part)
+            if pf.schema_arrow != schema:
+                raise UserError(f"the pieces of the input give frames with different columns ({part.name})")
+            for i in range(pf.metadata.num_row_groups):
+                writer.write_table(pf.read_row_group(i))
