@@ -25,7 +25,7 @@ from pathlib import Path
 
 from extractors.frame_index import frame_hashes
 from pipeline.errors import UserError
-from pipeline.run import Summary, chunk_size_for, chunks, status_counts, summarize
+from pipeline.run import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from synth.config import SynthConfig
 
 DEFAULT_CHUNK_SIZE = 32  # frames per task
@@ -168,8 +168,8 @@ class _Run:
                 mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
                 yield r.part, r.starts, r.lengths, r.ids, mask
 
-        size = chunk_size_for(todo, slots, self.chunk_size)
-        for n, (k, frames) in enumerate(chunks(runs(), size, MAX_SPAN_ROWS)):
+        sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.chunk_size))
+        for n, (k, frames) in enumerate(chunks(runs(), sizes, MAX_SPAN_ROWS)):
             part = dataset.parts[k]
             yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.columns, self.config,
                             self.config_hash, hard_cap=self.backend == "loky", test_hook=hook,

@@ -50,26 +50,40 @@ def chunk_size_for(todo: int, slots: int, largest: int) -> int:
     return max(1, min(largest, -(-todo // (2 * max(slots, 1)))))
 
 
-def chunks(runs: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]], size: int,
+def chunk_sizes(slots: int, largest: int) -> Iterator[int]:
+    """Frames per chunk, one chunk after another: 1 for the first chunk of each worker, then doubling up to
+    `largest`, so the first rows come back after one frame, not after a whole chunk."""
+    size = 1
+    while True:
+        for _ in range(max(slots, 1)):
+            yield min(size, largest)
+        size *= 2
+
+
+def chunks(runs: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]], sizes: int | Iterator[int],
            max_span_rows: int) -> Iterator[tuple[int, list[Frame]]]:
-    """Group the frames to compute into chunks of at most `size` frames of one file, spanning at most
-    `max_span_rows` rows (a worker reads the row groups under the span). `runs` yields (part, starts, lengths,
-    ids, todo mask) in file order."""
+    """Group the frames to compute into chunks of one file, of the sizes `sizes` gives one after another (or all
+    of one size), spanning at most `max_span_rows` rows (a worker reads the row groups under the span). `runs`
+    yields (part, starts, lengths, ids, todo mask) in file order."""
+    import itertools
+
+    sizes = itertools.repeat(sizes) if isinstance(sizes, int) else iter(sizes)
+    size = next(sizes)
     part, chunk = None, []
     for k, starts, lengths, ids, todo in runs:
         if k != part and chunk:
             yield part, chunk
-            chunk = []
+            chunk, size = [], next(sizes)
         part = k
         for i in np.flatnonzero(todo):
             start, n = int(starts[i]), int(lengths[i])
             if chunk and start + n - chunk[0][1] > max_span_rows:
                 yield part, chunk
-                chunk = []
+                chunk, size = [], next(sizes)
             chunk.append((str(ids[i]), start, n))
-            if len(chunk) == size:
+            if len(chunk) >= size:
                 yield part, chunk
-                chunk = []
+                chunk, size = [], next(sizes)
     if chunk:
         yield part, chunk
 

@@ -17,10 +17,11 @@ from __future__ import annotations
 import os
 import re
 import time
+import uuid
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import pyarrow as pa
@@ -239,6 +240,9 @@ class DaskPool:
 
     client: Any
     jobs: int | None = None
+    # Task keys are the run's own: two runs on one cluster (or a rerun while the scheduler still remembers the
+    # last one) must never share a result.
+    run_id: str = field(default_factory=lambda: uuid.uuid4().hex[:12])
 
     def slots(self) -> int:
         return self.jobs or max(1, sum(self.client.nthreads().values()))
@@ -259,7 +263,7 @@ class DaskPool:
         from distributed import wait as dask_wait
 
         def submit(task: ChunkTask) -> Any:
-            return self.client.submit(run_chunk, task, key=f"r2s-run-{task.key}", pure=False)
+            return self.client.submit(run_chunk, task, key=f"r2s-run-{self.run_id}-{task.key}", pure=False)
 
         def wait_first(futures: list, timeout: float | None) -> Iterable:
             try:

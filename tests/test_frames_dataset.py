@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from extractors.frame_index import FrameIndex, frame_hashes
 from extractors.frames import FRAMES_SCHEMA, FramesError, scene_to_rows, to_table
 from extractors.frames_dataset import FramesDataset, read_rows
-from pipeline.run import chunks
+from pipeline.run import chunk_sizes, chunks
 from synth.scene import ENTITY_TYPES, RESERVED_IDS
 
 # ------------------------------------------------------------------------------------------------ frame index
@@ -53,12 +53,13 @@ def frame_runs(draw):
     return batches
 
 
-@given(frame_runs(), st.integers(1, 5), st.integers(1, 12))
-def test_chunks_cover_the_frames_to_do_once_in_order(batches, size, span):
+@given(frame_runs(), st.integers(1, 3), st.integers(1, 5), st.integers(1, 12))
+def test_chunks_cover_the_frames_to_do_once_in_order(batches, slots, size, span):
     expected = [(k, (str(i), int(s), int(n))) for k, starts, lengths, names, todo in batches
                 for s, n, i, t in zip(starts, lengths, names, todo) if t]
-    got = list(chunks(iter(batches), size, span))
+    got = list(chunks(iter(batches), chunk_sizes(slots, size), span))
     assert [(k, f) for k, frames in got for f in frames] == expected
+    assert all(len(frames) == 1 for _, frames in got[:slots])  # every worker's first chunk is one frame
     for _, frames in got:
         assert 1 <= len(frames) <= size
         first, last = frames[0], frames[-1]

@@ -585,10 +585,10 @@ def test_an_old_single_file_output_resumes_and_stays_one_file(small_frames, tmp_
 
 def test_progress_lines_without_a_terminal_and_a_stop_says_how_to_resume(small_frames, tmp_path):
     out = tmp_path / "programs"
-    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=0.5@*"})
+    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=1@*"})  # four frames (4 s) are left when it is stopped
     proc = subprocess.Popen(
         [sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out), "--jobs", "1",
-         "--part-rows", "1", "--log-every", "0.5"],
+         "--chunk-size", "1", "--part-rows", "1", "--log-every", "0.5"],
         cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
     try:
