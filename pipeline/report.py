@@ -356,11 +356,15 @@ nav a { font-size: 13px; padding: 3px 10px; border: 1px solid var(--rule); borde
 nav a:hover { background: var(--band); }
 .scroll { overflow-x: auto; margin: 10px 0 16px; border: 1px solid var(--rule); border-radius: 6px; }
 table { border-collapse: collapse; font-size: 13px; width: 100%; }
-th, td { padding: 5px 10px; border-bottom: 1px solid var(--rule); white-space: nowrap; }
-th { background: var(--band); font-weight: 600; text-align: left; position: sticky; top: 0; }
+th, td { padding: 5px 5px; border-bottom: 1px solid var(--rule); white-space: nowrap; }
+/* Headers wrap (they are words, not numbers), so wide tables fit common widths instead of scrolling. */
+th { background: var(--band); font-weight: 600; text-align: left; position: sticky; top: 0; white-space: normal;
+     vertical-align: bottom; }
+@media (max-width: 900px) { main { padding: 16px 8px 40px; } table { font-size: 11.5px; }
+                            th, td { padding: 4px 3px; } }
 th.group { text-align: center; border-left: 1px solid var(--rule); }
 td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; }
-td.wrap { white-space: normal; min-width: 260px; }
+td.wrap { white-space: normal; min-width: 220px; word-break: break-word; }
 tbody tr:nth-child(even) { background: #fafbfc; }
 tbody tr:hover { background: #eef4fa; }
 td.best { font-weight: 700; }
