@@ -116,7 +116,9 @@ def _map(source, units, options, stage, jobs):
     except BaseException:
         for f in futures:
             f.cancel()
-        executor.shutdown(wait=False, kill_workers=True)
+        # Wait for the killed workers to be gone: one still writing would leave files in the staging
+        # directory after it is removed.
+        executor.shutdown(wait=True, kill_workers=True)
         raise
 
 
