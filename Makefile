@@ -31,7 +31,8 @@ $(STAMP): requirements.lock pyproject.toml
 	touch $(STAMP)
 
 # The whole pipeline on data shipped in the repo: extract (a ScenarioNet excerpt) -> run -> report on the 242
-# shipped nuScenes-mini keyframes, a query for a situation, then one scene end to end: program, Scenic, sampled variants, picture.
+# shipped nuScenes-mini keyframes, a query for a situation, then one scene end to end: program, Scenic, sampled variants, picture,
+# and motion programs for the extracted excerpt (its frames carry speeds).
 DEMO_FRAMES := data/nuscenes-mini-keyframes/frames.parquet
 DEMO_FRAME  := scene-0103/0
 
@@ -46,10 +47,14 @@ demo: setup
 	$(R2S) synth $(DEMO)/scene.json --format scenic --out $(DEMO)/scene.scenic
 	$(R2S) sample $(DEMO)/scene.scenic --n 5 --seed 0 --out $(DEMO)/samples
 	$(R2S) render $(DEMO)/scene.json --program $(DEMO)/scene.dsl --samples 5 --seed 0 --out $(DEMO)/scene.png
+	$(R2S) run $(DEMO)/excerpt-frames.parquet --motion --out $(DEMO)/motion-programs.parquet --jobs $(JOBS)
+	$(R2S) scene $(DEMO)/excerpt-frames.parquet $(DEMO_FRAME) --out $(DEMO)/moving-scene.json
+	$(R2S) synth $(DEMO)/moving-scene.json --motion --out $(DEMO)/moving-scene.dsl
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
 	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet"
+	@echo "           motion (who is parked, who drives with whom): $(DEMO)/motion-programs.parquet, moving-scene.dsl"
 
 test: setup
 	$(PY) -m pytest

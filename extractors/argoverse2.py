@@ -5,7 +5,9 @@ annotations_with_ego.feather of the scenario-mining release). Boxes are already 
 (x forward, y left, yaw CCW from +x), so our (x, y) = (-y_av, x_av) and heading = yaw_av; no pose is needed
 (city_SE3_egovehicle.feather, where present, holds the ego's city pose, which ego-centric frames do not use).
 One frame per annotated timestamp (10 Hz), frame_id `<log id>/<index>`; the EGO_VEHICLE row, where present,
-gives the ego's box.
+gives the ego's box. Speeds need ground positions: with city_SE3_egovehicle.feather beside the annotations, each
+box is placed in the city frame by the ego pose of its timestamp and each track (and the ego's pose track) is
+differenced over neighbours at most 0.5 s apart (extractors.speed); without it speeds are null.
 """
 
 from __future__ import annotations
@@ -27,12 +29,15 @@ from extractors.base import (
     require_path,
     vehicle_to_ego,
 )
+from extractors.speed import speeds_by_track, track_speeds
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
 TAXONOMY = "argoverse2"
 NAMES = ("annotations.feather", "annotations_with_ego.feather")
 COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "qw", "qx", "qy", "qz", "tx_m", "ty_m")
 EGO_CATEGORY = "EGO_VEHICLE"
+POSES = "city_SE3_egovehicle.feather"
+POSE_COLUMNS = ("timestamp_ns", "qw", "qx", "qy", "qz", "tx_m", "ty_m")
 
 
 def annotation_files(path: Path) -> list[Path]:
@@ -44,18 +49,18 @@ def annotation_files(path: Path) -> list[Path]:
     return found
 
 
-def read_annotations(path: Path) -> dict[str, np.ndarray]:
+def _read_columns(path: Path, columns: tuple[str, ...], floats: tuple[str, ...], what: str) -> dict[str, np.ndarray]:
     try:
         with pa.memory_map(str(path)) as source:
             table = pa.ipc.open_file(source).read_all()
     except (pa.ArrowException, OSError) as exc:
         raise ExtractError(f"{path} is not a readable Feather (Arrow IPC) file ({str(exc)[:100]})") from None
-    missing = [c for c in COLUMNS if c not in table.column_names]
+    missing = [c for c in columns if c not in table.column_names]
     if missing:
-        raise ExtractError(f"{path} is not an Argoverse 2 annotations file: it lacks {', '.join(missing)}")
+        raise ExtractError(f"{path} is not an Argoverse 2 {what} file: it lacks {', '.join(missing)}")
     try:
-        cols = {c: table.column(c).to_numpy(zero_copy_only=False) for c in COLUMNS}
-        for c in COLUMNS[3:]:
+        cols = {c: table.column(c).to_numpy(zero_copy_only=False) for c in columns}
+        for c in floats:
             cols[c] = cols[c].astype(float)
         cols["timestamp_ns"] = cols["timestamp_ns"].astype(np.int64)
     except (pa.ArrowException, ValueError, TypeError) as exc:
@@ -63,13 +68,54 @@ def read_annotations(path: Path) -> dict[str, np.ndarray]:
     return cols
 
 
+def read_annotations(path: Path) -> dict[str, np.ndarray]:
+    return _read_columns(path, COLUMNS, COLUMNS[3:], "annotations")
+
+
+def read_poses(path: Path) -> dict[str, np.ndarray] | None:
+    """The ego's city poses beside an annotations file (city_SE3_egovehicle.feather), or None where there is none."""
+    poses = path.parent / POSES
+    return _read_columns(poses, POSE_COLUMNS, POSE_COLUMNS[1:], "ego pose") if poses.is_file() else None
+
+
+def ground_speeds(cols: dict[str, np.ndarray], poses: dict[str, np.ndarray] | None,
+                  stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(speed of every annotation row, speed of the ego at every frame stamp), NaN where unknown."""
+    rows, frames = np.full(len(cols["timestamp_ns"]), np.nan), np.full(len(stamps), np.nan)
+    if poses is None:
+        return rows, frames
+    order = np.argsort(poses["timestamp_ns"], kind="stable")
+    pt = poses["timestamp_ns"][order]
+
+    def pose_at(t: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(found, x, y, yaw) of the ego pose recorded at exactly these timestamps."""
+        i = np.clip(np.searchsorted(pt, t), 0, len(pt) - 1)
+        found = pt[i] == t
+        j = order[i]
+        yaw = quaternion_yaw(poses["qw"][j], poses["qx"][j], poses["qy"][j], poses["qz"][j])
+        return found, poses["tx_m"][j], poses["ty_m"][j], yaw
+
+    found, ex, ey, eyaw = pose_at(cols["timestamp_ns"])
+    c, s = np.cos(eyaw), np.sin(eyaw)
+    gx = ex + c * cols["tx_m"] - s * cols["ty_m"]  # the box centre in the city frame (ground plane)
+    gy = ey + s * cols["tx_m"] + c * cols["ty_m"]
+    # Seconds from the log's first stamp: nanoseconds since 1970 as a float would blur 0.1 s steps by 1e-6.
+    t0 = int(stamps.min()) if len(stamps) else 0
+    t = (cols["timestamp_ns"] - t0) * 1e-9
+    rows = np.where(found, speeds_by_track(cols["track_uuid"], np.where(found, t, np.nan), gx, gy), np.nan)
+    found, ex, ey, _ = pose_at(stamps)
+    frames = np.where(found, track_speeds(np.where(found, (stamps - t0) * 1e-9, np.nan), ex, ey), np.nan)
+    return rows, frames
+
+
 def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     builder = FrameBuilder("argoverse2", TAXONOMY, options, tally)
     for f in annotation_files(require_path(input_path, "Argoverse 2 input")):
-        yield from log_frames(f, read_annotations(f), builder)
+        yield from log_frames(f, read_annotations(f), builder, read_poses(f))
 
 
-def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder) -> Iterator[list[dict[str, Any]]]:
+def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder,
+               poses: dict[str, np.ndarray] | None = None) -> Iterator[list[dict[str, Any]]]:
     log_id = path.parent.name
     x, y, heading = vehicle_to_ego(cols["tx_m"], cols["ty_m"], quaternion_yaw(cols["qw"], cols["qx"], cols["qy"],
                                                                                 cols["qz"]))
@@ -77,17 +123,19 @@ def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder) -
     order = np.argsort(ts, kind="stable")
     stamps, starts = np.unique(ts[order], return_index=True)
     bounds = list(starts) + [len(order)]
+    speed, ego_speed = ground_speeds(cols, poses, stamps)
     for index, stamp in enumerate(stamps):
         if index % builder.options.every:
             continue
         rows = order[bounds[index]:bounds[index + 1]]
-        ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0)
+        ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=ego_speed[index])
         boxes = []
         for i in rows:
             cat = str(cols["category"][i])
             if cat == EGO_CATEGORY:
-                ego = Box(str(cols["track_uuid"][i]), cat, 0.0, 0.0, 0.0, cols["length_m"][i], cols["width_m"][i])
+                ego = Box(str(cols["track_uuid"][i]), cat, 0.0, 0.0, 0.0, cols["length_m"][i], cols["width_m"][i],
+                          speed=ego_speed[index])
                 continue
             boxes.append(Box(str(cols["track_uuid"][i]), cat, float(x[i]), float(y[i]), float(heading[i]),
-                             cols["length_m"][i], cols["width_m"][i]))
+                             cols["length_m"][i], cols["width_m"][i], speed=speed[i]))
         yield builder.frame(log_id, index, int(stamp) // 1000, ego, boxes)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, scenic_class
-from extractors.frames import FramesError, _dim, frame_rows
+from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 
@@ -63,7 +63,9 @@ class Box:
     """One recorded object in the ego frame (+x right, +y forward, heading degrees CCW from +y).
 
     `fallback` is a coarser type to classify by when the taxonomy does not know `category` (ScenarioNet tracks
-    carry a dataset's own type in metadata.type and MetaDrive's VEHICLE / PEDESTRIAN / ... in type)."""
+    carry a dataset's own type in metadata.type and MetaDrive's VEHICLE / PEDESTRIAN / ... in type).
+    `speed` is the magnitude of the ground velocity in m/s, as the source gives or its positions imply
+    (extractors.speed); None where it is not known."""
 
     track_id: str
     category: str
@@ -73,6 +75,7 @@ class Box:
     length: float | None = None
     width: float | None = None
     fallback: str | None = None
+    speed: float | None = None
 
 
 def _stderr_line(message: str) -> None:
@@ -218,7 +221,7 @@ class FrameBuilder:
 
 def _as_entity(b: Box, cls: str) -> dict[str, Any]:
     return {"track_id": b.track_id, "type": cls, "category": b.category, "x": b.x, "y": b.y,
-            "heading": b.heading, "length": _dim(b.length), "width": _dim(b.width)}
+            "heading": b.heading, "length": _dim(b.length), "width": _dim(b.width), "speed": known_speed(b.speed)}
 
 
 def require_path(path: str | os.PathLike, what: str) -> Path:

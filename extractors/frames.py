@@ -42,6 +42,8 @@ FRAMES_COLUMNS = tuple(FRAMES_SCHEMA.names)
 # it) and measurement uncertainty (robust synthesis). Readers accept files without them.
 OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_sigma": pa.float64(),
                     "speed_sigma": pa.float64()}
+# What extractors write: every column of the schema and each entity's speed (null where the source cannot say).
+EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])])
 
 
 class FramesError(ValueError):
@@ -71,7 +73,7 @@ def frame_rows(
     frame_id: str | None = None,
 ) -> list[dict[str, Any]]:
     """Rows of one frame. ego / others are dicts with track_id, type, category, x, y, heading, length, width
-    already in the ego frame; ids are assigned here, by distance to ego."""
+    already in the ego frame, and speed (m/s or None); ids are assigned here, by distance to ego."""
     fid = frame_id or f"{scene_name}/{frame_index}"
     ids = entity_ids([o["type"] for o in others], [math.hypot(o["x"], o["y"]) for o in others])
     rows = []
@@ -83,11 +85,20 @@ def frame_rows(
                 "type": o["type"], "category": str(o.get("category", o["type"])),
                 "x": float(o["x"]), "y": float(o["y"]), "heading": float(o["heading"]) % 360.0,
                 "length": o.get("length"), "width": o.get("width"), "is_ego": is_ego,
+                "speed": known_speed(o.get("speed")),
             }
         )
     # Rows in id order of distance: ego first, then by rank.
     rows[1:] = sorted(rows[1:], key=lambda r: int("".join(ch for ch in r["entity_id"] if ch.isdigit())))
     return rows
+
+
+def known_speed(v: Any) -> float | None:
+    """A speed as frames store it: a finite, non-negative float, else None (unknown)."""
+    if v is None:
+        return None
+    f = float(v)
+    return f if math.isfinite(f) and f >= 0.0 else None
 
 
 def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
@@ -204,6 +215,7 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
 
 
 __all__ = [
+    "EXTRACTED_SCHEMA",
     "FRAMES_COLUMNS",
     "FRAMES_SCHEMA",
     "FramesError",

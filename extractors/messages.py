@@ -12,14 +12,22 @@ annotations   foxglove.SceneUpdate (protobuf, JSON, ROS 2 foxglove_msgs): one bo
 ego pose      tf2_msgs/TFMessage and foxglove.FrameTransform(s): the fixed frame -> ego frame transform;
               or a pose topic: geometry_msgs/PoseStamped, PoseWithCovarianceStamped, nav_msgs/Odometry,
               foxglove.PoseInFrame.
+speed         an object's from its message where the message carries one (a `velocity` or `twist` field, as
+              tracker outputs do), else from its track: the positions of the same track id in the neighbouring
+              annotation messages (at most 0.5 s away, extractors.speed), placed in the fixed frame (ego-frame
+              boxes through the ego pose). The ego's from odometry (nav_msgs/Odometry twist), else from its poses
+              the same way. Null where none of these is there.
 """
 
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
+
+import numpy as np
 
 from extractors.base import (
     Box,
@@ -31,6 +39,7 @@ from extractors.base import (
     quaternion_yaw,
     vehicle_to_ego,
 )
+from extractors.speed import MAX_GAP_S, track_speeds
 
 TAXONOMY = "logs"
 SCENE_UPDATE = ("foxglove.SceneUpdate", "foxglove_msgs/msg/SceneUpdate", "foxglove_msgs/SceneUpdate")
@@ -70,6 +79,20 @@ def _f(v: Any) -> float:
     return float(v) if v is not None else 0.0
 
 
+def _planar_speed(v: Any) -> float:
+    """|(x, y)| of a velocity or twist field (Twist, TwistWithCovariance, a plain vector), NaN without one."""
+    if v is None:
+        return math.nan
+    v = g(v, "twist", default=v)  # TwistWithCovariance wraps the twist once more
+    v = g(v, "linear", default=v)
+    return math.hypot(_f(g(v, "x")), _f(g(v, "y")))
+
+
+def _message_speed(obj: Any) -> float | None:
+    s = _planar_speed(g(obj, "velocity", "twist"))
+    return s if math.isfinite(s) else None
+
+
 def _pose(p: Any) -> tuple[float, float, float]:
     """(x, y, yaw) of a geometry pose (position + orientation quaternion)."""
     pos, q = g(p, "position", "translation", default={}), g(p, "orientation", "rotation", default={})
@@ -89,6 +112,7 @@ class RawBox:
     yaw: float
     length: float | None
     width: float | None
+    speed: float | None = None  # from the message itself, where it carries a velocity
 
 
 def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
@@ -105,7 +129,7 @@ def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
             size = g(cubes[0], "size", default={})
             eid = str(g(ent, "id", default=""))
             boxes.append(RawBox(str(g(ent, "frame_id", default="")), eid, str(meta.get("category") or eid), x, y,
-                                yaw, g(size, "x"), g(size, "y")))
+                                yaw, g(size, "x"), g(size, "y"), _message_speed(ent)))
             stamp = stamp or stamp_ns(g(ent, "timestamp"))
     elif schema in DETECTIONS:
         header = g(msg, "header", default={})
@@ -121,7 +145,8 @@ def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
             x, y, yaw = _pose(g(bbox, "center", default={}))
             size = g(bbox, "size", default={})
             frame = g(g(det, "header", default={}), "frame_id") or g(header, "frame_id", default="")
-            boxes.append(RawBox(str(frame), str(g(det, "id") or i), cat, x, y, yaw, g(size, "x"), g(size, "y")))
+            boxes.append(RawBox(str(frame), str(g(det, "id") or i), cat, x, y, yaw, g(size, "x"), g(size, "y"),
+                                _message_speed(det)))
     elif schema in MARKERS:
         for m in g(msg, "markers", default=[]):
             if int(g(m, "type", default=-1)) != MARKER_CUBE or int(g(m, "action", default=0)) != MARKER_ADD:
@@ -138,8 +163,10 @@ def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
     return stamp, boxes
 
 
-def pose_samples(msg: Any, schema: str, options: ExtractOptions, log_ns: int) -> list[tuple[int, float, float, float]]:
-    """(t ns, x, y, yaw) ego poses in the fixed frame carried by one tf or pose message."""
+def pose_samples(msg: Any, schema: str, options: ExtractOptions,
+                 log_ns: int) -> list[tuple[int, float, float, float, float]]:
+    """(t ns, x, y, yaw, speed) ego poses in the fixed frame carried by one tf or pose message; speed (m/s) is the
+    odometry's twist where the message is Odometry, else NaN."""
     out = []
     if schema in TF_TYPES:
         transforms = g(msg, "transforms")
@@ -150,34 +177,82 @@ def pose_samples(msg: Any, schema: str, options: ExtractOptions, log_ns: int) ->
                 continue
             t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(tf, "timestamp"))
             body = g(tf, "transform", default=tf)
-            out.append((t or log_ns, *_pose(body)))
+            out.append((t or log_ns, *_pose(body), math.nan))
     else:
         header = g(msg, "header")
         t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(msg, "timestamp"))
         pose = g(msg, "pose", default={})
         pose = g(pose, "pose", default=pose)  # Odometry / PoseWithCovariance wrap the pose once more
-        out.append((t or log_ns, *_pose(pose)))
+        out.append((t or log_ns, *_pose(pose), _planar_speed(g(msg, "twist"))))
     return out
 
 
 class PoseTrack:
     """Ego poses by time; lookups take the nearest pose within POSE_TOLERANCE_NS."""
 
-    def __init__(self, samples: Iterable[tuple[int, float, float, float]]) -> None:
+    def __init__(self, samples: Iterable[tuple[int, float, float, float, float]]) -> None:
         s = sorted(samples)
         self.times = [t for t, *_ in s]
-        self.poses = [p for _, *p in s]
+        self.poses = [tuple(p[:3]) for _, *p in s]
+        # Odometry's speed where the pose topic is odometry, else the poses' own differences.
+        odometry = np.array([p[3] for _, *p in s], dtype=float)
+        xy = np.array([p[:2] for p in self.poses], dtype=float).reshape(-1, 2)
+        # Seconds from the first pose (nanoseconds since 1970 as a float would blur short steps).
+        seconds = (np.array(self.times, dtype=np.int64) - (self.times[0] if self.times else 0)) * 1e-9
+        differenced = track_speeds(seconds, xy[:, 0], xy[:, 1])
+        self.speeds = np.where(np.isfinite(odometry), odometry, differenced)
 
     def __len__(self) -> int:
         return len(self.times)
 
-    def at(self, t: int) -> tuple[float, float, float] | None:
+    def _nearest(self, t: int) -> int | None:
         i = bisect.bisect_left(self.times, t)
         best = min((j for j in (i - 1, i) if 0 <= j < len(self.times)), key=lambda j: abs(self.times[j] - t),
                    default=None)
-        if best is None or abs(self.times[best] - t) > POSE_TOLERANCE_NS:
-            return None
-        return tuple(self.poses[best])  # type: ignore[return-value]
+        return None if best is None or abs(self.times[best] - t) > POSE_TOLERANCE_NS else best
+
+    def at(self, t: int) -> tuple[float, float, float] | None:
+        best = self._nearest(t)
+        return None if best is None else self.poses[best]
+
+    def speed_at(self, t: int) -> float | None:
+        """The ego's speed at the pose nearest t (odometry, else differenced poses); None where unknown."""
+        best = self._nearest(t)
+        return None if best is None or not math.isfinite(self.speeds[best]) else float(self.speeds[best])
+
+
+def ground_positions(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions) -> dict[str, tuple]:
+    """track id -> (x, y) in the fixed frame, for the boxes that can be placed there (ego-frame boxes need the
+    ego pose at t): what track differencing takes."""
+    out = {b.track_id: (b.x, b.y) for b in raw if b.frame == options.fixed_frame}
+    in_ego = [b for b in raw if b.frame == options.ego_frame]
+    pose = poses.at(t) if in_ego else None
+    if pose is not None:
+        px, py, yaw = pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        out.update({b.track_id: (px + c * b.x - s * b.y, py + s * b.x + c * b.y) for b in in_ego})
+    return out
+
+
+@dataclass(frozen=True)
+class _Message:
+    index: int
+    t: int  # ns
+    raw: list[RawBox]
+    ground: dict[str, tuple]
+
+
+def _differenced(track: str, cur: _Message, prev: _Message | None, nxt: _Message | None) -> float | None:
+    """A track's speed at `cur` from its positions in the neighbouring messages (extractors.speed's rule)."""
+    here = cur.ground.get(track)
+    if here is None:
+        return None
+    near = [m for m in (prev, nxt) if m is not None and track in m.ground and 0 < abs(m.t - cur.t) <= MAX_GAP_S * 1e9]
+    if not near:
+        return None
+    a, b = (near[0], near[-1]) if len(near) == 2 else ((near[0], cur) if near[0] is prev else (cur, near[0]))
+    (x0, y0), (x1, y1) = a.ground[track], b.ground[track]
+    return math.hypot(x1 - x0, y1 - y0) / ((b.t - a.t) * 1e-9)
 
 
 def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions, where: str) -> list[Box]:
@@ -193,7 +268,7 @@ def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOp
         )
     if in_ego:
         x, y, h = vehicle_to_ego([b.x for b in in_ego], [b.y for b in in_ego], [b.yaw for b in in_ego])
-        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width)
+        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width, speed=b.speed)
                 for i, b in enumerate(in_ego)]
     if in_fixed:
         pose = poses.at(t)
@@ -203,7 +278,7 @@ def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOp
                 f"{POSE_TOLERANCE_NS / 1e9:g} s of the annotations at t={t / 1e9:.3f} s (see --pose-topic)"
             )
         x, y, h = global_to_ego(*pose, [b.x for b in in_fixed], [b.y for b in in_fixed], [b.yaw for b in in_fixed])
-        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width)
+        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width, speed=b.speed)
                 for i, b in enumerate(in_fixed)]
     return out
 
@@ -243,12 +318,27 @@ def message_frames(
     source: str, scene: str, messages: Iterable[tuple[str, int, Any]], poses: PoseTrack, options: ExtractOptions,
     where: str, tally: ExtractTally | None = None,
 ) -> Iterator[list[dict[str, Any]]]:
-    """One frame per annotation message (schema, log time ns, decoded message), frame_id `<scene>/<index>`."""
+    """One frame per annotation message (schema, log time ns, decoded message), frame_id `<scene>/<index>`.
+
+    Messages are read one ahead of the frame they make, so that a track's speed can come from its position in the
+    next message as well as the previous one (every message counts as a neighbour, --every or not)."""
     builder = FrameBuilder(source, TAXONOMY, options, tally)
+
+    def frame(cur: _Message, prev: _Message | None, nxt: _Message | None) -> list[dict[str, Any]]:
+        boxes = to_ego_boxes(cur.raw, cur.t, poses, options, f"{where} message {cur.index}")
+        boxes = [b if b.speed is not None else replace(b, speed=_differenced(b.track_id, cur, prev, nxt))
+                 for b in boxes]
+        ego = Box("ego", "ego", 0.0, 0.0, 0.0, speed=poses.speed_at(cur.t))
+        return builder.frame(scene, cur.index, cur.t // 1000, ego, boxes)
+
+    window: list[_Message] = []  # the previous message, the one whose frame is due, the next one
     for index, (schema, log_ns, msg) in enumerate(messages):
-        if index % options.every:
-            continue
         stamp, raw = annotation_boxes(msg, schema)
         t = stamp or log_ns
-        boxes = to_ego_boxes(raw, t, poses, options, f"{where} message {index}")
-        yield builder.frame(scene, index, t // 1000, Box("ego", "ego", 0.0, 0.0, 0.0), boxes)
+        window = (window + [_Message(index, t, raw, ground_positions(raw, t, poses, options))])[-3:]
+        if len(window) >= 2:
+            due = window[-2]
+            if due.index % options.every == 0:
+                yield frame(due, window[-3] if len(window) == 3 else None, window[-1])
+    if window and window[-1].index % options.every == 0:
+        yield frame(window[-1], window[-2] if len(window) >= 2 else None, None)

@@ -2,7 +2,9 @@
 
 One frame per sample (2 Hz keyframe), frame_id `<scene name>/<0-based sample index>`. The ego pose is the
 LIDAR_TOP sample_data's ego_pose (the pose the annotations were made against); each sample_annotation's
-translation and rotation yaw go into the ego frame. Optional filters: visibility level and lidar points.
+translation and rotation yaw go into the ego frame. Speeds: the devkit's annotation velocity (box_velocity: a
+centred difference over the neighbouring annotations of the instance; null where it gives NaN) and, for the
+ego, the same rule over the neighbouring samples' ego poses. Optional filters: visibility level and lidar points.
 Only the JSON tables are read: no sensor files, and map masks named in map.json may be missing.
 """
 
@@ -10,9 +12,12 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from extractors.base import (
     Box,
@@ -98,9 +103,7 @@ def _scene_frames(nusc: Any, scene: dict, builder: FrameBuilder, options: Extrac
 
 def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: FrameBuilder,
                   options: ExtractOptions) -> list[dict]:
-    if "LIDAR_TOP" not in sample["data"]:
-        raise ExtractError(f"sample {index} of {scene} has no LIDAR_TOP sample_data (needed for the ego pose)")
-    pose = nusc.get("ego_pose", nusc.get("sample_data", sample["data"]["LIDAR_TOP"])["ego_pose_token"])
+    pose = _ego_pose(nusc, sample, f"sample {index} of {scene}")
     ego_yaw = float(quaternion_yaw(*pose["rotation"]))
     anns = [nusc.get("sample_annotation", t) for t in sample["anns"]]
     anns = [
@@ -115,6 +118,37 @@ def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: Fram
     )
     # nuScenes sizes are [width, length, height]
     boxes = [Box(a["instance_token"], a["category_name"], float(x[i]), float(y[i]), float(h[i]),
-                 a["size"][1], a["size"][0]) for i, a in enumerate(anns)]
-    ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0)
+                 a["size"][1], a["size"][0], speed=_ground_speed(nusc.box_velocity(a["token"])))
+             for i, a in enumerate(anns)]
+    ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=_ground_speed(ego_velocity(nusc, sample)))
     return builder.frame(scene, index, int(sample["timestamp"]), ego, boxes)
+
+
+def _ego_pose(nusc: Any, sample: dict, where: str) -> dict:
+    if "LIDAR_TOP" not in sample["data"]:
+        raise ExtractError(f"{where} has no LIDAR_TOP sample_data (needed for the ego pose)")
+    return nusc.get("ego_pose", nusc.get("sample_data", sample["data"]["LIDAR_TOP"])["ego_pose_token"])
+
+
+def _ground_speed(v: Any) -> float | None:
+    """|(vx, vy)| of a devkit velocity; None where the devkit gives NaN (no neighbour close enough)."""
+    s = math.hypot(float(v[0]), float(v[1]))
+    return s if math.isfinite(s) else None
+
+
+def ego_velocity(nusc: Any, sample: dict, max_time_diff: float = 1.5) -> np.ndarray:
+    """The ego's velocity at a sample, by the devkit's own rule for annotations (NuScenes.box_velocity): the
+    centred difference of the LIDAR_TOP ego poses of the previous and next samples (up to 2 max_time_diff
+    apart), else the one-sided difference with the one that exists (up to max_time_diff), else NaN."""
+    first = nusc.get("sample", sample["prev"]) if sample["prev"] else sample
+    last = nusc.get("sample", sample["next"]) if sample["next"] else sample
+    if first is last:
+        return np.full(3, np.nan)
+    p0 = np.array(_ego_pose(nusc, first, "a neighbouring sample")["translation"], dtype=float)
+    p1 = np.array(_ego_pose(nusc, last, "a neighbouring sample")["translation"], dtype=float)
+    dt = 1e-6 * (last["timestamp"] - first["timestamp"])
+    if sample["prev"] and sample["next"]:
+        max_time_diff *= 2
+    if not 0 < dt <= max_time_diff:
+        return np.full(3, np.nan)
+    return (p1 - p0) / dt

@@ -151,7 +151,7 @@ def scenario_frames(
 
     nuscenes = dataset == "nuscenes"
     builder = FrameBuilder("scenarionet", TAXONOMY, options, tally)
-    ids, cats, coarse, pos, yaw, valid, length, width = [], [], [], [], [], [], [], []
+    ids, cats, coarse, pos, yaw, valid, length, width, speed = [], [], [], [], [], [], [], [], []
     for tid, tr in tracks.items():
         try:
             state, tmeta = tr["state"], tr.get("metadata") or {}
@@ -169,8 +169,9 @@ def scenario_frames(
         valid.append(_series(state, "valid", steps, path, tid) > 0)
         length.append(_series(state, "length", steps, path, tid) if "length" in state else np.full(steps, np.nan))
         width.append(_series(state, "width", steps, path, tid) if "width" in state else np.full(steps, np.nan))
+        speed.append(_speeds(state, steps, path, tid))
     pos, yaw, valid = np.stack(pos), np.stack(yaw), np.stack(valid)
-    length, width = np.stack(length), np.stack(width)
+    length, width, speed = np.stack(length), np.stack(width), np.stack(speed)
     ego_i = ids.index(str(sdc))
 
     stride = NUSCENES_KEYFRAME_STEP if nuscenes else 1
@@ -184,12 +185,21 @@ def scenario_frames(
         x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
                                 yaw[others, step])
         boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step],
-                     coarse[i]) for k, i in enumerate(others)]
+                     coarse[i], speed[i, step]) for k, i in enumerate(others)]
         # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
         # than it is long, so the ego's box is read with its sides in order.
         ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)
-        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w)
+        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w, speed=speed[ego_i, step])
         yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
+
+
+def _speeds(state: dict, steps: int, path: Path, tid: str) -> np.ndarray:
+    """|state.velocity| per step (m/s; converters write (T, 2) in the scenario's ground frame), as recorded:
+    nuScenes-derived scenarios hold the forward difference of the interpolated positions. NaN without one."""
+    if "velocity" not in state:
+        return np.full(steps, np.nan)
+    v = _series(state, "velocity", steps, path, tid, width=2)
+    return np.hypot(v[:, 0], v[:, 1])
 
 
 def _timestamp_us(ts: Any, step: int) -> int | None:

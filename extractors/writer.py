@@ -11,7 +11,7 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from extractors.atomic import atomic_path
-from extractors.frames import FRAMES_SCHEMA, FramesError, to_table
+from extractors.frames import EXTRACTED_SCHEMA, FramesError, to_table
 
 ROW_GROUP_ROWS = 64_000
 
@@ -44,7 +44,7 @@ class FramesWriter:
 @contextmanager
 def frames_writer(path: str | os.PathLike) -> Iterator[FramesWriter]:
     with atomic_path(path) as tmp:
-        with pq.ParquetWriter(tmp, FRAMES_SCHEMA, compression="zstd") as pw:
+        with pq.ParquetWriter(tmp, EXTRACTED_SCHEMA, compression="zstd") as pw:
             w = FramesWriter(pw)
             yield w
             w.flush()

@@ -187,11 +187,13 @@ def tf_message(s: Sample) -> dict:
                                           "rotation": dict(zip("wxyz", s.ego_rotation))}}]}
 
 
-def odometry(s: Sample) -> dict:
+def odometry(s: Sample, twist: tuple[float, float] = (0.0, 0.0)) -> dict:
+    """nav_msgs/Odometry: the pose in map, the twist (linear x forward, y left) in base_link, as drivers write it."""
     sec, nsec = _sec_nsec(s.t_ns)
     return {"header": {"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": "map"}, "child_frame_id": "base_link",
             "pose": {"pose": {"position": {"x": s.ego_translation[0], "y": s.ego_translation[1], "z": 0.0},
-                              "orientation": dict(zip("wxyz", s.ego_rotation))}, "covariance": [0.0] * 36}}
+                              "orientation": dict(zip("wxyz", s.ego_rotation))}, "covariance": [0.0] * 36},
+            "twist": {"twist": {"linear": {"x": twist[0], "y": twist[1], "z": 0.0}}, "covariance": [0.0] * 36}}
 
 
 def write_ros2_mcap(path: Path, samples: list[Sample]) -> None:
@@ -277,8 +279,10 @@ def _map_detections(s: Sample) -> dict:
     return d
 
 
-def write_rosbag1(path: Path, samples: list[Sample], compression: str | None = None) -> None:
-    """ROS 1 bag: MarkerArray (map frame) on /markers, ego pose as nav_msgs/Odometry on /odom."""
+def write_rosbag1(path: Path, samples: list[Sample], compression: str | None = None,
+                  twist: list[tuple[float, float]] | None = None) -> None:
+    """ROS 1 bag: MarkerArray (map frame) on /markers, ego pose as nav_msgs/Odometry on /odom (with a twist per
+    sample where given)."""
     from rosbags.rosbag1 import Writer
 
     from extractors.rosbag import typestore
@@ -290,7 +294,7 @@ def write_rosbag1(path: Path, samples: list[Sample], compression: str | None = N
     with w:
         conns = {t: w.add_connection(topic, t, typestore=store) for topic, t in (
             ("/odom", "nav_msgs/msg/Odometry"), ("/markers", "visualization_msgs/msg/MarkerArray"))}
-        for s in samples:
-            for t, msg in (("nav_msgs/msg/Odometry", odometry(s)), ("visualization_msgs/msg/MarkerArray",
-                                                                     markers_in_map(s))):
+        for k, s in enumerate(samples):
+            odo = odometry(s, twist[k]) if twist else odometry(s)
+            for t, msg in (("nav_msgs/msg/Odometry", odo), ("visualization_msgs/msg/MarkerArray", markers_in_map(s))):
                 w.write(conns[t], s.t_ns, store.serialize_ros1(to_ros(store, t, msg, ros1=True), t))
