@@ -23,7 +23,8 @@ sys.path.insert(0, str(HERE))
 from common import RESULTS, machine  # noqa: E402
 
 ORDER = ("bench_synth.py", "bench_extract.py", "bench_scenic.py", "bench_variants.py", "bench_robust.py",
-         "bench_pipeline.py", "bench_scale.py", "bench_query.py", "bench_ablation.py", "bench_costs.py")
+         "bench_motion.py", "bench_pipeline.py", "bench_scale.py", "bench_query.py", "bench_ablation.py",
+         "bench_costs.py")
 
 
 def scripts(only: list[str] | None, skip: list[str]) -> list[Path]:
@@ -110,15 +111,26 @@ def query_summary(q: dict) -> list[str]:
             f"{q['python_baseline']['per_frame_ms']:.2f} ms a frame ([query.md](query.md))."]
 
 
+def motion_summary(mo: dict) -> list[str]:
+    s = mo["summary"]
+    kinds = ", ".join(f"{s['kinds'][k]} {k}" for k in s["kinds"])
+    return [f"`--motion` on {s['frames']} real keyframes ({mo['frames_source']}): {s['optimal']['motion']} optimal, "
+            f"{s['certified']['motion']} certified; mean cost {s['mean_cost']['static']:.2f} static, "
+            f"{s['mean_cost']['motion']:.2f} with motion ({s['motion_cost_per_entity']:.3f} per entity for speeds); "
+            f"runtime x{s['runtime_s']['ratio_total']:.2f}. Entities: {kinds} ([motion.md](motion.md))."]
+
+
 def readme() -> str:
     m = machine()
     md = ["# Benchmark results", "", f"`make bench` (`python bench/run_all.py`) on {m['cpu']} ({m['cores']} cores), "
           f"Python {m['python']}. {m['note']}.", ""]
-    ab, co, va, qu = _load("ablation"), _load("costs"), _load("variants"), _load("query")
+    ab, co, va, qu, mo = _load("ablation"), _load("costs"), _load("variants"), _load("query"), _load("motion")
     if co:
         md += ["## Program cost", ""] + costs_summary(co) + [""]
     if va:
         md += ["## Variants", ""] + variants_summary(va) + [""]
+    if mo:
+        md += ["## Motion", ""] + motion_summary(mo) + [""]
     if ab:
         md += ["## Search strategies", ""] + ablation_summary(ab) + [""]
     if qu:
