@@ -60,6 +60,6 @@ def collision_rule(program: Program, scene: Scene, config: SynthConfig,
     bound = np.array([r.r for r in reach]) + box_radius(np.array([d[0] for d in dims]), np.array([d[1] for d in dims]))
     i, j = np.triu_indices(len(ents), 1)
     near = np.hypot(cx[i] - cx[j], cy[i] - cy[j]) <= bound[i] + bound[j] + REACH_SLACK
-    apart = [(int(a), int(b)) for a, b in zip(i[near], j[near]) if (a, b) not in recorded]
+    apart = [(a, b) for a, b in zip(i[near].tolist(), j[near].tolist()) if (a, b) not in recorded]
     return CollisionRule(tuple(e.id for e in ents), tuple(d[0] for d in dims), tuple(d[1] for d in dims),
                          tuple(sorted(recorded)), tuple(apart))

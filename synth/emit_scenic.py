@@ -202,10 +202,26 @@ def _collision_rule(program: Program, scene: Scene, config: SynthConfig) -> list
         lines.append(f"if not globalParameters.{COLLISIONS_PARAM}:")
     for j, names in sorted(partners.items()):
         # Adjacent string literals, one per line, join into one string (a space ends every piece but the last).
-        pieces = textwrap.wrap(" ".join(names), width=90, break_on_hyphens=False, break_long_words=False)
+        pieces = _fill(names, 90)
         first = f"    require dsl__apart({rule.ids[j]}, "
         lines += [(first if k == 0 else " " * len(first)) + repr(piece + (" " if k < len(pieces) - 1 else ""))
                   + (")" if k == len(pieces) - 1 else "") for k, piece in enumerate(pieces)]
+    return lines
+
+
+def _fill(words: list[str], width: int) -> list[str]:
+    """textwrap.wrap(" ".join(words), width, break_on_hyphens=False, break_long_words=False) for words without
+    spaces (entity ids): the same greedy fill, without textwrap's per-call machinery (one call per entity)."""
+    lines, line = [], ""
+    for w in words:
+        if line and len(line) + 1 + len(w) <= width:
+            line += " " + w
+        else:
+            if line:
+                lines.append(line)
+            line = w
+    if line:
+        lines.append(line)
     return lines
 
 

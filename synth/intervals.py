@@ -13,6 +13,7 @@ value: this is not float geometry.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from fractions import Fraction
 
 from flint import arb
@@ -71,3 +72,20 @@ def cone(vx: arb, vy: arb, axis_heading: float, delta: float) -> Fact:
     if ahead is False:
         return False
     return all_of(ahead, nonnegative(dot * dot - ball(exact_cos_squared(delta)) * (vx * vx + vy * vy)))
+
+
+def centring_value(b: arb, exact: Callable[[], Fraction]) -> Fraction:
+    """A rational that centres a Range exactly as the exact value in the ball b does.
+
+    Ranges have widths in cents and start at the centre minus half the width, rounded to cents (synth.ranges), so
+    the Range changes only where the centre crosses a multiple of 1/200. When the ball lies strictly inside one
+    such cell, so does the exact value, and the ball's midpoint (an exact dyadic rational) gives the same Range;
+    otherwise (a ball on or across a multiple of 1/200) the exact value is computed.
+    """
+    t = b * 200
+    cell = t.floor().unique_fmpz()
+    if cell is None or not t > cell:
+        return exact()
+    m, e = b.mid().man_exp()
+    m, e = int(m), int(e)
+    return Fraction(m * 2**e) if e >= 0 else Fraction(m, 2**-e)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from synth.config import SynthConfig
 from synth.dsl import Program, Statement
 from synth.oracle import RelationOracle
@@ -26,6 +28,8 @@ def choose_references(oracle: RelationOracle, order: tuple[int, ...]) -> list[tu
     A relation that needs no reference (Part.refless, found in ego's row) comes first; then references are
     tried nearest first (ties: lower index, ego being 0); with none, the fallback is ego.
     """
+    if oracle.complete:
+        return _choose_from_table(oracle, order)
     ents = oracle.entities()
     out = []
     available = [0]
@@ -40,6 +44,32 @@ def choose_references(oracle: RelationOracle, order: tuple[int, ...]) -> list[tu
             row.append(next(((r, c) for r in refs if (c := oracle.relation(k, r, i)) != NONE), (0, NONE)))
         out.append(tuple(row))
         available.append(i)
+    return out
+
+
+def _choose_from_table(oracle: RelationOracle, order: tuple[int, ...]) -> list[tuple[Choice, ...]]:
+    """choose_references when every pair is known: the nearest available witness is the least (distance, index)
+    among the witnesses already declared, so only those are measured (not every declared entity, sorted)."""
+    ents = oracle.entities()
+    codes = [oracle.table[p.name] for p in oracle.parts]
+    witnesses = [[np.flatnonzero(c[:, i] != NONE).tolist() for i in range(len(ents))] for c in codes]
+    declared = {0}
+    out = []
+    for i in order:
+        e = ents[i]
+        row = []
+        for k, part in enumerate(oracle.parts):
+            if part.refless and (c := int(codes[k][0, i])) in part.refless:
+                row.append((0, c))
+                continue
+            refs = [r for r in witnesses[k][i] if r in declared]
+            if not refs:
+                row.append((0, NONE))
+                continue
+            r = min(refs, key=lambda r: (math.hypot(ents[r].x - e.x, ents[r].y - e.y), r))
+            row.append((r, int(codes[k][r, i])))
+        out.append(tuple(row))
+        declared.add(i)
     return out
 
 

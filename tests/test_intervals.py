@@ -176,3 +176,45 @@ def test_sqrt_rational_is_exact_where_it_can_be_and_close_below_elsewhere():
     assert sqrt_rational(Fraction(25, 16)) == Fraction(5, 4)
     r = sqrt_rational(Fraction(2))
     assert r * r < 2 < (r + Fraction(1, 10**15)) ** 2
+
+
+def _centred_by_definition(value, width, clamp=False) -> Range:
+    """Range(a, a + w), w = width rounded to cents, a = value - w / 2 rounded to cents (half to even), a >= 0 when
+    clamped: the definition, in Fractions, step by step."""
+    cent = Fraction(1, 100)
+    w = Fraction(round(Fraction(width) / cent)) * cent
+    lo = Fraction(round((Fraction(value) - w / 2) / cent)) * cent
+    if clamp and lo < 0:
+        lo = Fraction(0)
+    return Range(float(lo), float(lo + w))
+
+
+@given(value=st.one_of(st.floats(-500, 500), st.fractions(max_denominator=10**6).filter(lambda f: abs(f) < 500),
+                       st.integers(-100000, 100000).map(lambda k: Fraction(k, 200))),
+       width=st.sampled_from([5.0, 2.0, 0.5, 4.99, 0.015, 3.333]), clamp=st.booleans())
+def test_centred_is_its_definition_at_every_tie(value, width, clamp):
+    from synth.ranges import centred
+
+    assert centred(value, width, clamp) == _centred_by_definition(value, width, clamp)
+
+
+@given(rx=coords, ry=coords, rh=angles, ex=coords, ey=coords, local=st.booleans())
+def test_centring_values_centre_every_range_as_the_exact_value(rx, ry, rh, ex, ey, local):
+    from synth.ranges import centred
+
+    ref, e = entity("r", rx, ry, rh), entity("e", ex, ey, 0.0)
+    quantity = "local" if local else "distance"
+    fast = POSITION.exact_measure(quantity, e, ref)
+    exact = POSITION._exact(quantity, e, ref)
+    for a, b in zip(fast, exact):
+        for width in (5.0, 2.0, 0.01):
+            assert centred(a, width, not local) == centred(b, width, not local)
+
+
+def test_a_centre_on_a_cell_edge_is_computed_exactly():
+    from flint import arb
+
+    from synth.intervals import centring_value
+
+    assert centring_value(arb(2.5), lambda: Fraction(5, 2)) == Fraction(5, 2)  # exactly on a multiple of 1/200
+    assert centring_value(arb(1) / 3, lambda: Fraction(1, 3)) != Fraction(1, 3)  # inside a cell: the midpoint

@@ -107,8 +107,9 @@ class Part(ABC):
         return None
 
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...] | None:
-        """The quantity measure_terms pins down, computed in exact arithmetic (irrational values to within
-        1e-15, as the solver's model gives them to 1e-12), or None to leave it to the solver."""
+        """The quantity measure_terms pins down, without the solver, for centring Ranges: the exact value
+        (irrational ones to within 1e-15, as the solver's model gives them to 1e-12), or one that centres every
+        Range as it does (intervals.centring_value); None leaves it to the solver."""
         return None
 
     # ------------------------------------------------------------------------------- Alg. 4

@@ -255,6 +255,16 @@ class PositionPart(Part):
                                 intervals.between(printed(clause.forward.lo), ly, printed(clause.forward.hi)))
 
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        vx, vy = intervals.offset(ref, target)
+        if quantity == "distance":
+            return (intervals.centring_value((vx * vx + vy * vy).sqrt(), lambda: self._exact(quantity, target, ref)[0]),)
+        ux, uy = (intervals.ball(c) for c in exact_heading_vector(ref.heading))
+        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+        return (intervals.centring_value(lx, lambda: self._exact(quantity, target, ref)[0]),
+                intervals.centring_value(ly, lambda: self._exact(quantity, target, ref)[1]))
+
+    @staticmethod
+    def _exact(quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         vx, vy = exact_offset(ref, target)
         if quantity == "distance":
             return (sqrt_rational(vx * vx + vy * vy),)
