@@ -40,33 +40,25 @@ from synth.search.budget import Budget, BudgetExhausted
 from synth.search.common import SearchResult, finish, floor_bound
 from synth.search.costs import CostModel, bits
 
-Unmet = tuple[int, ...]
+Unmet = int  # CostModel.unmet: per part, who has a witness but none declared, packed into one int
 
 
-def _union(unmet: Unmet) -> int:
-    out = 0
-    for u in unmet:
-        out |= u
-    return out
-
-
-def _regret(unmet: Unmet, e: int) -> int:
-    """c(e, E) - floor(e): the parts of e still without a declared witness."""
-    return sum(u >> e & 1 for u in unmet)
-
-
-def _least_regret(unmet: Unmet, todo: int) -> tuple[int, int]:
+def _least_regret(cm: CostModel, unmet: Unmet, todo: int) -> tuple[int, int]:
     """(least regret over todo, the entities that have it), by counting set membership bit-parallel."""
-    at_least = [todo] + [0] * len(unmet)
-    for u in unmet:
-        for j in range(len(unmet), 0, -1):
-            at_least[j] |= at_least[j - 1] & u
-    at_least.append(0)
-    for j in range(len(unmet) + 1):
-        exactly = at_least[j] & ~at_least[j + 1]
-        if exactly:
-            return j, exactly
-    raise ValueError("empty todo")
+    if not todo & ~cm.union(unmet):
+        parts = cm.parts_of(unmet)
+        at_least = [todo] + [0] * len(parts)
+        for u in parts:
+            for j in range(len(parts), 0, -1):
+                at_least[j] |= at_least[j - 1] & u
+        at_least.append(0)
+        for j in range(1, len(parts) + 1):
+            exactly = at_least[j] & ~at_least[j + 1]
+            if exactly:
+                return j, exactly
+    if not todo:
+        raise ValueError("empty todo")
+    return 0, todo & ~cm.union(unmet)
 
 
 def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
@@ -81,7 +73,7 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
     while todo:
         above, progressed = todo, False
         while True:
-            free = above & todo & ~_union(unmet)
+            free = above & todo & ~cm.union(unmet)
             if not free:
                 break
             low = free & -free
@@ -90,7 +82,7 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
             declared |= low
             todo &= ~low
             unmet = cm.declare(unmet, e)
-            added += cm.floor_sum(low)
+            added += cm.floor_of[e]
             above &= ~((low << 1) - 1)
             progressed = True
         if not progressed:
@@ -101,7 +93,7 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
 def closed_sources(cm: CostModel, unmet: Unmet, todo: int) -> list[int]:
     """Every closed source (see the module's note), of every part, as a bitset of its members."""
     out = []
-    for k, u in enumerate(unmet):
+    for k, u in enumerate(cm.parts_of(unmet)):
         a = u & todo
         if not a:
             continue
@@ -170,11 +162,11 @@ def _greedy(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
     out, cost = list(order), 0
     todo = within & ~declared
     while todo:
-        regret, who = _least_regret(unmet, todo)
+        regret, who = _least_regret(cm, unmet, todo)
         low = who & -who
         e = low.bit_length() - 1
         out.append(e)
-        cost += cm.floor_sum(low) + regret
+        cost += cm.floor_of[e] + regret
         todo &= ~low
         unmet = cm.declare(unmet, e)
     return tuple(out), cost
@@ -187,7 +179,6 @@ class _Bound:
     def __init__(self, cm: CostModel, comp: int, unmet: Unmet, todo: int):
         self.cm, self.comp = cm, comp
         self.sources = closed_sources(cm, unmet, todo)
-        self.parts = len(unmet)
 
     def __call__(self, declared: int) -> int:
         return self.cm.floor_sum(self.comp & ~declared) + sum(not (s & declared) for s in self.sources)
@@ -201,11 +192,12 @@ class _Bound:
         return out
 
 
-def _free_moves(unmet: Unmet, todo: int, opening: int) -> int:
-    """The entities of todo whose every unmet part is one a closed source of theirs opens: moving any other
-    raises g + h_closed by at least one (waste; module note). With two or more parts an entity may pay one part
-    without opening it and still belong to a source of another, so this keeps any entity with a source."""
-    pays = _union(unmet) & todo
+def _free_moves(paying: int, todo: int, opening: int) -> int:
+    """The entities of todo that pay nothing over their floor, or belong to a closed source (`opening`): moving
+    any other (it pays a part without opening a source) raises g + h_closed by at least one (module note).
+    `paying`: the entities unmet in some part. An entity that pays one part and opens a source of another is
+    kept too: the child's own bound decides it."""
+    pays = paying & todo
     return (todo & ~pays) | (pays & opening)
 
 
@@ -224,10 +216,10 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
             continue
         todo = comp & ~declared
         slack = ub - (g + bound(declared))
-        moves = todo if slack > 1 else _free_moves(unmet, todo, bound.open_members(declared))
+        moves = todo if slack > 1 else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
         for e in bits(moves):
             low = 1 << e
-            g1 = g + cm.floor_sum(low) + _regret(unmet, e)
+            g1 = g + cm.floor_of[e] + cm.regret(unmet, e)
             order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e), comp)
             g2 = g1 + forced
             if declared2 & comp == comp:
@@ -237,7 +229,7 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
             if declared2 in best_g and best_g[declared2] <= g2:
                 continue
             todo2 = comp & ~declared2
-            f2 = g2 + max(bound(declared2), cm.floor_sum(todo2) + _least_regret(unmet2, todo2)[0])
+            f2 = g2 + max(bound(declared2), cm.floor_sum(todo2) + _least_regret(cm, unmet2, todo2)[0])
             if f2 >= ub:
                 continue
             best_g[declared2] = g2
@@ -261,7 +253,7 @@ def solve_component(
         todo = comp & ~declared
         if not todo:
             return 0
-        return cm.floor_sum(todo) + _least_regret(unmet, todo)[0]
+        return cm.floor_sum(todo) + _least_regret(cm, unmet, todo)[0]
 
     root = closure(cm, (), base, cm.unmet(base), comp)
     root_order, root_declared, root_unmet, root_g = root
@@ -291,12 +283,12 @@ def solve_component(
             slack = opt - (g + bound(declared))  # how much this node may still waste and reach the optimum
             if slack < 0:
                 continue
-            moves = todo if slack > 0 else _free_moves(unmet, todo, bound.open_members(declared))
+            moves = todo if slack > 0 else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
             for e in bits(todo):
                 if not moves >> e & 1:
                     continue
                 low = 1 << e
-                g1 = g + cm.floor_sum(low) + _regret(unmet, e)
+                g1 = g + cm.floor_of[e] + cm.regret(unmet, e)
                 order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e),
                                                             comp)
                 g2 = g1 + forced

@@ -53,7 +53,8 @@ class CostModel:
     def _bitsets(self) -> None:
         """The witness relation as bitsets per part, for searches that keep c(e, E) up to date incrementally:
         lonely[k] (no witness at all: part k always costs 1), ego_fed[k] (ego witnesses part k) and fed_by[k][r]
-        (the entities whose part k r witnesses)."""
+        (the entities whose part k r witnesses). A search state's unmet sets are packed into one int, part k in
+        bits k*n .. k*n + n - 1, so that declaring an entity is one operation."""
         n, all_ = self.n, self.all
         self.lonely, self.ego_fed, self.fed_by = [], [], []
         for k in range(self.kinds):
@@ -68,22 +69,40 @@ class CostModel:
             self.lonely.append(lonely & all_)
             self.ego_fed.append(ego)
             self.fed_by.append(fed)
+        self._fed_packed = [sum(self.fed_by[k][r] << (k * n) for k in range(self.kinds)) for r in range(n)]
+        self._one_per_part = sum(1 << (k * n) for k in range(self.kinds))
+        self.floor_of = [sum(lonely >> e & 1 for lonely in self.lonely) for e in range(n)]
 
     # ------------------------------------------------------------------------------------- incremental costs
-    def unmet(self, declared: int) -> tuple[int, ...]:
-        """Per part, the entities that have a witness but none among ego and `declared`: c(e, E) is floor(e) plus
-        the number of parts whose unmet set holds e."""
-        out = []
+    def unmet(self, declared: int) -> int:
+        """Per part, the entities that have a witness but none among ego and `declared`, packed (see _bitsets):
+        c(e, E) is floor(e) plus the number of parts whose unmet set holds e."""
+        out = 0
         for k in range(self.kinds):
             fed = self.ego_fed[k] | self.lonely[k]
             for r in bits(declared):
                 fed |= self.fed_by[k][r]
-            out.append(self.all & ~fed)
-        return tuple(out)
+            out |= (self.all & ~fed) << (k * self.n)
+        return out
 
-    def declare(self, unmet: tuple[int, ...], e: int) -> tuple[int, ...]:
+    def declare(self, unmet: int, e: int) -> int:
         """unmet after declaring e: only the entities e witnesses change."""
-        return tuple(u & ~fed[e] for u, fed in zip(unmet, self.fed_by))
+        return unmet & ~self._fed_packed[e]
+
+    def parts_of(self, unmet: int) -> list[int]:
+        """The packed unmet sets, one bitset per part."""
+        return [(unmet >> (k * self.n)) & self.all for k in range(self.kinds)]
+
+    def union(self, unmet: int) -> int:
+        """The entities unmet in some part: those that would pay over their floor if declared now."""
+        out = 0
+        for k in range(self.kinds):
+            out |= unmet >> (k * self.n)
+        return out & self.all
+
+    def regret(self, unmet: int, e: int) -> int:
+        """c(e, E) - floor(e): the parts of e still without a declared witness."""
+        return ((unmet >> e) & self._one_per_part).bit_count()
 
     def floor_sum(self, todo: int) -> int:
         """Sum of floors over a set: the parts that can never have a witness."""
