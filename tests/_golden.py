@@ -62,6 +62,19 @@ def check(got: dict, pin: dict, cfg: dict) -> None:
         assert got["nodes_expanded"] == pin["nodes_expanded"]
 
 
+def load_pins(path: Path) -> dict[tuple[str, str], dict]:
+    """Pins by (frame, configuration as canonical JSON)."""
+    return {(p["frame"], key(p["config"])): p for p in json.loads(path.read_text())["cases"]}
+
+
+def key(cfg: dict) -> str:
+    return json.dumps(cfg, sort_keys=True)
+
+
+def case_ids(cases: list[tuple[str, dict]]) -> list[str]:
+    return [f"{f}-{'-'.join(map(str, c.values()))}" for f, c in cases]
+
+
 def write(path: Path, cases: list[tuple[str, dict]], scenes: dict, tree: Path) -> None:
     """Pin every case, each in a fresh process whose `synth` comes from `tree`."""
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,

@@ -12,14 +12,13 @@ Also checked: the optimum against the independent brute force (tests/bruteforce.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _golden import check, output, tree_argument, write  # noqa: E402
+from _golden import case_ids, check, key, load_pins, output, tree_argument, write  # noqa: E402
 from crowds import crowd_scene  # noqa: E402
 
 GOLDEN = Path(__file__).resolve().parent / "data" / "crowd_golden.json"
@@ -55,12 +54,12 @@ def crowd_frames():
 
 @pytest.fixture(scope="module")
 def pins():
-    return {(p["frame"], json.dumps(p["config"], sort_keys=True)): p for p in json.loads(GOLDEN.read_text())["cases"]}
+    return load_pins(GOLDEN)
 
 
-@pytest.mark.parametrize("frame,cfg", CASES, ids=[f"{f}-{'-'.join(map(str, c.values()))}" for f, c in CASES])
+@pytest.mark.parametrize("frame,cfg", CASES, ids=case_ids(CASES))
 def test_output_is_byte_identical_to_the_pins(crowd_frames, pins, frame, cfg):
-    check(output(crowd_frames[frame], cfg), pins[(frame, json.dumps(cfg, sort_keys=True))], cfg)
+    check(output(crowd_frames[frame], cfg), pins[(frame, key(cfg))], cfg)
 
 
 @pytest.mark.parametrize("name", [n for n, _, _ in TINY + SMALL])

@@ -12,14 +12,13 @@ change of the static output, and say so in the commit.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _golden import check, output, tree_argument, write  # noqa: E402
+from _golden import case_ids, check, key, load_pins, output, tree_argument, write  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
@@ -54,12 +53,12 @@ def scenes():
 
 @pytest.fixture(scope="module")
 def pins():
-    return {(p["frame"], json.dumps(p["config"], sort_keys=True)): p for p in json.loads(GOLDEN.read_text())["cases"]}
+    return load_pins(GOLDEN)
 
 
-@pytest.mark.parametrize("frame,cfg", CASES, ids=[f"{f}-{'-'.join(map(str, c.values()))}" for f, c in CASES])
+@pytest.mark.parametrize("frame,cfg", CASES, ids=case_ids(CASES))
 def test_static_output_is_byte_identical_to_the_pins(scenes, pins, frame, cfg):
-    check(output(scenes[frame], cfg), pins[(frame, json.dumps(cfg, sort_keys=True))], cfg)
+    check(output(scenes[frame], cfg), pins[(frame, key(cfg))], cfg)
 
 
 if __name__ == "__main__" and sys.argv[1:2] == ["--write"]:

@@ -201,6 +201,18 @@ def _free_moves(paying: int, todo: int, opening: int) -> int:
     return (todo & ~pays) | (pays & opening)
 
 
+def _moves(cm: CostModel, bound: _Bound, todo: int, declared: int, unmet: Unmet, may_waste: bool) -> int:
+    """The entities worth declaring next: all of todo, or only those that waste nothing (_free_moves)."""
+    return todo if may_waste else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
+
+
+def _move(cm: CostModel, comp: int, g: int, order: tuple[int, ...], declared: int, unmet: Unmet,
+          e: int) -> tuple[int, tuple[int, ...], int, Unmet]:
+    """Declare e, then the closure: the child's (g, order, declared, unmet)."""
+    order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | 1 << e, cm.declare(unmet, e), comp)
+    return g + cm.floor_of[e] + cm.regret(unmet, e) + forced, order2, declared2, unmet2
+
+
 def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budget: Budget) -> tuple[int, tuple, int]:
     """Pass 1: the optimal cost of the component, by A* on g + max(h, h_closed) (admissible) with branch and bound
     on the incumbent. Returns (cost, an order reaching it, the least f left when the budget ran out, else cost)."""
@@ -214,14 +226,9 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
         f, _, _, g, declared, order, unmet = heapq.heappop(heap)
         if g > best_g.get(declared, g):
             continue
-        todo = comp & ~declared
-        slack = ub - (g + bound(declared))
-        moves = todo if slack > 1 else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
-        for e in bits(moves):
-            low = 1 << e
-            g1 = g + cm.floor_of[e] + cm.regret(unmet, e)
-            order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e), comp)
-            g2 = g1 + forced
+        # A move that wastes one over h_closed reaches the incumbent when the slack is one.
+        for e in bits(_moves(cm, bound, comp & ~declared, declared, unmet, ub - (g + bound(declared)) > 1)):
+            g2, order2, declared2, unmet2 = _move(cm, comp, g, order, declared, unmet, e)
             if declared2 & comp == comp:
                 if g2 < ub:
                     ub, best_order = g2, order2
@@ -279,19 +286,11 @@ def solve_component(
             f, _, _, g, declared, order, unmet = heapq.heappop(heap)
             if g > best_g.get(declared, g):
                 continue
-            todo = comp & ~declared
             slack = opt - (g + bound(declared))  # how much this node may still waste and reach the optimum
             if slack < 0:
                 continue
-            moves = todo if slack > 0 else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
-            for e in bits(todo):
-                if not moves >> e & 1:
-                    continue
-                low = 1 << e
-                g1 = g + cm.floor_of[e] + cm.regret(unmet, e)
-                order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | low, cm.declare(unmet, e),
-                                                            comp)
-                g2 = g1 + forced
+            for e in bits(_moves(cm, bound, comp & ~declared, declared, unmet, slack > 0)):
+                g2, order2, declared2, unmet2 = _move(cm, comp, g, order, declared, unmet, e)
                 if declared2 & comp == comp:
                     if g2 < ub:
                         ub, ub_order = g2, order2
