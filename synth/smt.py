@@ -17,6 +17,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from fractions import Fraction
+from functools import cached_property
 from typing import Any
 
 from synth.config import SynthConfig
@@ -82,9 +83,17 @@ class Z3Backend(_ByName):
             raise SolverUnavailable(f"z3 is not installed ({exc}); pip install z3-solver") from None
         self.z3 = z3
         self.And, self.Or, self.Not, self.BoolVal = z3.And, z3.Or, z3.Not, z3.BoolVal
-        self._solver = z3.SolverFor("QF_NRA")
-        self._nlsat = z3.Tactic("qfnra-nlsat")  # robust questions; see fresh_check
         self._fresh = 0
+
+    # One solver per frame (this backend's), reused with push / pop, and made only when a question needs it:
+    # with the default oracle most frames ask none.
+    @cached_property
+    def _solver(self) -> Any:
+        return self.z3.SolverFor("QF_NRA")
+
+    @cached_property
+    def _nlsat(self) -> Any:
+        return self.z3.Tactic("qfnra-nlsat")  # robust questions; see fresh_check
 
     # --------------------------------------------------------------------------------- building blocks
     def q(self, v: float | str | Fraction) -> Any:
