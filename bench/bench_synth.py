@@ -41,6 +41,13 @@ from realdata import keyframe_scenes  # noqa: E402
 
 # The last main commit before issue 18's changes (the core as it stood when the issue was filed).
 BASELINE = "169f18e"
+# Issue 18's steps as they landed on main, each timed as a tree of its own beside before and after (--steps).
+STEPS = {
+    "parts refactor (i16)": "23888fc",
+    "+ interval certification, exact Range values": "4250af5",
+    "+ incremental A*, closed-source bound": "c4b629b",
+    "+ Alg. 4 nearest witness, centring, rendering": "719db52",
+}
 STAGES = ("oracle_s", "search_s", "ranges_s", "certify_s", "render_s")
 STAGE_NAMES = {"oracle_s": "relation oracle", "search_s": "search", "ranges_s": "Alg. 4 + Range values",
                "certify_s": "certification", "render_s": "Scenic rendering"}
@@ -253,6 +260,18 @@ def markdown(payload: dict, args) -> str:
             x = s[side]
             cells = [f"{ms(x[k]['median'])} / {ms(x[k]['max'])}" for k in STAGES + ("smt_s",)]
             md.append(f"| {name} | {side} | " + " | ".join(cells) + " |")
+    if any(s.get("steps") for s in payload["sets"].values()):
+        md += ["", "### Step by step (each landed step as a tree of its own, all fed the same frames in turn)", "",
+               "Median per frame, and the stages a step moved (median).", "",
+               "| frames | tree | median | total | relation oracle | search | Alg. 4 + Range values | certification "
+               "| Scenic rendering |", "|---|---|---|---|---|---|---|---|---|"]
+        for name, s in payload["sets"].items():
+            chain = [(f"before ({payload['baseline']})", s["before"])]
+            chain += [(f"{label} ({STEPS[label]})", x) for label, x in s.get("steps", {}).items()]
+            chain += [(f"after ({m['commit']})", s["after"])]
+            for label, x in chain:
+                md.append(f"| {name} | {label} | {ms(x['wall_s']['median'])} | {x['wall_s']['total']:.1f} s | "
+                          + " | ".join(ms(x[k]["median"]) for k in STAGES) + " |")
     if payload.get("profile"):
         md += ["", "### Profile (cProfile, own time by kind of code, share of the profiled run)", "",
                f"On {payload['profile_frames']} frames (every set, evenly spaced).", "",
@@ -290,6 +309,8 @@ def main() -> int:
     ap.add_argument("--profile-every", type=int, default=8, help="profile one frame in K of every set (0: none)")
     ap.add_argument("--bfs-limit", type=float, default=120.0, help="seconds per bfs-cpa frame (default 120)")
     ap.add_argument("--max-n", type=int, default=23, help="largest vehicle count for the ratio (default 23)")
+    ap.add_argument("--steps", action="store_true",
+                    help="also time the tree after each landed step of issue 18 (STEPS), fed the same frames in turn")
     ap.add_argument("--quick", action="store_true", help="8 crowds, every 40th Waymo-like step, no BFS-CPA ratio")
     args = ap.parse_args()
     if args.quick:
@@ -309,7 +330,8 @@ def main() -> int:
         tmp = Path(tmp)
         before_tree = frozen_tree(args.baseline, tmp)
         after_tree = snapshot_tree(tmp)
-        trees = {"before": before_tree, "after": after_tree}
+        steps = {label: frozen_tree(commit, tmp) for label, commit in STEPS.items()} if args.steps else {}
+        trees = {"before": before_tree, **steps, "after": after_tree}
         sample = []
         for name, scenes in sets.items():
             items = [{"set": name, "scene": sc} for sc in scenes]
@@ -319,14 +341,16 @@ def main() -> int:
             sides = run_sides(items, trees, {})
             print(f"{name}: {len(items)} frames, both sides, in {time.time() - t:.1f} s", flush=True)
             payload["sets"][name] = {"before": side_summary(sides["before"]), "after": side_summary(sides["after"]),
-                                     "compare": compare(sides["before"], sides["after"]), "frames": frame_rows(sides)}
+                                     "compare": compare(sides["before"], sides["after"]), "frames": frame_rows(sides),
+                                     "steps": {label: side_summary(sides[label]) for label in steps}}
             c = payload["sets"][name]["compare"]
             print(f"{name}: median x{c['speedup_median']:.1f}, total x{c['speedup_total']:.1f}, "
                   f"identical {c['identical']}/{len(items)}", flush=True)
         if sample:
             payload["profile_frames"] = len(sample)
-            profiles = {side: tmp / f"profile-{side}.pstats" for side in trees}
-            run_sides(sample, trees, {}, profiles)
+            ends = {"before": before_tree, "after": after_tree}
+            profiles = {side: tmp / f"profile-{side}.pstats" for side in ends}
+            run_sides(sample, ends, {}, profiles)
             payload["profile"] = {side: profile_kinds(path) for side, path in profiles.items()}
     if not args.quick and workloads.SCENARIONET.is_dir():
         payload["ratio_vs_bfs_cpa"] = ratio(keyframe_scenes(vehicles_only=True), args.bfs_limit, 5, args.max_n)
