@@ -83,6 +83,7 @@ def _sql_list(files: Sequence[str]) -> str:
 
 
 def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None, spill_dir: str):
+    """A DuckDB session with the rows view; returns (connection, whether the frames have a speed column)."""
     import duckdb
 
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
@@ -90,15 +91,18 @@ def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None
     # Progress is tracked for _Progress, never printed by DuckDB itself (it would write to stdout).
     con.execute("SET enable_progress_bar = true")
     con.execute("SET enable_progress_bar_print = false")
+    source = f"read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)"
+    # speed is optional (frames of sources without velocities lack it): unknown is NULL, as in a file that has it.
+    has_speed = "speed" in {r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {source}").fetchall()}
     # Row ordinal: file number, then row number in the file; it orders frames and bindings deterministically.
     con.execute(
-        f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, x, y, heading, is_ego, "
+        f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, "
+        f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, is_ego, "
         f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
-        f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
-        f"FROM read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)")
+        f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild FROM {source}")
     for macro in MACROS:
         con.execute(macro)
-    return con
+    return con, has_speed
 
 
 def _validate(con, where: str) -> int:
@@ -154,7 +158,7 @@ def _write_matches(reader, path: Path) -> tuple[int, int]:
 
 class _ExactCheck:
     """The Python UDF: is a candidate binding a match by synth.semantics? Its arguments: the numbers (ego x, y,
-    heading, then x, y, heading per name) and the types (per name), as two lists."""
+    heading, speed, then the same per name; a speed may be None) and the types (per name), as two lists."""
 
     def __init__(self, pattern: Pattern, config: SynthConfig):
         self.pattern, self.config, self.calls = pattern, config, 0
@@ -165,8 +169,8 @@ class _ExactCheck:
         names = self.pattern.names
         out = []
         for v, t in zip(numbers.to_pylist(), types.to_pylist()):
-            ego = Entity(EGO_ID, "Car", v[0], v[1], v[2])
-            binding = {n: Entity(n, t[i], v[3 + 3 * i], v[4 + 3 * i], v[5 + 3 * i]) for i, n in enumerate(names)}
+            ego = Entity(EGO_ID, "Car", v[0], v[1], v[2], speed=v[3])
+            binding = {n: Entity(n, t[i], *v[4 + 4 * i: 7 + 4 * i], speed=v[7 + 4 * i]) for i, n in enumerate(names)}
             out.append(binding_holds(self.pattern, ego, binding, self.config))
         self.calls += len(out)
         return pa.array(out, pa.bool_())
@@ -221,8 +225,10 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
     out.parent.mkdir(parents=True, exist_ok=True)
     check = _ExactCheck(pattern, config)
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
-        con = _open(files, threads, memory_limit_mb, spill)
+        con, has_speed = _open(files, threads, memory_limit_mb, spill)
         try:
+            if pattern.uses_motion and not has_speed:
+                raise FramesError(f"{frames} has no speed column: the pattern's motion clauses need one")
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             n_frames = _validate(con, str(frames))
             with _Progress(con, log), atomic_path(out) as tmp:

@@ -35,13 +35,18 @@ from synth.config import SynthConfig
 from synth.dsl import (
     DIRECTIONS,
     AbsoluteHeading,
+    AbsoluteSpeed,
     AbsoluteXYPos,
     DirectionPos,
     FacingRelation,
     LocalXYPos,
+    MovingLike,
     RelativeHeading,
+    RelativeSpeed,
     Statement,
+    Stationary,
 )
+from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern, matched_types
 from synth.scene import EGO_ID
 from synth.semantics import ANGLE_EPS, LENGTH_EPS
@@ -85,9 +90,14 @@ def _slack_len(bound: float) -> float:
 
 
 def _within(expr: str, lo: float, hi: float) -> Condition:
-    """lo <= expr <= hi for bounds already carrying the semantics' own epsilon; lengths."""
-    return Condition(f"{expr} >= {lit(lo - _slack_len(lo))} AND {expr} <= {lit(hi + _slack_len(hi))}",
-                     f"{expr} >= {lit(lo + _slack_len(lo))} AND {expr} <= {lit(hi - _slack_len(hi))}")
+    """lo <= expr <= hi for bounds already carrying the semantics' own epsilon (lengths, speeds); an infinite bound
+    is no bound. A NULL expr is neither candidate nor sure."""
+    cand = [f"{expr} >= {lit(lo - _slack_len(lo))}"] if math.isfinite(lo) else [f"{expr} IS NOT NULL"]
+    sure = [f"{expr} >= {lit(lo + _slack_len(lo))}"] if math.isfinite(lo) else [f"{expr} IS NOT NULL"]
+    if math.isfinite(hi):
+        cand.append(f"{expr} <= {lit(hi + _slack_len(hi))}")
+        sure.append(f"{expr} <= {lit(hi - _slack_len(hi))}")
+    return Condition(" AND ".join(cand), " AND ".join(sure))
 
 
 def _distinct_points(e: str, r: str) -> str:
@@ -166,6 +176,25 @@ def absolute_heading(head: AbsoluteHeading, e: str, r: str | None, config: Synth
     return _angle_range(f"{e}.heading", None, head.angle.lo, head.angle.hi)
 
 
+# Speeds: plain differences and comparisons, the semantics' own operations, with the same slack as lengths. An
+# entity without a speed (NULL) makes every motion clause false, as in the semantics (NULL is never true in SQL).
+
+def stationary(clause: Stationary, e: str, r: str | None, config: SynthConfig) -> Condition:
+    return _within(f"{e}.speed", -math.inf, config.v_stop + SPEED_EPS)
+
+
+def moving_like(clause: MovingLike, e: str, r: str | None, config: SynthConfig) -> Condition:
+    return _within(f"abs({e}.speed - {r}.speed)", -math.inf, config.dv + SPEED_EPS)
+
+
+def relative_speed(clause: RelativeSpeed, e: str, r: str | None, config: SynthConfig) -> Condition:
+    return _within(f"({e}.speed - {r}.speed)", clause.speed.lo - SPEED_EPS, clause.speed.hi + SPEED_EPS)
+
+
+def absolute_speed(clause: AbsoluteSpeed, e: str, r: str | None, config: SynthConfig) -> Condition:
+    return _within(f"{e}.speed", clause.speed.lo - SPEED_EPS, clause.speed.hi + SPEED_EPS)
+
+
 Builder = Callable[[object, str, "str | None", SynthConfig], Condition]
 BUILDERS: dict[type, Builder] = {
     DirectionPos: direction_pos,
@@ -174,6 +203,10 @@ BUILDERS: dict[type, Builder] = {
     FacingRelation: facing_relation,
     RelativeHeading: relative_heading,
     AbsoluteHeading: absolute_heading,
+    Stationary: stationary,
+    MovingLike: moving_like,
+    RelativeSpeed: relative_speed,
+    AbsoluteSpeed: absolute_speed,
 }
 
 
@@ -203,11 +236,11 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
     """The query: one row per matching frame (frame_id, scene, timestamp_us, n_matches, binding = the first
     binding), or with all_bindings one row per binding; frames in input order, bindings in lexicographic order of
     their entities' input rows. It calls r2s_exact(numbers, types) on the candidates that are not sure: numbers are
-    ego's x, y, heading, then x, y, heading per name; types one per name."""
+    ego's x, y, heading, speed, then the same per name; types one per name."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.type, f.x, f.y, f.heading, f.c, f.s, f.wild"
-    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, scene, timestamp_us, x, y, heading, c, s, wild "
+    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.type, f.x, f.y, f.heading, f.speed, f.c, f.s, f.wild"
+    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, scene, timestamp_us, x, y, heading, speed, c, s, wild "
             f"FROM {ROWS} WHERE is_ego)"]
     first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
@@ -236,7 +269,7 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
         sure_parts.append(f"({bcond.sure})")
         candidate_parts.append(f"({bcond.candidate})")
         joins.append(f"JOIN {a} ON {' AND '.join(on)}")
-    numbers = ["g.x", "g.y", "g.heading"] + [f"{alias[n]}.{c}" for n in names for c in ("x", "y", "heading")]
+    numbers = [f"{a}.{c}" for a in ["g"] + [alias[n] for n in names] for c in ("x", "y", "heading", "speed")]
     types = [f"{alias[n]}.type" for n in names]
     key = "[" + ", ".join(f"{alias[n]}.ord" for n in names) + "]"
     binding = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.entity_id" for n in names) + ")"

@@ -32,6 +32,11 @@ class Pattern:
     def names(self) -> tuple[str, ...]:
         return tuple(s.id for s in self.statements)
 
+    @property
+    def uses_motion(self) -> bool:
+        """Does a statement carry a MOTION clause (which needs the entities' speeds)?"""
+        return any(s.motion is not None for s in self.statements)
+
     def __str__(self) -> str:
         return "".join(f"{s}\n" for s in self.statements)
 

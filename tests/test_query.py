@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -246,6 +247,45 @@ def test_coincident_points_have_no_bearing(tmp_path):
         got, _ = engine(path, text, tmp_path)
         want = brute(scenes, text)
         assert got == want
+
+
+MOTION_CASES = {
+    # motion clause (REF is ego or r) -> function(ref speed, rng, delta) -> the subject's speed
+    "stationary": lambda rs, g, d: 0.5 + d,
+    "moving like {R}": lambda rs, g, d: max(0.0, rs + g.choice([-1, 1]) * (1.0 + d)),
+    "moving Range(-2, 3.5) m/s relative to {R}": lambda rs, g, d: max(0.0, rs + g.choice([-2 - d, 3.5 + d])),
+    "moving Range(4, 6) m/s": lambda rs, g, d: g.choice([4 - d, 6 + d]),
+}
+
+
+@pytest.mark.parametrize("ref_is_ego", [True, False], ids=["ego", "name"])
+@pytest.mark.parametrize("clause", list(MOTION_CASES))
+def test_motion_boundaries_and_missing_speeds(clause, ref_is_ego, tmp_path):
+    g = random.Random(len(clause) * 2 + ref_is_ego)
+    ref_line = "" if ref_is_ego else f"r = new Truck {ANYWHERE}, {ANY_HEADING}, moving Range(0, 100) m/s\n"
+    text = ref_line + f"a = new Car {ANYWHERE}, {ANY_HEADING}, {clause.format(R='ego' if ref_is_ego else 'r')}\n"
+    scenes = []
+    for i in range(300):
+        ego = Entity("ego", "Car", 0.0, 0.0, 0.0, speed=g.choice([0.0, 3.0, g.uniform(0, 15)]))
+        ref = ego if ref_is_ego else Entity("truck1", "Truck", 5.0, 5.0, 0.0, speed=g.uniform(0, 15))
+        speed = MOTION_CASES[clause](ref.speed, g, g.choice(DELTAS))
+        ents = [ego, Entity("car1", "Car", 1.0, 2.0, 0.0, speed=None if g.random() < 0.1 else speed)]
+        ents += [] if ref_is_ego else [ref]
+        ents.append(Entity("car2", "Car", -3.0, 8.0, 90.0, speed=g.choice([None, 0.2, 5.0])))
+        if not ref_is_ego and g.random() < 0.1:
+            ents[2] = replace(ref, speed=None)  # a reference without speed: no motion relation to it
+        scenes.append(Scene(f"m/{i}", tuple(ents)))
+    got, summary = engine(_write(scenes, tmp_path / "f.parquet"), text, tmp_path)
+    want = brute(scenes, text)
+    assert got == want and 0 < len(want) < len(scenes)
+    assert summary.checked_exactly > 0
+
+
+def test_motion_patterns_need_a_speed_column(tmp_path):
+    pattern = tmp_path / "p.dsl"
+    pattern.write_text(f"a = new Car {ANYWHERE}, {ANY_HEADING}, stationary\n")
+    proc = run_r2s("query", str(KEYFRAMES), str(pattern), "--out", str(tmp_path / "m.parquet"))
+    assert_one_line_error(proc, 2, "no speed column")
 
 
 @settings(max_examples=25)
