@@ -1,8 +1,9 @@
 """Scenario mining: every frame of a frames dataset that matches a pattern (synth.pattern), through DuckDB.
 
-The pattern becomes one query (pipeline.query_sql); this module owns the I/O around it: the input files, the
-streaming validation of the rows, the DuckDB session (threads, memory limit, a spill directory), the exact
-re-check of near-boundary bindings in Python, and the atomic, streaming write of matches.parquet.
+The pattern becomes one query (pipeline.query_sql); this module owns the I/O around it: the input (a frames file or
+dataset, checked by extractors.frames_dataset as every verb checks it), the DuckDB session (threads, memory limit,
+a spill directory), the exact re-check of near-boundary bindings in Python, and the atomic, streaming write of
+matches.parquet.
 
 matches.parquet: frame_id, scene, timestamp_us, n_matches (distinct bindings in the frame), binding; one row per
 matching frame (binding: the first, in lexicographic order of the entities' input rows, i.e. the nearest for
@@ -23,11 +24,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from extractors.frames import FRAMES_COLUMNS, FramesError
+from extractors.frames import FramesError
+from extractors.frames_dataset import FramesDataset
 from pipeline.query_sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
-from synth.scene import EGO_ID, ENTITY_TYPES, Entity
+from synth.scene import EGO_ID, Entity
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -46,44 +48,12 @@ class QuerySummary:
                 f"{self.seconds:.2f} s")
 
 
-def frames_files(path: str | os.PathLike) -> list[str]:
-    """The Parquet files of a frames file or dataset directory (sorted; hidden and _-prefixed names skipped, as
-    pyarrow.dataset does), each checked to be Parquet with the frames columns."""
-    p = Path(path)
-    if not p.exists():
-        raise FramesError(f"{path} does not exist")
-    if p.is_dir():
-        files = sorted(str(f) for f in p.rglob("*.parquet") if f.is_file()
-                       and not any(part.startswith((".", "_")) for part in f.relative_to(p).parts))
-        if not files:
-            raise FramesError(f"{path} is a directory without Parquet files")
-    else:
-        files = [str(p)]
-    for f in files:
-        _check_columns(f)
-    return files
-
-
-def _check_columns(path: str) -> None:
-    """A Parquet file with the frames columns (its footer only: the rows are validated by one DuckDB pass)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    try:
-        names = set(pq.ParquetFile(path).schema_arrow.names)
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
-    missing = [c for c in FRAMES_COLUMNS if c not in names]
-    if missing:
-        raise FramesError(f"{path} is not a frames file: it lacks column(s) {', '.join(missing)}")
-
-
 def _sql_list(files: Sequence[str]) -> str:
     return "[" + ", ".join("'" + f.replace("'", "''") + "'" for f in files) + "]"
 
 
-def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None, spill_dir: str):
-    """A DuckDB session with the rows view; returns (connection, whether the frames have a speed column)."""
+def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str):
+    """A DuckDB session with the rows view of the files."""
     import duckdb
 
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
@@ -93,7 +63,6 @@ def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None
     con.execute("SET enable_progress_bar_print = false")
     source = f"read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)"
     # speed is optional (frames of sources without velocities lack it): unknown is NULL, as in a file that has it.
-    has_speed = "speed" in {r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {source}").fetchall()}
     # Row ordinal: file number, then row number in the file; it orders frames and bindings deterministically.
     con.execute(
         f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, "
@@ -102,42 +71,7 @@ def _open(files: Sequence[str], threads: int | None, memory_limit_mb: int | None
         f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild FROM {source}")
     for macro in MACROS:
         con.execute(macro)
-    return con, has_speed
-
-
-def _validate(con, where: str) -> int:
-    """The frames contract, checked in two streaming aggregates; returns the number of frames. (Ids unique within a
-    frame is checked on the matching frames only, _check_unique_ids: over every row it costs more than the query.)"""
-    known = ", ".join(repr(t) for t in sorted(ENTITY_TYPES))
-    bad_num, bad_null, ego_named, unknown = con.execute(
-        f"SELECT any_value(frame_id) FILTER (WHERE NOT coalesce(isfinite(x) AND isfinite(y) AND isfinite(heading), FALSE)), "
-        f"count(*) FILTER (WHERE frame_id IS NULL OR entity_id IS NULL OR type IS NULL OR is_ego IS NULL), "
-        f"any_value(frame_id) FILTER (WHERE (entity_id = '{EGO_ID}') <> is_ego), "
-        f"any_value(type) FILTER (WHERE type NOT IN ({known})) FROM {ROWS}").fetchall()[0]
-    if bad_null:
-        raise FramesError(f"{where}: {bad_null} row(s) lack a frame_id, entity_id, type or is_ego")
-    if bad_num is not None:
-        raise FramesError(f"{where}: column x, y or heading has a missing or non-finite value (frame {bad_num})")
-    if unknown is not None:
-        raise FramesError(f"{where}: unknown entity type {unknown!r}")
-    if ego_named is not None:
-        raise FramesError(f"{where}: frame {ego_named!r}: the id 'ego' belongs to the ego row only")
-    n_frames, no_ego = con.execute(
-        f"SELECT count(*), any_value(frame_id) FILTER (WHERE n_ego <> 1) FROM (SELECT fk, frame_id, "
-        f"count(*) FILTER (WHERE is_ego) AS n_ego FROM {ROWS} GROUP BY fk, frame_id)").fetchall()[0]
-    if no_ego is not None:
-        raise FramesError(f"{where}: frame {no_ego!r} does not have exactly one ego row")
-    return int(n_frames)
-
-
-def _check_unique_ids(con, matches: Path, where: str) -> None:
-    """No matching frame has an entity id twice (a binding names entities by id)."""
-    dup = con.execute(
-        f"SELECT any_value(r.frame_id) FROM {ROWS} r SEMI JOIN (SELECT DISTINCT hash(frame_id) AS fk, frame_id "
-        f"FROM read_parquet('{str(matches).replace(chr(39), chr(39) * 2)}')) m ON r.fk = m.fk AND r.frame_id = m.frame_id "
-        f"GROUP BY r.fk, r.frame_id, r.entity_id HAVING count(*) > 1").fetchall()
-    if dup:
-        raise FramesError(f"{where}: frame {dup[0][0]!r} has an entity id twice")
+    return con
 
 
 def _write_matches(reader, path: Path) -> tuple[int, int]:
@@ -219,22 +153,24 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
 
     t0 = time.monotonic()
     config = config or SynthConfig()
-    files = frames_files(frames)
+    dataset = FramesDataset.open(frames)
+    if dataset.url:
+        raise FramesError(f"{frames}: r2s query reads frames on a local filesystem (copy them here first)")
+    has_speed = any("speed" in part.optional for part in dataset.parts)
+    if pattern.uses_motion and not has_speed:
+        raise FramesError(f"{frames} has no speed column: the pattern's motion clauses need one")
+    # The frames contract, as every verb checks it (one streaming pass; the same one-line messages).
+    n_frames, _ = dataset.check()
     sql = compile_pattern(pattern, config, all_bindings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     check = _ExactCheck(pattern, config)
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
-        con, has_speed = _open(files, threads, memory_limit_mb, spill)
+        con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill)
         try:
-            if pattern.uses_motion and not has_speed:
-                raise FramesError(f"{frames} has no speed column: the pattern's motion clauses need one")
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
-            n_frames = _validate(con, str(frames))
             with _Progress(con, log), atomic_path(out) as tmp:
                 matched, bindings = _write_matches(con.sql(sql).to_arrow_reader(BATCH_ROWS), tmp)
-                if matched:
-                    _check_unique_ids(con, tmp, str(frames))
         except (duckdb.IOException, duckdb.InvalidInputException, duckdb.ConversionException) as exc:
             raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
         finally:

@@ -9,6 +9,7 @@ import subprocess
 from dataclasses import replace
 from pathlib import Path
 
+import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from conftest import ROOT, assert_one_line_error, run_r2s
@@ -401,18 +402,19 @@ def _frames_with(tmp_path, change) -> Path:
 @pytest.mark.parametrize("make,needle", [
     (lambda t: t / "missing.parquet", "does not exist"),
     (lambda t: (t / "x.parquet").write_text("not parquet") and t / "x.parquet", "not a readable parquet"),
-    (lambda t: (t / "empty").mkdir() or t / "empty", "without parquet files"),
+    (lambda t: (t / "empty").mkdir() or t / "empty", "without frames parquet files"),
     (lambda t: _frames_with(t, lambda df: df.drop(columns=["heading"])), "lacks column"),
     (lambda t: _frames_with(t, lambda df: df.assign(x=df["x"].where(df.index != 5, float("nan")))), "non-finite"),
     (lambda t: _frames_with(t, lambda df: df.assign(heading=df["heading"].where(df.index != 5, float("inf")))), "non-finite"),
     (lambda t: _frames_with(t, lambda df: df.assign(type=df["type"].where(df.index != 5, "Rocket"))), "unknown entity type"),
     (lambda t: _frames_with(t, lambda df: df[df.index != 0]), "exactly one ego"),
     (lambda t: _frames_with(t, lambda df: df.assign(entity_id=df["entity_id"].where(df.index != 2, df["entity_id"][1]))),
-     "entity id twice"),
+     "twice"),
+    (lambda t: _frames_with(t, lambda df: pd.concat([df.drop(index=5), df.loc[[5]]])), "occurs in two places"),
 ])
 def test_bad_frames_input_is_one_line_exit_2(make, needle, tmp_path, capsys):
     pattern = tmp_path / "p.dsl"
-    pattern.write_text(f"x = new Object {ANYWHERE}, {ANY_HEADING}\n")  # every frame with an entity matches
+    pattern.write_text(f"x = new Object {ANYWHERE}, {ANY_HEADING}\n")
     frames = make(tmp_path)
     args = (str(frames), str(pattern), "--out", str(tmp_path / "m.parquet"))
     proc = run_r2s("query", *args) if needle == "non-finite" else r2s_query(capsys, *args)
