@@ -292,6 +292,59 @@ def test_motion_boundaries_and_missing_speeds(clause, ref_is_ego, tmp_path):
     assert summary.checked_exactly > 0
 
 
+MOTION_PATTERNS = [
+    # "a parked car ahead and a vehicle passing it"
+    f"parked = new Car ahead of ego by Range(0, 40), {ANY_HEADING}, stationary\n"
+    f"other = new Vehicle on Range(-5, 5) @ Range(-10, 10) relative to parked, {ANY_HEADING}, moving Range(2, 30) m/s\n",
+    "car = new Vehicle ahead of ego by Range(0, 40), facing Range(-20, 20) deg relative to ego, moving like ego\n",
+    f"ped = new Pedestrian on Range(-20, 20) @ Range(-20, 20), {ANY_HEADING}, moving Range(0.5, 3) m/s\n",
+    f"car = new Vehicle on Range(-30, 30) @ Range(-30, 30), {ANY_HEADING}, moving Range(-30, -3) m/s relative to ego\n",
+    f"a = new Car on Range(-50, 50) @ Range(-50, 50), {ANY_HEADING}, stationary\n"
+    "b = new Car ahead of a by Range(1, 10), facing Range(-20, 20) deg relative to a, moving like a\n",
+]
+
+
+# On the 9 frames of the shipped excerpt: every motion clause kind, each pattern matching somewhere.
+EXCERPT_MOTION_PATTERNS = MOTION_PATTERNS[2:4] + [
+    f"a = new Object on Range(-50, 50) @ Range(-50, 50), {ANY_HEADING}, stationary\n"
+    f"b = new Object ahead of a by Range(0, 10), {ANY_HEADING}, moving like a\n",
+    f"a = new Vehicle on Range(-50, 50) @ Range(-50, 50), {ANY_HEADING}, moving like ego\n",
+    f"a = new Object on Range(-50, 50) @ Range(-50, 50), {ANY_HEADING}, moving Range(2, 30) m/s\n"
+    f"b = new Object left of a by Range(0, 10), {ANY_HEADING}, stationary\n",
+]
+
+
+def _extracted(source: Path, out: Path) -> Path:
+    proc = run_r2s("extract", "scenarionet", str(source), "--categories", "all", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def excerpt_frames(tmp_path_factory) -> Path:
+    """The shipped ScenarioNet excerpt (real velocities) through r2s extract: frames with speeds."""
+    return _extracted(ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet", tmp_path_factory.mktemp("x") / "f.parquet")
+
+
+@pytest.mark.parametrize("k", range(len(EXCERPT_MOTION_PATTERNS)))
+def test_motion_patterns_on_real_speeds(k, excerpt_frames, tmp_path):
+    text = EXCERPT_MOTION_PATTERNS[k]
+    scenes = list(iter_scenes(read_frames(excerpt_frames)))
+    assert all(e.speed is not None for s in scenes for e in s.entities)
+    got, _ = engine(excerpt_frames, text, tmp_path)
+    want = brute(scenes, text)
+    assert got == want and want
+
+
+def test_motion_patterns_on_every_shared_keyframe(shared_dir, tmp_path):
+    frames = _extracted(shared_dir / "data" / "nuscenes-mini" / "scenarionet", tmp_path / "f.parquet")
+    scenes = list(iter_scenes(read_frames(frames)))
+    for text in MOTION_PATTERNS:
+        got, _ = engine(frames, text, tmp_path)
+        want = brute(scenes, text)
+        assert got == want and want, text
+
+
 def test_motion_patterns_need_a_speed_column(tmp_path, capsys):
     pattern = tmp_path / "p.dsl"
     pattern.write_text(f"a = new Car {ANYWHERE}, {ANY_HEADING}, stationary\n")
