@@ -22,6 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced if it holds a report)")
     p.add_argument("--max-table-rows", type=int, default=40, metavar="N",
                    help="frames shown in the side-by-side (Table 3) table; more are sampled evenly over N (default 40)")
+    p.add_argument("--query", metavar="PATTERN", help="a section on the frames that match this pattern file (as "
+                   "`r2s query` reads it; needs --frames): the match count and the frames with the most bindings")
+    p.add_argument("--query-top", type=int, default=10, metavar="N",
+                   help="matching frames listed with their programs (default 10)")
 
 
 def _report_files() -> frozenset[str]:
@@ -74,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
+    extra = _query_sections(args)  # a bad pattern or option: exit 2 before anything is read or written
     target = Path(args.out)
     with ProgramsDB(args.programs) as db:  # ProgramsError (exit 2) before anything is written
         if db.rows == 0:
@@ -82,6 +87,31 @@ def run(args: argparse.Namespace) -> int:
         from pipeline.report import HTML_NAME, write_report
 
         with staged_directory(target) as stage:
-            write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db)
+            write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db,
+                         extra=extra)
     print(target / HTML_NAME)
     return 0
+
+
+def _query_sections(args: argparse.Namespace) -> tuple:
+    from pipeline.errors import UserError
+
+    if args.query is None:
+        return ()
+    from pipeline.inputs import read_text_file
+    from pipeline.report_query import query_section
+    from synth.dsl import DslError
+    from synth.pattern import parse_pattern
+
+    if args.frames is None:
+        raise UserError("--query needs --frames: the frames the programs came from, where the pattern is matched")
+    if args.query_top < 1:
+        raise UserError(f"--query-top must be at least 1, got {args.query_top}")
+    try:
+        pattern = parse_pattern(read_text_file(args.query, "pattern"))
+    except DslError as exc:
+        raise UserError(f"{args.query}: {exc}") from None
+    from extractors.frames_dataset import FramesDataset
+
+    FramesDataset.open(args.frames)  # a missing or foreign frames path is refused before the report is built
+    return (query_section(pattern, Path(args.query).name, args.frames, args.query_top),)
