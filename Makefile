@@ -40,7 +40,7 @@ demo: setup
 	@mkdir -p $(DEMO)
 	$(R2S) extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out $(DEMO)/excerpt-frames.parquet
 	$(R2S) run $(DEMO_FRAMES) --out $(DEMO)/programs --jobs $(JOBS)
-	$(R2S) report $(DEMO)/programs --frames $(DEMO_FRAMES) --out $(DEMO)/report
+	$(R2S) report $(DEMO)/programs --frames $(DEMO_FRAMES) --query data/patterns/queue-of-three.dsl --out $(DEMO)/report
 	$(R2S) query $(DEMO_FRAMES) data/patterns/queue-of-three.dsl --out $(DEMO)/matches.parquet
 	$(R2S) scene $(DEMO_FRAMES) $(DEMO_FRAME) --out $(DEMO)/scene.json
 	$(R2S) synth $(DEMO)/scene.json --out $(DEMO)/scene.dsl
@@ -53,7 +53,7 @@ demo: setup
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
-	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet"
+	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet (and a section of the report)"
 	@echo "           motion (who is parked, who drives with whom): $(DEMO)/motion-programs.parquet, moving-scene.dsl"
 
 test: setup
