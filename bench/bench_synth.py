@@ -46,7 +46,8 @@ STEPS = {
     "parts refactor (i16)": "23888fc",
     "+ interval certification, exact Range values": "4250af5",
     "+ incremental A*, closed-source bound": "c4b629b",
-    "+ Alg. 4 nearest witness, centring, rendering": "719db52",
+    "+ Alg. 4 nearest witness, centring, rendering": "047684b",
+    "+ packed search state": "2887f4e",
 }
 STAGES = ("oracle_s", "search_s", "ranges_s", "certify_s", "render_s")
 STAGE_NAMES = {"oracle_s": "relation oracle", "search_s": "search", "ranges_s": "Alg. 4 + Range values",
