@@ -1,4 +1,4 @@
-"""The one frames schema every extractor writes and the pipeline reads (ARCHITECTURE.md, frames.parquet).
+"""The one frames schema every extractor writes and the pipeline reads (docs/formats.md, "Frames Parquet").
 
 One row per entity per frame, ego included, in the ego-centric frame (+x right, +y forward, heading degrees
 counter-clockwise from +y). Writing is atomic; reading validates, so a corrupt or foreign file is refused

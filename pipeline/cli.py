@@ -41,6 +41,14 @@ def _top_help() -> str:
     return f"usage: r2s VERB [options]\n\nverbs:\n{rows}\n\n`r2s VERB --help` for a verb's options.\n"
 
 
+def build_parser(verb: str) -> argparse.ArgumentParser:
+    """The argument parser of one verb (its module's add_arguments)."""
+    module = importlib.import_module(VERBS[verb][0])
+    parser = _Parser(prog=f"r2s {verb}", description=VERBS[verb][1])
+    module.add_arguments(parser)
+    return parser
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
@@ -56,9 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"r2s: unknown verb {verb!r} (verbs: {', '.join(VERBS)})\n")
         return 2
     module = importlib.import_module(VERBS[verb][0])
-    parser = _Parser(prog=f"r2s {verb}", description=VERBS[verb][1])
-    module.add_arguments(parser)
-    args = parser.parse_args(argv[1:])
+    args = build_parser(verb).parse_args(argv[1:])
     from pipeline.errors import user_error_types
 
     try:

@@ -10,7 +10,7 @@ from synth.config import ORACLES, SOLVERS, STRATEGIES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene JSON file (see ARCHITECTURE.md)")
+    p.add_argument("scene", help="scene JSON file, or - for standard input (format: docs/formats.md)")
     p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")

@@ -1,4 +1,4 @@
-"""The programs schema (ARCHITECTURE.md, programs.parquet): one row per frame, written by `r2s run`, read by
+"""The programs schema (docs/formats.md, "Programs Parquet"): one row per frame, written by `r2s run`, read by
 `r2s report`, the benchmarks and users' pandas. Keep it stable: other tools read these columns."""
 
 from __future__ import annotations

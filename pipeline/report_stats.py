@@ -34,7 +34,7 @@ HEADING_KINDS = HEADING.kinds
 MOTION_KINDS = MOTION.kinds
 RELATION_KINDS = POSITION_KINDS + HEADING_KINDS
 ALL = "all"
-# Substrings that mark each relation in a statement `ID = new TYPE POS, HEADING` (ARCHITECTURE.md). The
+# Substrings that mark each relation in a statement `ID = new TYPE POS, HEADING` (docs/dsl.md). The
 # relative position is the only `@ Range(...)` followed by `relative to`; the absolute heading is a `deg` Range
 # without one. Counted with replace() arithmetic, which DuckDB runs at memory speed (a regex pass is ~10x slower).
 _MARKS = {

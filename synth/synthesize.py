@@ -49,7 +49,7 @@ class SynthResult:
     config: SynthConfig
 
     def to_json_dict(self) -> dict:
-        """The `r2s synth --format json` document (ARCHITECTURE.md)."""
+        """The `r2s synth --format json` document (docs/formats.md)."""
         return {
             "frame_id": self.frame_id,
             "status": self.status,

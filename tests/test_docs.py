@@ -1,0 +1,91 @@
+"""The specification lives in the repository: every link of README.md and docs/*.md resolves inside it, and no doc,
+help text or source comment sends the reader outside it (docs/spec.md is the contract)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+DOCS = sorted((ROOT / "docs").glob("*.md"))
+PAGES = [ROOT / "README.md", *DOCS]
+# [text](target) and ![alt](target); a target ends at whitespace or the closing parenthesis.
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
+HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$")
+OUTSIDE = ("ARCHITECTURE.md", "../shared")
+
+
+def anchors(md: Path) -> set[str]:
+    """GitHub's heading anchors: lower case, punctuation dropped (not - or _), spaces to hyphens, repeats -1, -2."""
+    seen: dict[str, int] = {}
+    out = set()
+    in_code = False
+    for line in md.read_text().splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        m = None if in_code else HEADING.match(line)
+        if not m:
+            continue
+        slug = re.sub(r"[^\w\- ]", "", m.group(2).lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        out.add(slug if n == 0 else f"{slug}-{n}")
+    return out
+
+
+def links(md: Path) -> list[str]:
+    text = re.sub(r"```.*?```", "", md.read_text(), flags=re.S)  # code blocks hold code, not links
+    return LINK.findall(text)
+
+
+def test_the_specification_exists():
+    names = {p.name for p in DOCS}
+    assert {"spec.md", "dsl.md", "formats.md", "scenic.md", "cli.md"} <= names
+    # The index names every page of the specification.
+    index = (ROOT / "docs" / "spec.md").read_text()
+    assert all(f"]({name})" in index for name in names - {"spec.md"}), names
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_relative_link_resolves_inside_the_repository(page):
+    bad = []
+    for target in links(page):
+        if re.match(r"[a-z][a-z0-9+.-]*:", target):  # http:, https:, mailto:
+            continue
+        path, _, anchor = target.partition("#")
+        file = (page.parent / path).resolve() if path else page
+        if ROOT.resolve() not in (file, *file.parents):
+            bad.append(f"{target}: outside the repository")
+        elif not file.exists():
+            bad.append(f"{target}: no such file")
+        elif anchor and file.suffix == ".md" and anchor not in anchors(file):
+            bad.append(f"{target}: no heading #{anchor} in {file.name}")
+    assert not bad, f"{page.name}: " + "; ".join(bad)
+
+
+@pytest.mark.parametrize("page", DOCS, ids=lambda p: p.name)
+def test_the_specification_is_self_contained(page):
+    """No link out of the repository at all: a clone is the whole contract."""
+    text = page.read_text()
+    assert not re.search(r"https?://", text), page.name
+    assert not any(s in text for s in OUTSIDE), page.name
+
+
+def test_no_page_help_or_source_points_outside_the_repository():
+    from pipeline.cli import VERBS, build_parser
+
+    texts = {p.name: p.read_text() for p in PAGES}
+    for verb in VERBS:
+        texts[f"r2s {verb} --help"] = build_parser(verb).format_help()
+    for folder in ("synth", "extractors", "pipeline", "configs", "data"):
+        for f in (ROOT / folder).rglob("*"):
+            if f.is_file() and f.suffix in (".py", ".toml", "") and "__pycache__" not in f.parts:
+                texts[str(f.relative_to(ROOT))] = f.read_text(errors="replace")
+    bad = [name for name, text in texts.items() if "ARCHITECTURE.md" in text]
+    assert not bad, bad
+    # Whatever names a page of docs/ names one that exists.
+    missing = sorted({(name, m) for name, text in texts.items() for m in re.findall(r"docs/[\w-]+\.md", text)
+                      if not (ROOT / m).exists()})
+    assert not missing, missing
