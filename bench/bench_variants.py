@@ -200,9 +200,11 @@ def markdown(payload: dict) -> str:
                                         f"{r['error']}" for r in failed]
     md += ["", "## Mixing", "",
            "Integrated autocorrelation time (Sokal's adaptive window) of every Range parameter, in sweeps (1 = "
-           "independent draws), over a run from the recorded scene (first tenth dropped). A sweep moves every "
-           f"part of every statement once; the default keeps a variant every {payload['mixing'][0]['thin']} sweeps "
-           "after 20 sweeps of burn-in. CPU seconds per sweep from the same run.", "",
+           "independent draws), over a run from the recorded scene (first tenth dropped). A sweep redraws every "
+           "clause of every statement once (and re-anchors every clause another one reads); the default keeps a "
+           f"variant every {payload['mixing'][0]['thin']} sweeps after 20 sweeps of burn-in. CPU seconds per sweep "
+           "from the same run. \"Draws accepted\" above counts every draw, the shrunk retries of a rejected one "
+           "included.", "",
            "| frame | N | parameters | sweeps | s / sweep | tau median | tau p90 | tau max | share with tau <= thin | "
            "dependants per entity (mean) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in payload["mixing"]:
@@ -227,7 +229,15 @@ def markdown(payload: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="every 8th keyframe, 300-sweep mixing runs, 2 distribution frames")
+    ap.add_argument("--markdown-only", action="store_true", help="rewrite variants.md from variants.json")
     args = ap.parse_args(argv)
+    if args.markdown_only:
+        from common import RESULTS
+
+        from extractors.atomic import write_text_atomic
+
+        write_text_atomic(RESULTS / "variants.md", markdown(json.loads((RESULTS / "variants.json").read_text())))
+        return 0
     load_before = os.getloadavg()
     scenes = keyframes()
     rows = success(scenes, 8 if args.quick else 1)
