@@ -19,14 +19,15 @@ import shutil
 import signal
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import nullcontext
 from pathlib import Path
+from typing import Any
 
 from extractors.frame_index import frame_hashes
 from pipeline.errors import UserError
 from pipeline.run import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
-from synth.config import SynthConfig
+from synth.config import SynthConfig, as_config
 
 DEFAULT_CHUNK_SIZE = 32  # frames per task
 DEFAULT_PART_ROWS = 2048  # rows per part file (~20 MB of program text at most)
@@ -38,7 +39,7 @@ BACKENDS = ("loky", "dask")
 def run_frames(
     frames: str | os.PathLike,
     out: str | os.PathLike,
-    config: SynthConfig | None = None,
+    config: SynthConfig | Mapping[str, Any] | None = None,
     *,
     jobs: int | None = None,
     backend: str = "loky",
@@ -51,10 +52,11 @@ def run_frames(
 ) -> Summary:
     """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
     (a dataset directory, or one file if the name ends in .parquet); frames already in `out` with the same
-    config are kept. Returns the summary; raises UserError / FramesError / ProgramsError on bad input (nothing
+    config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults (docs/api.md).
+    Returns the summary; raises UserError / FramesError / ProgramsError / ConfigError on bad input (nothing
     written then). `log` receives one line at a time (default: stderr); `terminal` forces the progress bar on or
     off (default: a bar when stderr is a terminal, else a log line every `log_every_s` seconds)."""
-    config = config or SynthConfig()
+    config = as_config(config)
     if jobs is not None and jobs < 1:
         raise UserError(f"--jobs must be at least 1, got {jobs}")
     if chunk_size < 1:

@@ -3,7 +3,6 @@ and solver."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Mapping
@@ -125,6 +124,8 @@ class SynthConfig:
         if not self.motion:
             for name in MOTION_FIELDS:
                 values.pop(name, None)
+        import hashlib  # here, not at the top: `import synth` (which loads this module) stays light
+
         blob = json.dumps(values, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
@@ -160,6 +161,18 @@ def _one_of(name: str, value: Any, allowed: tuple[str, ...]) -> None:
         raise ConfigError(f"unknown {name} {value!r} (choose from {', '.join(allowed)})")
 
 
+def as_config(value: SynthConfig | Mapping[str, Any] | None) -> SynthConfig:
+    """The configuration the Python API was given: a SynthConfig as it is, a dict of its fields (or a decoded TOML
+    document with a [synth] table) through config_from_mapping, None as the defaults."""
+    if value is None:
+        return SynthConfig()
+    if isinstance(value, SynthConfig):
+        return value
+    if isinstance(value, Mapping):
+        return config_from_mapping(value)
+    raise TypeError(f"a configuration is a SynthConfig or a dict of its fields, not {type(value).__name__}")
+
+
 def config_from_mapping(raw: Mapping[str, Any], base: SynthConfig | None = None) -> SynthConfig:
     """A config from a decoded TOML table ([synth] section or flat); unknown keys are refused."""
     table = raw.get("synth", raw)
@@ -168,5 +181,10 @@ def config_from_mapping(raw: Mapping[str, Any], base: SynthConfig | None = None)
     known = {f.name for f in fields(SynthConfig)}
     unknown = sorted(set(table) - known)
     if unknown:
-        raise ConfigError(f"unknown config key(s): {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+        import difflib
+
+        close = difflib.get_close_matches(str(unknown[0]), known, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(f"unknown config key(s): {', '.join(map(str, unknown))}{hint} "
+                          f"(known: {', '.join(sorted(known))})")
     return replace(base or SynthConfig(), **dict(table))

@@ -95,6 +95,8 @@ def _finite(value: Any, what: str) -> float:
 
 @dataclass(frozen=True)
 class Entity:
+    """One recorded road user: ego-centric metres, heading in degrees counter-clockwise from +y (docs/spec.md)."""
+
     id: str
     type: str
     x: float
@@ -122,6 +124,9 @@ class Entity:
 
 @dataclass(frozen=True)
 class Scene:
+    """A recorded frame: ego and the entities to declare, validated on construction (build one with
+    scene_from_dict / scene_from_json; to_dict / to_json write scene JSON, docs/formats.md)."""
+
     frame_id: str
     entities: tuple[Entity, ...]
 
@@ -214,6 +219,17 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         speed=speed,
         speed_sigma=sigmas[2],
     )
+
+
+def as_scene(value: Scene | Mapping[str, Any]) -> Scene:
+    """The scene the Python API was given: a Scene as it is, a decoded scene JSON document through
+    scene_from_dict. (JSON text or a path is a mistake of type: use scene_from_json.)"""
+    if isinstance(value, Scene):
+        return value
+    if isinstance(value, Mapping):
+        return scene_from_dict(value)
+    hint = " (JSON text: scene_from_json(text))" if isinstance(value, (str, bytes)) else ""
+    raise TypeError(f"a scene is a Scene or a dict (decoded scene JSON), not {type(value).__name__}{hint}")
 
 
 def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene:

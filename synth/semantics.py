@@ -10,13 +10,15 @@ undefined: no direction or facing relation holds there.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
-from synth.config import SynthConfig
-from synth.dsl import Program, Statement
+from synth.config import SynthConfig, as_config
+from synth.dsl import Program, Statement, parse_program
 from synth.parts import HEADING, POSITION
 from synth.parts.position import ANGLE_EPS, LENGTH_EPS
-from synth.scene import EGO_ID, Entity, Scene
+from synth.scene import EGO_ID, Entity, Scene, as_scene
 
 __all__ = ["ANGLE_EPS", "LENGTH_EPS", "CheckResult", "Violation", "check", "check_statement", "heading_holds",
            "position_holds"]
@@ -61,9 +63,16 @@ def check_statement(st: Statement, scene_by_id: dict[str, Entity], config: Synth
     return out
 
 
-def check(program: Program, scene: Scene, config: SynthConfig | None = None) -> CheckResult:
-    """All the ways in which `scene` is not in the semantics of `program` (none: it is)."""
-    config = config or SynthConfig()
+def check(program: Program | str, scene: Scene | Mapping[str, Any],
+          config: SynthConfig | Mapping[str, Any] | None = None) -> CheckResult:
+    """All the ways in which `scene` is not in the semantics of `program` (none: it is; `r2s check`).
+
+    `program`: a Program or DSL text; `scene`: a Scene or a decoded scene JSON dict; `config`: as synthesize takes
+    it (only the tolerances and motion constants matter here)."""
+    if isinstance(program, str):
+        program = parse_program(program)
+    scene = as_scene(scene)
+    config = as_config(config)
     by_id = scene.by_id()
     violations: list[Violation] = []
     declared = {EGO_ID}

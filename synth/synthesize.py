@@ -1,25 +1,29 @@
-"""ConstraintSolvingBasedSynthesizer (the paper's Alg. 1): one scene in, a minimum-cost program out."""
+"""ConstraintSolvingBasedSynthesizer (the paper's Alg. 1): one scene in, a minimum-cost program out.
+
+`synthesize` is the Python API's entry point (`from synth import synthesize`, docs/api.md). The package exports it
+under this module's own name, so this module is imported whenever `synth` is: it loads only the scene and config
+modules, and the core (DSL, oracles, solver, search, Scenic) on the first call.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from synth import __version__
-from synth.config import SynthConfig
-from synth.dsl import Program, fmt_number
-from synth.emit_scenic import render_scenic
-from synth.oracle import make_oracle
-from synth.parts import MOTION
-from synth.robust import is_robust
-from synth.scene import Scene, SceneError
-from synth.search import Budget, CostModel, search
-from synth.search.budget import peak_rss_mb
-from synth.statement import build_program
+from synth.config import SynthConfig, as_config
+from synth.scene import Scene, SceneError, as_scene
+
+if TYPE_CHECKING:
+    from synth.dsl import Program
 
 
 @dataclass(frozen=True)
 class SynthStats:
+    """Where the time and memory of one synthesis went (the `stats` of `r2s synth --format json`)."""
+
     runtime_s: float
     search_s: float
     smt_s: float
@@ -37,6 +41,10 @@ class SynthStats:
 
 @dataclass(frozen=True)
 class SynthResult:
+    """The program synthesized for one scene, with its cost, status and certificate (docs/dsl.md, "What synthesis
+    returns"). `str(result.program)` is the DSL text, `result.scenic` the Scenic text, `to_json_dict()` the
+    `r2s synth --format json` document."""
+
     frame_id: str
     status: str  # optimal | feasible | timeout | memout
     cost: int
@@ -86,8 +94,26 @@ class CertificationError(RuntimeError):
     """The solver could not confirm a statement of the synthesized program: an internal error, never silent."""
 
 
-def synthesize(scene: Scene, config: SynthConfig | None = None) -> SynthResult:
-    config = config or SynthConfig()
+def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[str, Any] | None = None) -> SynthResult:
+    """A minimum-cost program whose semantics contain `scene` (docs/dsl.md).
+
+    `scene`: a Scene, or a decoded scene JSON document (a dict, validated as scene_from_dict validates it).
+    `config`: a SynthConfig, a dict of its fields (or {"synth": {...}}, as a TOML file decodes), or None for the
+    defaults. Bad input raises SceneError / ConfigError (ValueErrors with one-line messages); with motion, a scene
+    entity without a speed raises SpeedMissing. A program the solver cannot certify raises CertificationError (a
+    bug, never a silent result). Deterministic: the same scene and config give the same program and Scenic text.
+    """
+    from synth.dsl import fmt_number
+    from synth.emit_scenic import render_scenic
+    from synth.oracle import make_oracle
+    from synth.parts import MOTION
+    from synth.robust import is_robust
+    from synth.search import Budget, CostModel, search
+    from synth.search.budget import peak_rss_mb
+    from synth.statement import build_program
+
+    scene = as_scene(scene)
+    config = as_config(config)
     if config.motion:
         require_speeds(scene)
     started = time.perf_counter()

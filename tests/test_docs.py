@@ -89,3 +89,26 @@ def test_no_page_help_or_source_points_outside_the_repository():
     missing = sorted({(name, m) for name, text in texts.items() for m in re.findall(r"docs/[\w-]+\.md", text)
                       if not (ROOT / m).exists()})
     assert not missing, missing
+
+
+def python_blocks(md: Path) -> list[str]:
+    return re.findall(r"^```python\n(.*?)^```", md.read_text(), flags=re.S | re.M)
+
+
+def test_the_readme_has_a_python_quick_start():
+    blocks = python_blocks(ROOT / "README.md")
+    assert any("from synth import" in b for b in blocks) and any("run_frames" in b for b in blocks)
+
+
+@pytest.mark.parametrize("k", range(len(python_blocks(ROOT / "README.md"))))
+def test_readme_python_block_runs_as_written(k, tmp_path):
+    """Each ```python block of the README, alone, in a fresh interpreter, from a directory that has the shipped
+    data where the repository's root has it (the README says: from the repository's root)."""
+    import subprocess
+    import sys
+
+    (tmp_path / "data").symlink_to(ROOT / "data")
+    (tmp_path / "configs").symlink_to(ROOT / "configs")
+    block = python_blocks(ROOT / "README.md")[k]
+    proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"README python block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
