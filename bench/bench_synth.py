@@ -195,8 +195,6 @@ def profile_kinds(path: Path) -> dict:
 # ------------------------------------------------------------------------------------------ ratio vs BFS-CPA
 
 def ratio(scenes, limit: float, n_min: int, n_max: int) -> list[dict]:
-    import networkx  # noqa: F401  (warm the search's lazy import so it is not charged to the first frame)
-
     from synth.config import SynthConfig
     from synth.synthesize import synthesize
 

@@ -70,8 +70,6 @@ def main() -> int:
     if Path(synth.__file__).resolve().parent.parent != code:
         print(f"synth_worker: imported {synth.__file__}, not the tree at {code}", file=sys.stderr)
         return 1
-    import networkx  # noqa: F401  (the search imports it lazily: warm it, as a long run would have)
-
     from synth.config import SynthConfig
     from synth.scene import scene_from_dict
     from synth.synthesize import SynthStats, synthesize

@@ -175,3 +175,31 @@ def test_the_closed_group_bound_is_admissible_and_consistent(seed, n, crowd):
         for e in range(cm.n):
             if not d >> e & 1:
                 assert h(d) <= cm.delta(e, d) + h(d | 1 << e)
+
+
+@settings(max_examples=80)
+@given(n=st.integers(1, 30), p=st.sampled_from([0.03, 0.1, 0.3]), seed=st.integers(0, 2**32 - 1))
+def test_components_are_networkx_condensation_in_lexicographic_topological_order(n, p, seed):
+    # auto orders the witness graph's strongly connected components itself (networkx cost a cold process a
+    # quarter second to import); networkx stays the reference.
+    import networkx as nx
+
+    from synth.search.auto import components
+    from synth.search.costs import bits
+
+    rng = random.Random(seed)
+    masks = [sum(1 << r for r in range(n) if r != e and rng.random() < p) for e in range(n)]
+    rest = rng.getrandbits(n) | 1
+
+    class Witnesses:
+        def witness_mask(self, e):
+            return masks[e]
+
+    g = nx.DiGraph()
+    g.add_nodes_from(bits(rest))
+    g.add_edges_from((r, e) for e in bits(rest) for r in bits(masks[e] & rest))
+    dag = nx.condensation(g)
+    first = {c: min(dag.nodes[c]["members"]) for c in dag.nodes}
+    expected = [sum(1 << e for e in dag.nodes[c]["members"])
+                for c in nx.lexicographical_topological_sort(dag, key=lambda c: first[c])]
+    assert components(Witnesses(), rest) == expected

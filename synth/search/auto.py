@@ -136,23 +136,42 @@ def closed_sources(cm: CostModel, unmet: Unmet, todo: int) -> list[int]:
 
 
 def components(cm: CostModel, rest: int) -> list[int]:
-    """Strongly connected components of the witness graph on `rest`, upstream first, as bitsets."""
-    if not rest:
-        return []
-    import networkx as nx  # only when the closure leaves work: most real frames never get here
+    """Strongly connected components of the witness graph on `rest` (r -> e when r witnesses e), as bitsets,
+    upstream first: among the components whose upstream is already listed, the one with the lowest member."""
+    preds = {e: cm.witness_mask(e) & rest for e in bits(rest)}
+    succs = dict.fromkeys(preds, 0)
+    for e, p in preds.items():
+        for r in bits(p):
+            succs[r] |= 1 << e
 
-    g = nx.DiGraph()
-    nodes = list(bits(rest))
-    g.add_nodes_from(nodes)
-    g.add_edges_from((r, e) for e in nodes for r in bits(cm.witness_mask(e) & rest))
-    dag = nx.condensation(g)
-    members = dag.graph["mapping"]
-    first = {}
-    for node, comp in members.items():
-        first[comp] = min(first.get(comp, node), node)
-    out = []
-    for comp in nx.lexicographical_topological_sort(dag, key=lambda c: first[c]):
-        out.append(sum(1 << e for e in dag.nodes[comp]["members"]))
+    def reach(x: int, step: dict[int, int], within: int) -> int:
+        seen = frontier = 1 << x
+        while frontier:
+            grown = 0
+            for y in bits(frontier):
+                grown |= step[y]
+            frontier = grown & within & ~seen
+            seen |= frontier
+        return seen
+
+    comps, left = [], rest
+    while left:
+        x = (left & -left).bit_length() - 1
+        comp = reach(x, succs, left) & reach(x, preds, left)  # what x reaches and what reaches x
+        comps.append(comp)
+        left &= ~comp
+    upstream = [0] * len(comps)
+    for i, comp in enumerate(comps):
+        for e in bits(comp):
+            upstream[i] |= preds[e]
+        upstream[i] &= ~comp
+    out, listed, todo = [], 0, list(range(len(comps)))
+    while todo:
+        # comps were found lowest member first, so the first ready one has the lowest member
+        i = next(i for i in todo if not upstream[i] & ~listed)
+        out.append(comps[i])
+        listed |= comps[i]
+        todo.remove(i)
     return out
 
 
