@@ -62,8 +62,8 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     con.execute("SET enable_progress_bar = true")
     con.execute("SET enable_progress_bar_print = false")
     source = f"read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)"
+    # ord, the row ordinal (file number, then row in the file), orders frames and bindings deterministically.
     # speed is optional (frames of sources without velocities lack it): unknown is NULL, as in a file that has it.
-    # Row ordinal: file number, then row number in the file; it orders frames and bindings deterministically.
     con.execute(
         f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, "
         f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, is_ego, "
@@ -171,7 +171,7 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             with _Progress(con, log), atomic_path(out) as tmp:
                 matched, bindings = _write_matches(con.sql(sql).to_arrow_reader(BATCH_ROWS), tmp)
-        except (duckdb.IOException, duckdb.InvalidInputException, duckdb.ConversionException) as exc:
+        except duckdb.IOException as exc:  # the rows were checked, so this is a file that changed or broke since
             raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
         finally:
             con.close()
