@@ -170,13 +170,52 @@ class Scene:
         return json.dumps(self.to_dict(), indent=1) + "\n"
 
 
+# Every key scene JSON may hold (docs/formats.md). Anything else is refused: a misspelt optional key would
+# otherwise be silently dropped (`pos_sgima` turning robust synthesis off, `hedding` leaving a default).
+SCENE_KEYS = ("frame_id", "entities")
+REQUIRED_ENTITY_KEYS = ("id", "type", "x", "y", "heading")
+ENTITY_KEYS = (*REQUIRED_ENTITY_KEYS, "length", "width", "speed", *SIGMA_CAPS)
+
+
+def _misspelt(key: Any, known: Iterable[str]) -> str | None:
+    """The known key that `key` most likely misspells, if any."""
+    import difflib
+
+    close = difflib.get_close_matches(str(key), list(known), n=1)
+    return close[0] if close else None
+
+
+def _unknown_keys(raw: Mapping, known: tuple[str, ...], what: str) -> None:
+    unknown = [k for k in raw if k not in known]
+    if not unknown:
+        return
+    close = {k: _misspelt(k, known) for k in unknown}
+    unknown.sort(key=lambda k: close[k] is None)  # misspellings first: they say what to fix
+    named = [f"{k!r}" + (f" (did you mean {close[k]!r}?)" if close[k] else "") for k in unknown[:3]]
+    more = f" and {len(unknown) - 3} more" if len(unknown) > 3 else ""
+    keys = "key" if len(unknown) == 1 else "keys"
+    hint = "" if any("did you mean" in n for n in named) else f"; its keys are {', '.join(known)}"
+    raise SceneError(f"{what} has unknown {keys} {', '.join(named)}{more}{hint}")
+
+
+def _lacks(raw: Mapping, missing: list[str], known: tuple[str, ...], what: str) -> SceneError:
+    """`what lacks KEY`, naming a key of raw that misspells it."""
+    unknown = [k for k in raw if k not in known]
+    for key in missing:
+        for k in unknown:
+            if _misspelt(k, (key,)):
+                return SceneError(f"{what} lacks {', '.join(missing)} ({k!r} is not a key: did you mean {key!r}?)")
+    return SceneError(f"{what} lacks {', '.join(missing)}")
+
+
 def entity_from_mapping(raw: Any, index: int) -> Entity:
     if not isinstance(raw, Mapping):
         raise SceneError(f"entity {index} must be an object")
-    missing = [k for k in ("id", "type", "x", "y", "heading") if k not in raw]
+    missing = [k for k in REQUIRED_ENTITY_KEYS if k not in raw]
     if missing:
-        raise SceneError(f"entity {index} lacks {', '.join(missing)}")
+        raise _lacks(raw, missing, ENTITY_KEYS, f"entity {index}")
     eid = check_identifier(raw["id"], f"entity {index} id")
+    _unknown_keys(raw, ENTITY_KEYS, f"entity {eid!r}")
     etype = raw["type"]
     if not isinstance(etype, str) or etype not in ENTITY_TYPES:
         raise SceneError(
@@ -236,6 +275,9 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
     """Validate a decoded scene JSON document. Headings are normalised into [0, 360)."""
     if not isinstance(raw, Mapping):
         raise SceneError("a scene must be a JSON object with 'frame_id' and 'entities'")
+    if "entities" not in raw:
+        raise _lacks(raw, ["entities"], SCENE_KEYS, "scene")
+    _unknown_keys(raw, SCENE_KEYS, "scene")
     frame_id = raw.get("frame_id", "scene")
     if not isinstance(frame_id, str) or not frame_id or len(frame_id) > 256 or not frame_id.isprintable():
         raise SceneError("frame_id must be a printable string of 1 to 256 characters")
