@@ -1,10 +1,11 @@
 """`r2s VERB ...`: every operation is a verb of one command (ScenarioNet's style).
 
 Each verb lives in its own module with `add_arguments(parser)` and `run(args) -> int`, imported only when
-that verb runs, so `r2s synth` never pays for pandas, Scenic or the dataset readers.
-Exit codes: 0 done; 2 bad input or usage (one line on stderr, nothing written); 1 internal error; 3 from r2s check
-(the program does not contain the scene); 4 from r2s sample and render (no variant found: the one-line error's
-class carries `exit_code`).
+that verb runs, so `r2s synth` never pays for pandas, Scenic or the dataset readers. `r2s VERB --help` shows the
+options with their defaults, an example that runs on the data shipped in the repository (EXAMPLES; the tests run
+every one) and the exit codes (docs/cli.md): 0 done; 2 bad input or usage (one line on stderr, nothing written);
+1 internal error; 3 from r2s check (the program does not contain the scene); 4 from r2s sample and render (no
+variant found: the one-line error's class carries `exit_code`).
 """
 
 from __future__ import annotations
@@ -22,11 +23,67 @@ VERBS: dict[str, tuple[str, str]] = {
     "scene": ("pipeline.cmd_scene", "print one frame of a frames.parquet as scene JSON"),
     "run": ("pipeline.cmd_run", "one program per frame of a frames.parquet, in parallel, with limits and resume"),
     "query": ("pipeline.cmd_query", "every frame of a frames dataset that matches a DSL pattern (scenario mining)"),
-    "report": ("pipeline.cmd_report", "report.md / report.html with plots from a programs.parquet"),
+    "report": ("pipeline.cmd_report", "report.md / report.html with plots from r2s run's programs"),
     "render": ("pipeline.cmd_render", "bird's-eye view of a scene, its program's references and sampled variants"),
-    "sample": ("pipeline.cmd_sample", "sample scenes from a generated Scenic program with the Scenic compiler"),
+    "sample": ("pipeline.cmd_sample", "variants of a recorded scene, sampled from its program, as scene JSON"),
     "eval-frontend": ("pipeline.cmd_eval_frontend", "detection metrics of predicted frames against ground truth"),
 }
+
+# verb -> an example, one command a line, run from the repository's root on the data shipped there (after
+# `make setup`, with .venv/bin on PATH). Lines that make an input are repeated where a verb needs one, so that
+# each example runs alone; tests/test_cli_help.py runs them all.
+_SCENE = "r2s scene data/nuscenes-mini-keyframes/frames.parquet scene-0103/0 --out scene.json"
+_EXCERPT = "r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --out frames.parquet"
+EXAMPLES: dict[str, tuple[str, ...]] = {
+    "synth": (_SCENE, "r2s synth scene.json --format json --out result.json"),
+    "check": (_SCENE, "r2s synth scene.json --out scene.dsl", "r2s check scene.json scene.dsl"),
+    "extract": ("r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out frames",),
+    "scene": (_SCENE,),
+    "run": (_EXCERPT, "r2s run frames.parquet --out programs --jobs 2 --time-limit 30"),
+    "query": ("r2s query data/nuscenes-mini-keyframes/frames.parquet data/patterns/queue-of-three.dsl "
+              "--out matches.parquet",),
+    "report": (_EXCERPT, "r2s run frames.parquet --out programs --jobs 2 --time-limit 30",
+               "r2s report programs --frames frames.parquet --out report"),
+    "render": (_SCENE, "r2s synth scene.json --out scene.dsl",
+               "r2s render scene.json --program scene.dsl --samples 5 --out scene.png"),
+    "sample": (_SCENE, "r2s synth scene.json --format scenic --out scene.scenic",
+               "r2s sample scene.scenic --n 5 --seed 0 --out variants"),
+    "eval-frontend": ("r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out gt.parquet",
+                      "r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories vehicles "
+                      "--out vehicles.parquet",
+                      "r2s eval-frontend vehicles.parquet gt.parquet --out eval --name vehicles-only"),
+}
+
+EXIT_CODES = "0 done; 2 bad input or usage (one line on stderr, nothing written); 1 internal error (R2S_DEBUG=1: traceback)"
+# Exit codes beyond EXIT_CODES, by verb.
+MORE_EXIT_CODES: dict[str, str] = {
+    "check": "3 the program does not contain the scene (the violations on stdout)",
+    "sample": "4 sampling failed: no variant satisfies the program and the collision rule within the budget "
+              "(one line naming the colliding entities; nothing written)",
+    "render": "4 with --samples: no variant found (as r2s sample)",
+    "run": "130 / 143 stopped by Ctrl-C / SIGTERM (finished frames kept: the same command resumes)",
+}
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Every option with its default (unless its help already says it); description and epilog as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if ("default" in text or not action.option_strings or action.default is None or action.default is False
+                or action.default is argparse.SUPPRESS):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def _epilog(verb: str) -> str:
+    import textwrap
+
+    codes = f"exit codes: {EXIT_CODES}" + (f"; {MORE_EXIT_CODES[verb]}" if verb in MORE_EXIT_CODES else "")
+    lines = ["example (from the repository's root):", *(f"  {line}" for line in EXAMPLES[verb]), "",
+             textwrap.fill(codes, width=100, subsequent_indent="  "), "",
+             "the specification: docs/cli.md, docs/formats.md, docs/dsl.md"]
+    return "\n".join(lines)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -38,14 +95,17 @@ class _Parser(argparse.ArgumentParser):
 def _top_help() -> str:
     width = max(map(len, VERBS))
     rows = "\n".join(f"  {v.ljust(width)}  {h}" for v, (_, h) in VERBS.items())
-    return f"usage: r2s VERB [options]\n\nverbs:\n{rows}\n\n`r2s VERB --help` for a verb's options.\n"
+    return (f"usage: r2s VERB [options]\n\nverbs:\n{rows}\n\n`r2s VERB --help` for a verb's options, defaults and an "
+            f"example.\nexit codes: {EXIT_CODES}; 3 r2s check: the program does not contain the scene; 4 r2s sample, "
+            "r2s render --samples: no variant found\nthe specification: docs/spec.md\n")
 
 
 def build_parser(verb: str) -> argparse.ArgumentParser:
     """The argument parser of one verb (its module's add_arguments)."""
     module = importlib.import_module(VERBS[verb][0])
-    parser = _Parser(prog=f"r2s {verb}", description=VERBS[verb][1])
+    parser = _Parser(prog=f"r2s {verb}", description=VERBS[verb][1], formatter_class=_HelpFormatter)
     module.add_arguments(parser)
+    parser.epilog = _epilog(verb)
     return parser
 
 

@@ -9,7 +9,8 @@ import sys
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene JSON file")
     p.add_argument("program", help="DSL program file")
-    p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2)")
+    p.add_argument("--config", metavar="NAME|F",
+                   help="preset (default, paper) or TOML file: the tolerances delta1, delta2 (default: default)")
 
 
 def run(args: argparse.Namespace) -> int:

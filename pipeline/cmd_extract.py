@@ -21,16 +21,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "input file, log or bag) if PATH does not end in .parquet")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="extract N input files (logs, bags) at once, in worker processes (default 1)")
-    p.add_argument("--radius", type=float, default=50.0, metavar="M", help="keep objects within M metres of ego (50)")
+    p.add_argument("--radius", type=float, default=50.0, metavar="M", help="keep objects within M metres of ego")
     p.add_argument("--categories", default="vehicles", metavar="C",
                    help="vehicles (default), all, or a comma list of Scenic classes / raw categories "
                         "(Car,Pedestrian or human.pedestrian,vehicle.car)")
-    p.add_argument("--every", type=int, default=1, metavar="K", help="keep every K-th frame (1)")
+    p.add_argument("--every", type=int, default=1, metavar="K", help="keep every K-th frame")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
-                   help="refuse a frame with more than N entities (1000)")
+                   help="refuse a frame with more than N entities")
     g = p.add_argument_group("nuscenes")
     g.add_argument("--version", default="v1.0-mini", help="nuScenes version folder (v1.0-mini, v1.0-trainval, ...)")
-    g.add_argument("--scenes", type=_topics, default=(), metavar="S,...", help="only these scene names")
+    g.add_argument("--scenes", type=_topics, default=(), metavar="S,...", help="only these scene names (default: all)")
     g.add_argument("--min-visibility", type=int, default=0, metavar="V",
                    help="keep annotations with visibility level >= V (1-4; 0 keeps all)")
     g.add_argument("--min-lidar-pts", type=int, default=0, metavar="N", help="keep annotations with >= N lidar points")
@@ -38,10 +38,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--topics", type=_topics, default=(), metavar="T,...",
                    help="annotation topics (default: every SceneUpdate / Detection3DArray / MarkerArray topic)")
     g.add_argument("--pose-topic", metavar="T", help="ego pose topic (PoseStamped, Odometry, PoseInFrame); default /tf")
-    g.add_argument("--fixed-frame", default="map", metavar="F", help="global frame of the ego pose (map)")
-    g.add_argument("--ego-frame", default="base_link", metavar="F", help="the vehicle's frame (base_link)")
+    g.add_argument("--fixed-frame", default="map", metavar="F", help="global frame of the ego pose")
+    g.add_argument("--ego-frame", default="base_link", metavar="F", help="the vehicle's frame")
     g.add_argument("--max-chunk-mb", type=float, default=256, metavar="MB",
-                   help="refuse compressed chunks that claim to decompress to more than this (256)")
+                   help="refuse compressed chunks that claim to decompress to more than this")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(r2s run's output) by its frame id, instead of --program")
     p.add_argument("--samples", type=bounded_int(0, 1000), default=0, metavar="K",
                    help="overlay K variants sampled from the program (needs --program)")
-    p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2)")
+    p.add_argument("--config", metavar="NAME|F",
+                   help="preset (default, paper) or TOML file: the tolerances delta1, delta2 (default: default)")
     p.add_argument("--out", required=True, metavar="F", help="image file: .png, .svg or .pdf")
     add_sampling_arguments(p)
 

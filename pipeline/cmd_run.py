@@ -25,14 +25,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, metavar="N", help="parallel workers (default: all cores; "
                    "with --backend dask and --scheduler: all workers of the cluster)")
     p.add_argument("--time-limit", type=float, metavar="S", help="seconds of search per frame; the best program "
-                   "found and a proven lower bound are recorded (status feasible or timeout)")
+                   "found and a proven lower bound are recorded (status feasible or timeout; default: no limit)")
     p.add_argument("--memory-limit", type=float, metavar="MB", help="resident memory per frame: the search stops "
                    "past it (status memout, its best program kept); with loky a hard cap 50%% (at least 256 MB) "
-                   "above it ends the frame")
+                   "above it ends the frame (default: no limit)")
     p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
-    p.add_argument("--config", metavar="F", help="TOML config (configs/default.toml, configs/paper.toml)")
+    p.add_argument("--config", metavar="NAME|F",
+                   help="preset (default, paper) or TOML file; the options here override it (default: default)")
     p.add_argument("--motion", action="store_const", const=True, default=None,
                    help="statements also say how fast entities move, as in r2s synth (needs the frames' speed "
                         "column; a frame with an entity lacking speed is an error row naming it)")

@@ -72,13 +72,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "files you checked)")
     p.add_argument("--program", dest="dsl_file", metavar="P.dsl", help="sample from a DSL program instead (with --scene)")
     p.add_argument("--scene", metavar="S.json", help="the scene the DSL program was synthesized for (ego, sizes)")
-    p.add_argument("--config", metavar="F", help="TOML config (tolerances delta1, delta2) for the DSL route")
+    p.add_argument("--config", metavar="NAME|F",
+                   help="preset (default, paper) or TOML file: the tolerances, for the DSL route (default: default)")
     p.add_argument("--n", type=bounded_int(1, 100_000), default=1, metavar="K", help="number of scenes (default 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for sample_000.json ...")
     add_sampling_arguments(p)
-    p.epilog = (f"exit codes: 0 written; 2 bad input (nothing written); {SAMPLING_FAILED_EXIT} sampling failed: no "
-                "variant satisfies the program and the collision rule within the budget (the message names the "
-                "colliding entities; nothing written); 1 internal error")
 
 
 def read_dsl_program(path: str):

@@ -14,9 +14,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
     p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
     p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
-    p.add_argument("--time-limit", type=float, metavar="S", help="seconds of search; the best program found is returned")
-    p.add_argument("--memory-limit", type=float, metavar="MB", help="stop the search (status memout) past this RSS")
-    p.add_argument("--config", metavar="F", help="TOML config (configs/default.toml, configs/paper.toml)")
+    p.add_argument("--time-limit", type=float, metavar="S",
+                   help="seconds of search; the best program found is returned (default: no limit)")
+    p.add_argument("--memory-limit", type=float, metavar="MB",
+                   help="stop the search (status memout) past this RSS (default: no limit)")
+    p.add_argument("--config", metavar="NAME|F",
+                   help="preset (default, paper) or TOML file; the options here override it (default: default)")
     p.add_argument("--format", choices=("dsl", "scenic", "json"), default="dsl", help="output (default: dsl)")
     p.add_argument("--out", metavar="F", help="write to this file (atomically) instead of stdout")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",

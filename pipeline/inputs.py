@@ -47,11 +47,35 @@ def read_scene(path: str, max_entities: int | None = None) -> Scene:
         raise UserError(f"{path}: {exc}") from None
 
 
+def preset_names() -> list[str]:
+    """The configuration presets shipped as package data (configs/*.toml): what `--config NAME` accepts."""
+    from importlib.resources import files
+
+    return sorted(f.name[: -len(".toml")] for f in files("configs").iterdir() if f.name.endswith(".toml"))
+
+
+def _preset_text(name: str) -> str | None:
+    from importlib.resources import files
+
+    return files("configs").joinpath(f"{name}.toml").read_text("utf-8") if name in preset_names() else None
+
+
 def load_config(path: str | None) -> SynthConfig:
-    """configs/default.toml values are the dataclass defaults; a file overrides what it names."""
+    """`--config`: a preset name (`default`, `paper`: configs/*.toml, shipped with the package) or a TOML file (a
+    path; a file wins over a preset of the same name). configs/default.toml values are the dataclass defaults; a
+    file overrides what it names."""
     if path is None:
         return SynthConfig()
-    text = read_text_file(path, "config")
+    text = None if Path(path).exists() else _preset_text(path)
+    if text is None and not Path(path).exists() and "/" not in path and not path.endswith(".toml"):
+        import difflib
+
+        names = preset_names()
+        close = difflib.get_close_matches(path, names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise UserError(f"config {path!r} is neither a file nor a preset (presets: {', '.join(names)}){hint}")
+    if text is None:
+        text = read_text_file(path, "config")
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
