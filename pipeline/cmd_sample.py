@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS, SAMPLING_FAILED_EXIT
+from pipeline.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
 
 
 def bounded_int(lo: int, hi: int):

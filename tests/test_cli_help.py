@@ -31,6 +31,14 @@ def test_help_shows_defaults_an_example_and_the_exit_codes(verb):
     assert ("4 " in text.split("exit codes:")[1]) == (verb in ("sample", "render"))
 
 
+def test_the_sampling_exit_code_is_the_one_sampling_raises():
+    from pipeline.cli import MORE_EXIT_CODES
+    from pipeline.sample import SAMPLING_FAILED_EXIT, SamplingFailed
+
+    assert SamplingFailed.exit_code == SAMPLING_FAILED_EXIT
+    assert all(MORE_EXIT_CODES[v].startswith(f"{SAMPLING_FAILED_EXIT} ") for v in ("sample", "render"))
+
+
 def test_top_level_help_lists_the_exit_codes():
     proc = run_r2s("--help")
     assert proc.returncode == 0 and "exit codes: 0 done" in proc.stdout and "docs/spec.md" in proc.stdout
