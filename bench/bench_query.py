@@ -42,7 +42,8 @@ def replicate(n_frames: int, out: Path, parts: int = 1) -> int:
     """n_frames frames: the keyframes again and again, copy r's frame ids suffixed `~r`; rows keep their order."""
     import duckdb
 
-    con = duckdb.connect(config={"threads": os.cpu_count() or 1, "enable_progress_bar": False})
+    con = duckdb.connect(config={"threads": os.cpu_count() or 1})
+    con.execute("SET enable_progress_bar = false")  # duckdb 2.0 refuses it as a connect-time option
     con.execute(f"CREATE TEMP TABLE base AS SELECT *, file_row_number AS rn, "
                 f"dense_rank() OVER (ORDER BY frame_ord) - 1 AS fno FROM (SELECT *, min(file_row_number) OVER "
                 f"(PARTITION BY frame_id) AS frame_ord FROM read_parquet('{KEYFRAMES}', file_row_number = true))")
