@@ -7,7 +7,7 @@ unmatched prediction a false positive, an unmatched ground-truth object a false 
 class (the paper scores vehicles as one class); per-category figures attribute a pair to its ground-truth type.
 A frame present in only one file counts wholly as misses (ground truth only) or false alarms (predictions only).
 
-Pure math on plain values: reading files, writing outputs and the plot live in pipeline.cmd_eval_frontend.
+Pure math on plain values: reading files, writing outputs and the plot live in pipeline.cli.eval_frontend.
 """
 
 from __future__ import annotations

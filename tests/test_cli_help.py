@@ -75,7 +75,7 @@ def test_every_help_example_runs(tmp_path):
 # ------------------------------------------------------------------------------------------------ config presets
 
 def test_presets_are_the_shipped_files_and_resolve_by_name(tmp_path):
-    from pipeline.inputs import load_config, preset_names
+    from pipeline.cli.inputs import load_config, preset_names
 
     assert preset_names() == sorted(p.stem for p in (ROOT / "configs").glob("*.toml")) == ["default", "paper"]
     assert load_config("paper") == load_config(str(ROOT / "configs" / "paper.toml"))
@@ -84,7 +84,7 @@ def test_presets_are_the_shipped_files_and_resolve_by_name(tmp_path):
     assert (paper.strategy, paper.oracle) == ("bfs-cpa", "smt")
     # A file of a preset's name wins (a path always works).
     (tmp_path / "paper").write_text("[synth]\ndelta1 = 7\n")
-    proc = subprocess.run([sys.executable, "-c", "from pipeline.inputs import load_config; "
+    proc = subprocess.run([sys.executable, "-c", "from pipeline.cli.inputs import load_config; "
                            "print(load_config('paper').delta1)"], cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0 and float(proc.stdout) == 7.0, proc.stderr
 

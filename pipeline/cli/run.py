@@ -11,7 +11,7 @@ import argparse
 import signal
 import sys
 
-from pipeline.cmd_synth import uncertainty_arg
+from pipeline.cli.synth import uncertainty_arg
 from synth.config import ORACLES, SOLVERS, STRATEGIES
 
 
@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.batch import run_frames
-    from pipeline.inputs import load_config
+    from pipeline.cli.inputs import load_config
 
     config = load_config(args.config).with_(
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,

@@ -46,7 +46,7 @@ def uncertainty_arg(text: str) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from extractors.atomic import write_text_atomic
-    from pipeline.inputs import load_config, read_scene
+    from pipeline.cli.inputs import load_config, read_scene
     from synth.synthesize import synthesize
 
     config = load_config(args.config).with_(

@@ -98,7 +98,7 @@ def _query_sections(args: argparse.Namespace) -> tuple:
 
     if args.query is None:
         return ()
-    from pipeline.inputs import read_text_file
+    from pipeline.cli.inputs import read_text_file
     from pipeline.report_query import query_section
     from synth.dsl import DslError
     from synth.pattern import parse_pattern

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.cmd_sample import add_sampling_arguments, bounded_int, sample_options
+from pipeline.cli.sample import add_sampling_arguments, bounded_int, sample_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,9 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from pipeline.cmd_sample import read_dsl_program
+    from pipeline.cli.inputs import load_config, read_scene
+    from pipeline.cli.sample import read_dsl_program
     from pipeline.errors import UserError
-    from pipeline.inputs import load_config, read_scene
     from pipeline.render import FORMATS, View, draw, save
     from synth.semantics import check
 

@@ -17,16 +17,16 @@ import sys
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
-    "synth": ("pipeline.cmd_synth", "synthesize a minimum-cost program for one scene JSON"),
-    "check": ("pipeline.cmd_check", "does a DSL program contain a scene? (the semantics checker)"),
-    "extract": ("pipeline.cmd_extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
-    "scene": ("pipeline.cmd_scene", "print one frame of a frames.parquet as scene JSON"),
-    "run": ("pipeline.cmd_run", "one program per frame of a frames.parquet, in parallel, with limits and resume"),
-    "query": ("pipeline.cmd_query", "every frame of a frames dataset that matches a DSL pattern (scenario mining)"),
-    "report": ("pipeline.cmd_report", "report.md / report.html with plots from r2s run's programs"),
-    "render": ("pipeline.cmd_render", "bird's-eye view of a scene, its program's references and sampled variants"),
-    "sample": ("pipeline.cmd_sample", "variants of a recorded scene, sampled from its program, as scene JSON"),
-    "eval-frontend": ("pipeline.cmd_eval_frontend", "detection metrics of predicted frames against ground truth"),
+    "synth": ("pipeline.cli.synth", "synthesize a minimum-cost program for one scene JSON"),
+    "check": ("pipeline.cli.check", "does a DSL program contain a scene? (the semantics checker)"),
+    "extract": ("pipeline.cli.extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
+    "scene": ("pipeline.cli.scene", "print one frame of a frames.parquet as scene JSON"),
+    "run": ("pipeline.cli.run", "one program per frame of a frames.parquet, in parallel, with limits and resume"),
+    "query": ("pipeline.cli.query", "every frame of a frames dataset that matches a DSL pattern (scenario mining)"),
+    "report": ("pipeline.cli.report", "report.md / report.html with plots from r2s run's programs"),
+    "render": ("pipeline.cli.render", "bird's-eye view of a scene, its program's references and sampled variants"),
+    "sample": ("pipeline.cli.sample", "variants of a recorded scene, sampled from its program, as scene JSON"),
+    "eval-frontend": ("pipeline.cli.eval_frontend", "detection metrics of predicted frames against ground truth"),
 }
 
 # verb -> an example, one command a line, run from the repository's root on the data shipped there (after
@@ -142,7 +142,3 @@ def main(argv: list[str] | None = None) -> int:
             raise
         sys.stderr.write(f"r2s {verb}: internal error: {type(exc).__name__}: {exc} (R2S_DEBUG=1 shows the traceback)\n")
         return 1
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -80,8 +80,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def read_dsl_program(path: str):
+    from pipeline.cli.inputs import read_text_file
     from pipeline.errors import UserError
-    from pipeline.inputs import read_text_file
     from synth.dsl import DslError, parse_program
 
     try:
@@ -95,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from extractors.atomic import write_text_atomic
+    from pipeline.cli.inputs import load_config, read_scene, read_text_file
     from pipeline.errors import UserError
-    from pipeline.inputs import load_config, read_scene, read_text_file
     from pipeline.sample import ProgressReport, sample_program, sample_scenic
 
     out = Path(args.out)

@@ -14,8 +14,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipeline.cli.inputs import load_config, read_scene, read_text_file
     from pipeline.errors import UserError
-    from pipeline.inputs import load_config, read_scene, read_text_file
     from synth.dsl import DslError, parse_program
     from synth.semantics import check
 
