@@ -242,8 +242,10 @@ def ensure_generated(text: str, filename: str = "<program>") -> None:
     if expected != text:
         got, want = text.splitlines(), expected.splitlines()
         line = next((i for i, (a, b) in enumerate(zip(got, want)) if a != b), min(len(got), len(want)))
-        raise ScenicProgramError(f"{filename} differs from what r2sgen writes for its own record at line {line + 1}; "
-                                 f"{hint}")
+        # Files written before a change of the emitter (e.g. the collision rule) differ too: say how to renew them.
+        raise ScenicProgramError(f"{filename} differs from what r2sgen writes for its own record at line {line + 1} "
+                                 "(edited, or written by an older r2sgen: write it again with "
+                                 f"`r2s synth SCENE --format scenic`); {hint}")
 
 
 def sample_scenic(text: str, options: SampleOptions, filename: str = "<program>", trusted: bool = False,

@@ -58,6 +58,17 @@ def test_injected_code_is_refused_and_never_runs(generated, tmp_path, where):
     assert not marker.exists() and not (tmp_path / "out").exists()
 
 
+def test_a_file_from_an_older_emitter_says_how_to_write_it_again(generated, tmp_path):
+    # As an older r2sgen wrote it: without the collision rule's requirements (issue 15 added them).
+    older = "".join(line for line in generated.splitlines(keepends=True) if not line.lstrip().startswith("require dsl__apart"))
+    assert older != generated
+    path = tmp_path / "old.scenic"
+    path.write_text(older)
+    proc = run_r2s("sample", str(path), "--n", "1", "--out", str(tmp_path / "out"))
+    assert_one_line_error(proc, 2, contains="older r2sgen: write it again with `r2s synth SCENE --format scenic`")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_forged_record_can_only_yield_what_the_emitter_writes(generated, tmp_path):
     rec = _record(generated)
     # Code smuggled through every free-text field of the record: each is refused by validation, or stays inert.
