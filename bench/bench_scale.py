@@ -192,6 +192,30 @@ def timed(cmd: list[str]) -> dict:
     return {"seconds": time.monotonic() - start, "peak_rss_mb": max(watch.peak_rss_mb, watch.hwm_mb), "stderr": err}
 
 
+def measure_extract(tmp: Path, quick: bool) -> dict:
+    """`r2s extract scenarionet --jobs 1` against `--jobs 2` on the shared scenarios copied under distinct ids,
+    alternated, best of each (the machine is shared); with the load, commit and date it was measured at, so that
+    `--only-extract` can redo it alone on a quiet machine."""
+    load_before = load()
+    scenarios = tmp / "scenarios"
+    n_sc = replicate_scenarios(4 if quick else 60, scenarios)
+    attempts = 1 if quick else 3
+    extract: dict = {}
+    for attempt in range(attempts):
+        for jobs in (1, 2):
+            e = timed([sys.executable, "-m", "pipeline.cli", "extract", "scenarionet", str(scenarios),
+                       "--categories", "all", "--out", str(tmp / f"frames-x{jobs}-{attempt}"), "--jobs", str(jobs)])
+            frames_n = int(re.search(r"(\d+) frames", e["stderr"]).group(1))
+            print(f"extract --jobs {jobs}: {frames_n} frames in {e['seconds']:.1f} s", flush=True)
+            if str(jobs) not in extract or e["seconds"] < extract[str(jobs)]["seconds"]:
+                extract[str(jobs)] = {"seconds": e["seconds"], "frames": frames_n,
+                                      "frames_per_s": frames_n / e["seconds"], "load_at_end": load()}
+    m = machine()
+    return {"scenarios": n_sc, "runs": extract, "attempts": attempts,
+            "speedup": extract["1"]["seconds"] / extract["2"]["seconds"],
+            "load_before": load_before, "load_after": load(), "commit": m["commit"], "date": m["date"]}
+
+
 # ------------------------------------------------------------------------------------------------ main
 
 def main() -> int:
@@ -199,7 +223,11 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="10^4 and 10^5 only, short windows")
     ap.add_argument("--window", type=float, default=60.0, help="seconds of running after the first result (60)")
     ap.add_argument("--tmp", default=None, help="scratch directory (default: the system's; needs ~3 GB)")
+    ap.add_argument("--only-extract", action="store_true",
+                    help="redo only the extract measurement, keeping the other results of bench/results/scale.json")
     args = ap.parse_args()
+    if args.only_extract:
+        return only_extract(args)
     sizes = (10**4, 10**5) if args.quick else (10**4, 10**5, 10**6)
     window = 15.0 if args.quick else args.window
     loads = [load()]
@@ -239,23 +267,21 @@ def main() -> int:
         loads.append(load())
 
         if SCENARIONET.is_dir():
-            scenarios = tmp / "scenarios"
-            n_sc = replicate_scenarios(4 if args.quick else 60, scenarios)
-            extract: dict = {}
-            for attempt in range(1 if args.quick else 2):  # alternated, best of each: the machine is shared
-                for jobs in (1, 2):
-                    e = timed([sys.executable, "-m", "pipeline.cli", "extract", "scenarionet", str(scenarios),
-                               "--categories", "all", "--out", str(tmp / f"frames-x{jobs}-{attempt}"), "--jobs",
-                               str(jobs)])
-                    frames_n = int(re.search(r"(\d+) frames", e["stderr"]).group(1))
-                    print(f"extract --jobs {jobs}: {frames_n} frames in {e['seconds']:.1f} s", flush=True)
-                    if str(jobs) not in extract or e["seconds"] < extract[str(jobs)]["seconds"]:
-                        extract[str(jobs)] = {"seconds": e["seconds"], "frames": frames_n,
-                                              "frames_per_s": frames_n / e["seconds"], "load_at_end": load()}
-            payload["extract"] = {"scenarios": n_sc, "runs": extract, "attempts": 1 if args.quick else 2,
-                                  "speedup": extract["1"]["seconds"] / extract["2"]["seconds"]}
+            payload["extract"] = measure_extract(tmp, args.quick)
     payload["load"] = {"min": min(loads), "max": max(loads), "samples": loads}
     payload["projection"] = projection(payload)
+    write_results("scale", payload, markdown(payload))
+    return 0
+
+
+def only_extract(args) -> int:
+    previous = HERE / "results" / "scale.json"
+    if not previous.exists() or not SCENARIONET.is_dir():
+        print(f"--only-extract needs {previous} and {SCENARIONET}", file=sys.stderr)
+        return 2
+    payload = json.loads(previous.read_text())
+    with tempfile.TemporaryDirectory(prefix="r2s-bench-scale-", dir=args.tmp) as tmp:
+        payload["extract"] = measure_extract(Path(tmp), args.quick)
     write_results("scale", payload, markdown(payload))
     return 0
 
@@ -325,12 +351,14 @@ def markdown(p: dict) -> str:
               f"< {t['report_mb']} MB): {verdict[r['seconds'] < t['report_s'] and r['peak_rss_mb'] < t['report_mb']]}.")
     if "extract" in p:
         e = p["extract"]
+        best = f", best of {e['attempts']} alternated runs" if e.get("attempts", 1) > 1 else ""
+        when = (f" (measured on its own: commit {e['commit']}, {e['date']}, load average {e['load_before']:.1f} "
+                f"before, {e['load_after']:.1f} after)" if "commit" in e else "")
         md.append(f"- `r2s extract scenarionet` over {e['scenarios']} scenario files (the shared nuScenes-mini "
-                  f"scenarios copied under distinct ids), into a dataset directory"
-                  f"{', best of two alternated runs' if e.get('attempts', 1) > 1 else ''}: "
+                  f"scenarios copied under distinct ids), into a dataset directory{best}: "
                   f"{e['runs']['1']['frames_per_s']:.0f} frames/s with --jobs 1, {e['runs']['2']['frames_per_s']:.0f} "
                   f"with --jobs 2: x{e['speedup']:.2f} (target >= x{t['extract_speedup']}): "
-                  f"{verdict[e['speedup'] >= t['extract_speedup']]}.")
+                  f"{verdict[e['speedup'] >= t['extract_speedup']]}{when}.")
     j = p["projection"]
     md += ["", "## Projection: 9 M frames (Waymo Open Motion at 10 Hz) on 100 dask workers", "",
            f"From {j['worker_s_per_frame']:.3f} worker-seconds a real frame ({j['source']}; "
