@@ -92,7 +92,7 @@ def test_import_synth_stays_light():
 def test_synthesize_is_the_function_whatever_was_imported_first():
     """The module synth.synthesize shares the function's name; loading it first (as the pipeline does) must not
     make `from synth import synthesize` the module."""
-    proc = _fresh("import synth.synthesize, pipeline.run_task\nfrom synth import synthesize\nimport synth\n"
+    proc = _fresh("import synth.synthesize, pipeline.batch.task\nfrom synth import synthesize\nimport synth\n"
                   "assert callable(synthesize) and synth.synthesize is synthesize, synthesize\n"
                   "from synth.synthesize import SynthResult\nprint(SynthResult.__name__)")
     assert proc.returncode == 0, proc.stderr

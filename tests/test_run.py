@@ -16,11 +16,11 @@ import pytest
 from conftest import ROOT, assert_one_line_error, run_r2s
 
 from extractors.frames import frame_to_scene, read_frames, scene_to_rows, write_frames
-from pipeline import run_pool
+from pipeline.batch import pool as run_pool
+from pipeline.batch.pool import LokyPool, compute
+from pipeline.batch.rules import PartBuffer, summarize
+from pipeline.batch.task import TEST_HOOK_ENV, ChunkTask
 from pipeline.programs import failure_row, programs_table, read_programs
-from pipeline.run import PartBuffer, summarize
-from pipeline.run_pool import LokyPool, compute
-from pipeline.run_task import TEST_HOOK_ENV, ChunkTask
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check
@@ -251,7 +251,7 @@ def _chunk_tasks(frames: Path, size: int, hook: str | None = None, progress: Pat
                  config: SynthConfig | None = None) -> list[ChunkTask]:
     """The run's own chunking of a frames file into tasks of `size` frames (progress markers in `progress`)."""
     from extractors.frames_dataset import FramesDataset
-    from pipeline.run import chunks
+    from pipeline.batch.rules import chunks
 
     config = config or SynthConfig()
     dataset = FramesDataset.open(frames)
@@ -431,7 +431,7 @@ def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0)
 
 def test_resume_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames(tmp_path):
     from extractors.frame_index import FrameIndex, frame_hashes
-    from pipeline.run_store import RunStore
+    from pipeline.batch.store import RunStore
 
     store = RunStore(tmp_path / "programs")
     store.write_part(programs_table([_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0")]))
@@ -687,9 +687,9 @@ def test_dask_workers_that_cannot_see_the_frames_are_refused_before_anything_is_
     out = tmp_path / "programs"
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
                                   dashboard_address=None, silence_logs=logging.ERROR) as cluster:
-        from pipeline.batch import run_frames
+        from pipeline.batch.pool import DaskPool
+        from pipeline.batch.stage import run_frames
         from pipeline.errors import UserError
-        from pipeline.run_pool import DaskPool
 
         original = DaskPool.check_readable
 

@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise UserError(f"--jobs must be at least 1, got {args.jobs}")
     tally = ExtractTally(warn=lambda line: tqdm.write(line, file=sys.stderr))
-    from pipeline.extract_jobs import extract_parallel, is_dataset
+    from pipeline.batch.extract import extract_parallel, is_dataset
 
     if args.jobs > 1 or is_dataset(args.out):
         try:

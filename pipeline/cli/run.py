@@ -1,7 +1,7 @@
 """`r2s run FRAMES --out PROGRAMS`: one program per frame, in parallel, each frame under its own time and memory
 limit, written in atomic part files so that a stopped run resumes where it stopped.
 
-The verb only reads its options; the work is pipeline.batch.run_frames (the Python API). Heavy modules (pandas,
+The verb only reads its options; the work is pipeline.batch.stage.run_frames (the Python API). Heavy modules (pandas,
 pyarrow, joblib, dask) are imported inside run(), so that the other verbs do not pay for them.
 """
 
@@ -16,7 +16,7 @@ from synth.config import ORACLES, SOLVERS, STRATEGIES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
+    from pipeline.batch.stage import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
 
     p.add_argument("frames", help="frames Parquet file, or a directory of them (r2s extract)")
     p.add_argument("--out", required=True, metavar="PATH",
@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.batch import run_frames
+    from pipeline.batch.stage import run_frames
     from pipeline.cli.inputs import load_config
 
     config = load_config(args.config).with_(

@@ -13,9 +13,9 @@ import os
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 
+from pipeline.batch.pool import DaskPool
+from pipeline.batch.task import one_line
 from pipeline.errors import UserError
-from pipeline.run_pool import DaskPool
-from pipeline.run_task import one_line
 
 CONNECT_TIMEOUT_S = 10
 WORKERS_TIMEOUT_S = 60

@@ -8,7 +8,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
-from pipeline.run import status_line
+from pipeline.batch.rules import status_line
 
 
 def duration(seconds: float) -> str:

@@ -1,5 +1,5 @@
 """Pure logic of `r2s run`: how frames are grouped into chunks, when finished rows become a part file, what the
-summary says. No files and no processes here (those are pipeline.run_store and pipeline.run_pool), so the rules
+summary says. No files and no processes here (those are pipeline.batch.store and pipeline.batch.pool), so the rules
 are tested on plain values.
 """
 

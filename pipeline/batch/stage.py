@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from extractors.frame_index import frame_hashes
+from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.errors import UserError
-from pipeline.run import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from synth.config import SynthConfig, as_config
 
 DEFAULT_CHUNK_SIZE = 32  # frames per task
@@ -112,7 +112,7 @@ class _Run:
 
     def go(self) -> Summary:
         from extractors.frames_dataset import FramesDataset
-        from pipeline.run_store import RunStore
+        from pipeline.batch.store import RunStore
 
         store = RunStore(self.out)
         store.check_writable()
@@ -149,19 +149,19 @@ class _Run:
 
     def _pool(self, todo: int):
         """A context that yields the pool (None when there is nothing to compute)."""
-        from pipeline.run_pool import LokyPool, wall_guard_s
+        from pipeline.batch.pool import LokyPool, wall_guard_s
 
         if todo == 0:
             return nullcontext(None)
         if self.backend == "dask":
-            from pipeline.run_dask import dask_pool
+            from pipeline.batch.cluster import dask_pool
 
             return dask_pool(self.scheduler, self.jobs)
         jobs = min(self.jobs or os.cpu_count() or 1, todo)
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
 
     def _tasks(self, dataset, done, todo: int, slots: int, progress_dir: str | None) -> Iterator:
-        from pipeline.run_task import TEST_HOOK_ENV, ChunkTask
+        from pipeline.batch.task import TEST_HOOK_ENV, ChunkTask
 
         hook = os.environ.get(TEST_HOOK_ENV) or None
 
@@ -178,10 +178,10 @@ class _Run:
                             progress_dir=progress_dir)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
-        from pipeline.run import PartBuffer
-        from pipeline.run_pool import LokyPool, compute
-        from pipeline.run_progress import Progress
-        from pipeline.run_task import ChunkUnreadable
+        from pipeline.batch.pool import LokyPool, compute
+        from pipeline.batch.progress import Progress
+        from pipeline.batch.rules import PartBuffer
+        from pipeline.batch.task import ChunkUnreadable
 
         local = isinstance(pool, LokyPool)
         slots = pool.jobs if local else pool.slots()

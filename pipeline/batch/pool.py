@@ -1,7 +1,7 @@
 """Workers of `r2s run`: a loky process pool (joblib's) or a dask.distributed cluster, and the rule that keeps
 a run going when a worker dies.
 
-The unit of work is a chunk of frames (pipeline.run_task.ChunkTask); the unit of blame is still one frame.
+The unit of work is a chunk of frames (pipeline.batch.task.ChunkTask); the unit of blame is still one frame.
 When a worker dies (killed at its memory limit, by the OOM killer, a segfault in a native library), the chunks
 it ran fail with it and nobody says which frame was to blame. Each chunk's progress marker names the frame it
 was running: the frames before it (finished, rows lost) and after it (not started) are innocent and go back
@@ -26,7 +26,7 @@ from typing import Any, Protocol
 
 import pyarrow as pa
 
-from pipeline.run_task import ChunkTask, one_line, run_chunk
+from pipeline.batch.task import ChunkTask, one_line, run_chunk
 
 
 class WorkerLost(Exception):
