@@ -3,7 +3,7 @@
 The 242 shipped nuScenes-mini keyframes (data/nuscenes-mini-keyframes, up to 141 entities, ~41 rows a frame) are
 replicated under distinct frame ids, rows in their original order: 200,000 frames (8.3 M rows) in one file, and
 1,000,000 frames (41 M rows) as a dataset of ten part files. Each query runs in a fresh process through
-pipeline.query.query_frames (what `r2s query` runs, minus argument parsing), timed by wall clock, with its peak RSS.
+pipeline.query.mining.query_frames (what `r2s query` runs, minus argument parsing), timed by wall clock, with its peak RSS.
 The two-name pattern of the target is data/patterns/pedestrian-beside-vehicle.dsl; the one- and three-name shipped
 patterns run at 200,000 frames too. The baseline is synth.pattern.matches (backtracking, each statement checked by
 synth.semantics as soon as its name is bound) on frames read with pandas and built into scenes, over a subset,
@@ -67,7 +67,7 @@ def replicate(n_frames: int, out: Path, parts: int = 1) -> int:
 
 def one(frames: str, pattern: str, threads: int | None, memory_mb: int | None) -> None:
     """Child process: one query; prints its summary and peak RSS as JSON."""
-    from pipeline.query import query_frames
+    from pipeline.query.mining import query_frames
     from synth.pattern import parse_pattern
 
     with tempfile.TemporaryDirectory(prefix="r2s-bench-query-out-") as tmp:
@@ -114,7 +114,7 @@ def python_baseline(frames: Path, pattern: Path) -> dict:
 def engine_bindings(frames: Path, pattern: Path) -> dict:
     import pyarrow.parquet as pq
 
-    from pipeline.query import query_frames
+    from pipeline.query.mining import query_frames
     from synth.pattern import parse_pattern
 
     pat = parse_pattern(pattern.read_text())

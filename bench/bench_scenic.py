@@ -53,7 +53,7 @@ def timed(fn):
 
 def one_run(result, allow_collisions: bool) -> dict:
     """Compile, sample + read back, then the semantics check, for N_VARIANTS scenes."""
-    from pipeline.sample import SampleOptions, compile_scenic, draw_scenes
+    from pipeline.variants.sample import SampleOptions, compile_scenic, draw_scenes
     from synth.semantics import check
 
     options = SampleOptions(n=N_VARIANTS, seed=0, allow_collisions=allow_collisions, sampler="scenic")

@@ -54,7 +54,7 @@ def overlapping(scene) -> set[frozenset[str]]:
     from shapely import STRtree
     from shapely.geometry import Polygon
 
-    from pipeline.render import ego_frame
+    from pipeline.variants.render import ego_frame
 
     boxes = list(ego_frame(scene).values())
     polys = [Polygon(b.corners()) for b in boxes]

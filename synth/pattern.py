@@ -6,7 +6,7 @@ A pattern is a program in the DSL, parsed by the same parser, with two differenc
 - Ranges are taken as written, of any width (the C_dist / C_head widths are a rule for synthesized programs).
 A match of a pattern in a scene is an injective binding of its names to the scene's non-ego entities, of
 matching types, under which every statement holds by the DSL semantics, REF resolved through the binding
-(synth.semantics: the same functions `r2s check` uses). This module is the definition; pipeline.query is the
+(synth.semantics: the same functions `r2s check` uses). This module is the definition; pipeline.query.mining is the
 vectorized engine over a whole frames dataset, which must agree with it exactly.
 """
 

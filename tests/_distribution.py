@@ -86,7 +86,7 @@ def thinning(program, scene, config) -> tuple[int, float]:
 
 def scenic_draws(program, scene, config, n: int = N_DRAWS, seed: int = 1):
     """n scenes from Scenic's own rejection sampler, and its iterations."""
-    from pipeline.sample import SampleOptions, sample_program
+    from pipeline.variants.sample import SampleOptions, sample_program
 
     drawn = sample_program(program, scene, config, SampleOptions(n=n, seed=seed, sampler="scenic"))
     return drawn.scenes, drawn.iterations

@@ -33,7 +33,7 @@ def test_help_shows_defaults_an_example_and_the_exit_codes(verb):
 
 def test_the_sampling_exit_code_is_the_one_sampling_raises():
     from pipeline.cli import MORE_EXIT_CODES
-    from pipeline.sample import SAMPLING_FAILED_EXIT, SamplingFailed
+    from pipeline.variants.sample import SAMPLING_FAILED_EXIT, SamplingFailed
 
     assert SamplingFailed.exit_code == SAMPLING_FAILED_EXIT
     assert all(MORE_EXIT_CODES[v].startswith(f"{SAMPLING_FAILED_EXIT} ") for v in ("sample", "render"))

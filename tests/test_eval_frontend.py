@@ -9,7 +9,7 @@ import pytest
 from conftest import assert_one_line_error, run_r2s
 
 from extractors.frames import scene_to_rows, write_frames
-from pipeline.frontend_eval import Detected, assign, evaluate, metrics
+from pipeline.evaluation.frontend import Detected, assign, evaluate, metrics
 from synth.scene import Entity, make_scene
 
 EGO = Entity("ego", "Car", 0.0, 0.0, 0.0)

@@ -19,7 +19,7 @@ from query_bruteforce import brute_matches
 
 from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
 from pipeline.cli import main as cli_main
-from pipeline.query import query_frames
+from pipeline.query.mining import query_frames
 from synth.config import SynthConfig
 from synth.dsl import DslError
 from synth.pattern import matches, parse_pattern

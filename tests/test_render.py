@@ -7,7 +7,7 @@ import math
 import pytest
 from conftest import assert_one_line_error, run_r2s
 
-from pipeline.render import Box, ego_frame, references
+from pipeline.variants.render import Box, ego_frame, references
 from synth.dsl import parse_program
 from synth.scene import scene_from_dict
 from synth.synthesize import synthesize
@@ -133,7 +133,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(inputs, tmp_path, case
 
 
 def test_motion_references_are_drawn(tmp_path):
-    from pipeline.render import View, draw, save
+    from pipeline.variants.render import View, draw, save
     from synth.scene import scene_from_dict
 
     program = parse_program(

@@ -17,8 +17,8 @@ from conftest import assert_one_line_error, run_r2s
 from PIL import Image
 
 from pipeline.programs import failure_row, programs_table, read_programs, result_row
-from pipeline.report_plots import PLOT_FILES
-from pipeline.report_stats import bucket_label
+from pipeline.report.plots import PLOT_FILES
+from pipeline.report.stats import bucket_label
 from synth.config import SynthConfig
 from synth.synthesize import synthesize
 

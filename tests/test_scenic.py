@@ -15,8 +15,8 @@ from conftest import all_relation_kinds, assert_one_line_error, run_r2s
 
 pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: the Scenic tests need the compiler")
 
-from pipeline.render import ego_frame  # noqa: E402
-from pipeline.sample import SampleOptions, ScenicProgramError, sample_program, sample_scenic  # noqa: E402
+from pipeline.variants.render import ego_frame  # noqa: E402
+from pipeline.variants.sample import SampleOptions, ScenicProgramError, sample_program, sample_scenic  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
 from synth.dsl import parse_program  # noqa: E402
 from synth.scene import scene_from_dict  # noqa: E402

@@ -12,7 +12,7 @@ from conftest import every_motion_clause, run_r2s, shipped_frames
 
 pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: the Scenic tests need the compiler")
 
-from pipeline.sample import SampleOptions, sample_program, sample_scenic  # noqa: E402
+from pipeline.variants.sample import SampleOptions, sample_program, sample_scenic  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
 from synth.emit_scenic import rebuild_from_source  # noqa: E402
 from synth.scene import Scene  # noqa: E402

@@ -11,7 +11,7 @@ import json
 import pytest
 from conftest import assert_one_line_error, run_r2s
 
-from pipeline.sample import ScenicProgramError, ensure_generated
+from pipeline.variants.sample import ScenicProgramError, ensure_generated
 from synth.emit_scenic import SOURCE_PREFIX, NotGenerated, rebuild_from_source
 from synth.synthesize import synthesize
 

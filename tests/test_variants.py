@@ -18,7 +18,7 @@ from conftest import all_relation_kinds, assert_one_line_error, every_motion_cla
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from pipeline.render import Box, ego_frame
+from pipeline.variants.render import Box, ego_frame
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.geometry import angular_difference
@@ -267,7 +267,7 @@ def test_cli_no_variant_is_exit_4_one_line_nothing_written(tmp_path):
 
 
 def test_progress_is_logged_when_not_a_terminal(real_frames, capsys):
-    from pipeline.sample import ProgressReport, SampleOptions, sample_scenic
+    from pipeline.variants.sample import ProgressReport, SampleOptions, sample_scenic
 
     recorded = next(s for s in real_frames if s.frame_id == "scene-0061/2")
     report = ProgressReport("r2s sample", every_s=0.0)

@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from pipeline.frontend_eval import DEFAULT_MAX_DISTANCE
+from pipeline.evaluation.frontend import DEFAULT_MAX_DISTANCE
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def objects_by_frame(df) -> dict:
     """frame_id -> its non-ego objects as Detected, range measured from the frame's ego row."""
-    from pipeline.frontend_eval import Detected
+    from pipeline.evaluation.frontend import Detected
 
     out = {}
     for fid, rows in df.groupby("frame_id", sort=False):
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from extractors.atomic import write_text_atomic
     from extractors.frames import read_frames
     from pipeline.errors import UserError
-    from pipeline.frontend_eval import evaluate, metrics, table_md
+    from pipeline.evaluation.frontend import evaluate, metrics, table_md
 
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number of metres, got {args.max_distance!r}")
@@ -74,7 +74,7 @@ def plot(ev, doc: dict, method: str, path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from pipeline.render import save
+    from pipeline.variants.render import save
 
     buckets = doc["protocol"]["range_buckets_m"]
     series = {"all": doc["recall_by_range"]} | {t: c["recall_by_range"] for t, c in doc["per_category"].items()}

@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_text_file
     from pipeline.errors import UserError
-    from pipeline.query import query_frames
+    from pipeline.query.mining import query_frames
     from synth.dsl import DslError
     from synth.pattern import parse_pattern
 

@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_scene
     from pipeline.cli.sample import read_dsl_program
     from pipeline.errors import UserError
-    from pipeline.render import FORMATS, View, draw, save
+    from pipeline.variants.render import FORMATS, View, draw, save
     from synth.semantics import check
 
     if Path(args.out).suffix.lstrip(".").lower() not in FORMATS:
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         subtitle = f"program cost {program.cost}, " + (
             "contains the scene" if result.ok else f"does NOT contain the scene ({len(result.violations)} violations)")
         if args.samples:
-            from pipeline.sample import ProgressReport, sample_program
+            from pipeline.variants.sample import ProgressReport, sample_program
 
             progress = ProgressReport("r2s render")
             try:

@@ -29,8 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _report_files() -> frozenset[str]:
-    from pipeline.report import HTML_NAME, MD_NAME
-    from pipeline.report_plots import PLOT_FILES
+    from pipeline.report.document import HTML_NAME, MD_NAME
+    from pipeline.report.plots import PLOT_FILES
 
     return frozenset((MD_NAME, HTML_NAME, *PLOT_FILES))
 
@@ -74,7 +74,7 @@ def staged_directory(target: Path) -> Iterator[Path]:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.errors import UserError
-    from pipeline.report_stats import ProgramsDB
+    from pipeline.report.stats import ProgramsDB
 
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if db.rows == 0:
             raise UserError(f"{args.programs} has no rows: nothing to report (did `r2s run` process any frame?)")
         _check_replaceable(target)
-        from pipeline.report import HTML_NAME, write_report
+        from pipeline.report.document import HTML_NAME, write_report
 
         with staged_directory(target) as stage:
             write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db,
@@ -99,7 +99,7 @@ def _query_sections(args: argparse.Namespace) -> tuple:
     if args.query is None:
         return ()
     from pipeline.cli.inputs import read_text_file
-    from pipeline.report_query import query_section
+    from pipeline.report.query_section import query_section
     from synth.dsl import DslError
     from synth.pattern import parse_pattern
 

@@ -6,7 +6,7 @@ files; sample k does not depend on K. Or `--program P.dsl --scene S.json`: the D
 describes. Every variant is checked against the DSL semantics, and in every variant two boxes overlap only if
 they overlap in the recorded scene (the collision rule the emitted text states).
 
-Samplers (`--sampler`, see pipeline.sample): `gibbs` (default) is r2sgen's Metropolis-within-Gibbs chain over the
+Samplers (`--sampler`, see pipeline.variants.sample): `gibbs` (default) is r2sgen's Metropolis-within-Gibbs chain over the
 program's Ranges, started at the recording (`--burn-in`, `--thin` in sweeps); `scenic` is the Scenic compiler's
 rejection sampler over whole scenes (`--max-iterations` per scene): the same distribution, exact, but only for
 small scenes. A hand-edited file (`--trusted`) can only be sampled by Scenic.
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
+from pipeline.variants.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
 
 
 def bounded_int(lo: int, hi: int):
@@ -57,7 +57,7 @@ def add_sampling_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def sample_options(args: argparse.Namespace, n: int):
-    from pipeline.sample import SampleOptions
+    from pipeline.variants.sample import SampleOptions
 
     return SampleOptions(n=n, seed=args.seed, max_iterations=args.max_iterations,
                          allow_collisions=args.allow_collisions, sampler=args.sampler, burn_in=args.burn_in,
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     from extractors.atomic import write_text_atomic
     from pipeline.cli.inputs import load_config, read_scene, read_text_file
     from pipeline.errors import UserError
-    from pipeline.sample import ProgressReport, sample_program, sample_scenic
+    from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

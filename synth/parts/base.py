@@ -13,7 +13,7 @@ form (cost 2). The rest of the core is written once, over parts:
   semantics             holds, observed                       -> semantics (the independent checker)
   syntax                parse (printing is the clause's __str__) -> dsl
   Scenic                keyword, scenic, needs_own_position, scenic_requirements, scenic_prelude -> emit_scenic
-  report                kinds, kind                           -> pipeline.report_stats
+  report                kinds, kind                           -> pipeline.report.stats
 
 The SMT methods take the backend as an argument and build formulas from its primitives (q, var, offset, cone,
 distance_in, angle_in, check, fresh_check, robust_cone, And, Not, Or, BoolVal), so one encoding serves z3 and

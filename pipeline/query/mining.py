@@ -1,6 +1,6 @@
 """Scenario mining: every frame of a frames dataset that matches a pattern (synth.pattern), through DuckDB.
 
-The pattern becomes one query (pipeline.query_sql); this module owns the I/O around it: the input (a frames file or
+The pattern becomes one query (pipeline.query.sql); this module owns the I/O around it: the input (a frames file or
 dataset, checked by extractors.frames_dataset as every verb checks it), the DuckDB session (threads, memory limit,
 a spill directory), the exact re-check of near-boundary bindings in Python, and the atomic, streaming write of
 matches.parquet.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from extractors.frames import FramesError
 from extractors.frames_dataset import FramesDataset
-from pipeline.query_sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
+from pipeline.query.sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
 from synth.scene import EGO_ID, Entity

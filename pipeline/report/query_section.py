@@ -1,8 +1,8 @@
 """`r2s report --query PATTERN --frames FRAMES`: a report section on the frames that match a pattern.
 
-The match count comes from pipeline.query over the frames the programs came from; the frames with the most
+The match count comes from pipeline.query.mining over the frames the programs came from; the frames with the most
 bindings are listed with their first binding, each program the run wrote for them and the command that renders
-the frame with its program. The section is one more builder passed to pipeline.report.write_report.
+the frame with its program. The section is one more builder passed to pipeline.report.document.write_report.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.report import MISSING, Details, ReportContext, Section, SectionBuilder, Table, render_command
-from pipeline.report_stats import programs_text
+from pipeline.report.document import MISSING, Details, ReportContext, Section, SectionBuilder, Table, render_command
+from pipeline.report.stats import programs_text
 from synth.config import SynthConfig
 from synth.pattern import Pattern
 
@@ -36,7 +36,7 @@ def top_matches(matches: Path, top: int) -> list[MatchedFrame]:
 def query_section(pattern: Pattern, pattern_name: str, frames: str, top: int = 10,
                   config: SynthConfig | None = None) -> SectionBuilder:
     def build(ctx: ReportContext) -> Section:
-        from pipeline.query import query_frames
+        from pipeline.query.mining import query_frames
 
         with tempfile.TemporaryDirectory(prefix="r2s-report-query-") as tmp:
             summary = query_frames(frames, pattern, Path(tmp) / "matches.parquet", config=config, log=lambda _: None)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.report_stats import (
+from pipeline.report.stats import (
     ABSOLUTE_COST_PER_ENTITY,
     HEADING_KINDS,
     MOTION_KINDS,

@@ -56,7 +56,7 @@ COS_MARGIN = 1e-9  # on cosines, relative to |v|
 TINY = 1e-100  # metres: shorter vectors are never sure
 WILD_XY = 1e6
 WILD_HEADING = 1e4
-ROWS = "r2s_rows"  # the view of the frames rows the query reads (pipeline.query creates it)
+ROWS = "r2s_rows"  # the view of the frames rows the query reads (pipeline.query.mining creates it)
 EXACT_UDF = "r2s_exact"
 
 # synth.geometry.normalize, operation for operation (the heading Ranges use it).

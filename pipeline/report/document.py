@@ -1,6 +1,6 @@
 """report.md and report.html from a programs file or dataset: one document model, two renderers.
 
-The statistics come from pipeline.report_stats (DuckDB queries) and the pictures from pipeline.report_plots; this
+The statistics come from pipeline.report.stats (DuckDB queries) and the pictures from pipeline.report.plots; this
 module only arranges them into sections and tables, then prints that one document as Markdown and as
 self-contained HTML (inline CSS, plots embedded as base64), so the two files can never disagree.
 
@@ -23,8 +23,8 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.programs import STATUSES
-from pipeline.report_plots import Plot, all_plots
-from pipeline.report_stats import (
+from pipeline.report.plots import Plot, all_plots
+from pipeline.report.stats import (
     ABSOLUTE_COST_PER_ENTITY,
     FailureGroup,
     GroupStats,
