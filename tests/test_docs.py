@@ -112,3 +112,23 @@ def test_readme_python_block_runs_as_written(k, tmp_path):
     block = python_blocks(ROOT / "README.md")[k]
     proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"README python block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
+
+
+def test_the_layout_map_names_every_room_and_module():
+    """docs/layout.md is where a newcomer finds the room for a change (the README links it): it links every package
+    of the code and names every module of synth/, extractors/ and pipeline/'s rooms, so a move or a new module
+    that forgets the map fails here."""
+    layout = ROOT / "docs" / "layout.md"
+    text = layout.read_text()
+    linked = {(layout.parent / t).resolve() for t in links(layout)}
+    unlinked, unnamed = [], []
+    for folder in ("synth", "extractors", "pipeline"):
+        for init in sorted((ROOT / folder).rglob("__init__.py")):
+            if init.parent.resolve() not in linked:
+                unlinked.append(str(init.parent.relative_to(ROOT)))
+    modules = [*(ROOT / "synth").glob("*.py"), *(ROOT / "extractors").glob("*.py"), *(ROOT / "pipeline").rglob("*.py")]
+    for f in sorted(modules):
+        if f.name not in ("__init__.py", "__main__.py") and f"`{f.name}`" not in text:
+            unnamed.append(str(f.relative_to(ROOT)))
+    assert not unlinked and not unnamed, (unlinked, unnamed)
+    assert "](docs/layout.md)" in (ROOT / "README.md").read_text()
