@@ -22,7 +22,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))  # tests.support
 
 from common import machine, write_results  # noqa: E402
 from realdata import SHARED  # noqa: E402
@@ -52,7 +52,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
-    import _log_fixtures as fx
+    from tests.support import logs as fx
 
     results = []
     shared_sn = SHARED / "data" / "nuscenes-mini" / "scenarionet"

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "bench"), str(ROOT / "tests"), str(ROOT)]
+sys.path[:0] = [str(ROOT / "bench"), str(ROOT)]
 
 from common import machine, write_results  # noqa: E402
 from realdata import available, keyframe_scenes  # noqa: E402
@@ -38,7 +38,7 @@ def program_scene() -> Scene:
         frames = [s for s in keyframe_scenes(vehicles_only=True) if len(s.others) == 20]
         if frames:
             return frames[0]
-    from conftest import shipped_frames
+    from tests.support import shipped_frames
 
     big = next(s for s in shipped_frames() if s.frame_id == "scene-0061/2")
     nearest = sorted(big.others, key=lambda e: e.x * e.x + e.y * e.y)[:20]
@@ -95,9 +95,8 @@ def main() -> int:
         rows["collisions allowed" if allow else "collisions as in the recording (default)"] = median_of(runs)
     cli_s = statistics.median(cli_run(result, scene) for _ in range(REPEATS))
 
-    from conftest import shipped_frames
-
     from synth.overlap import scene_overlaps
+    from tests.support import shipped_frames
 
     scale = []
     for frame in ("scene-0061/2", "scene-0061/18"):

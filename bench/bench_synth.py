@@ -3,7 +3,7 @@
 
 1. Before / after (issue 18). Frame sets (bench/workloads.py): all 242 shipped nuScenes-mini keyframes (all
    categories within 50 m), Waymo-like ScenarioNet frames (real nuScenes tracks in the Waymo converter's layout,
-   needs ../shared) and dense crowds (tests/crowds.py). Each set is synthesized with the default configuration
+   needs ../shared) and dense crowds (tests/support/crowds.py). Each set is synthesized with the default configuration
    (auto, hybrid oracle, z3: certified) by this tree ("after") and by a frozen checkout of the baseline commit
    ("before", `git archive` into a temporary folder), each in its own warmed process (bench/synth_worker.py),
    frame by frame in turn (so both see the same load on a shared machine). Per frame: wall time and its split into relation oracle, search, Alg. 4

@@ -12,7 +12,7 @@ and its agreement with Scenic's own sampler.
    over a long run from the recorded scene, seconds per sweep, and the default sweeps per variant against it.
 3. Same distribution. On the keyframes small enough for Scenic's rejection (N <= 8) and a crowded synthetic
    scene where the rule binds: two-sample KS tests of every parameter and pairwise distance, the chain against
-   Scenic (tests/_distribution.py: 400 draws a side, Bonferroni at 0.01).
+   Scenic (tests/support/distribution.py: 400 draws a side, Bonferroni at 0.01).
 
 Writes bench/results/variants.json and variants.md, with the machine's load average before and after.
 `--quick`: every 8th keyframe, shorter mixing runs, two distribution frames.
@@ -33,7 +33,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path[:0] = [str(HERE), str(ROOT / "tests"), str(ROOT)]
+sys.path[:0] = [str(HERE), str(ROOT)]
 
 from common import machine, write_results  # noqa: E402
 
@@ -127,11 +127,11 @@ def by_bin(rows: list[dict]) -> list[dict]:
 
 def mixing(scenes, sweeps: int) -> list[dict]:
     import numpy as np
-    from _distribution import autocorrelation_times
 
     from synth.config import SynthConfig
     from synth.gibbs import DEFAULT_THIN, Chain
     from synth.synthesize import synthesize
+    from tests.support.distribution import autocorrelation_times
 
     rows = []
     for target in MIXING_N:
@@ -154,10 +154,9 @@ def mixing(scenes, sweeps: int) -> list[dict]:
 
 
 def distribution(scenes, limit: int | None) -> list[dict]:
-    from _distribution import TIGHT, TIGHT_PROGRAM, compare, scenic_draws
-
     from synth.config import SynthConfig
     from synth.synthesize import synthesize
+    from tests.support.distribution import TIGHT, TIGHT_PROGRAM, compare, scenic_draws
 
     cases = [(s, synthesize(s).program) for s in scenes if len(s.others) <= 8][:limit]
     cases.append((TIGHT, TIGHT_PROGRAM))
@@ -216,7 +215,7 @@ def markdown(payload: dict) -> str:
            "marginals), 400 draws a side: Scenic's rejection sampler against the chain thinned by twice its largest "
            "measured autocorrelation time. Same distribution if the smallest p-value stays above 0.01 / m "
            "(Bonferroni); with 400 a side a marginal whose CDFs differ by more than ~0.15 is caught "
-           "(tests/_distribution.py; tests/test_variants.py shows a half-width sector and an ignored rule are).", "",
+           "(tests/support/distribution.py; tests/synth/test_variants.py shows a half-width sector and an ignored rule are).", "",
            "| frame | N | m | smallest p | threshold | same | thin (sweeps) | tau max | Scenic iterations per scene |",
            "|---|---|---|---|---|---|---|---|---|"]
     for r in payload["distribution"]:

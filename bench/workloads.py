@@ -7,7 +7,7 @@
   `r2s extract scenarionet --categories all`, one frame every `every` steps of the 10 Hz tracks. The shared
   data has no Waymo recording; this is the Waymo layout and rate over real boxes. Steps 5k hold the nuScenes
   annotations themselves, the others ScenarioNet's interpolation between them.
-- crowds: tests/crowds.py, dense crowds of 50-60 pedestrians with barriers, cones and cars (seeds 0..count-1).
+- crowds: tests/support/crowds.py, dense crowds of 50-60 pedestrians with barriers, cones and cars (seeds 0..count-1).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
-for p in (str(ROOT / "tests"), str(HERE)):
+for p in (str(ROOT), str(HERE)):  # ROOT: tests.support
     if p not in sys.path:
         sys.path.insert(0, p)
 
@@ -45,11 +45,11 @@ def waymo_like(every: int = 10) -> list[dict]:
     if not SCENARIONET.is_dir():
         return []
     import pandas as pd
-    from _scenarionet_layouts import as_waymo, load_real, write_single_worker
 
     from extractors import scenarionet
     from extractors.base import ExtractOptions
     from extractors.categories import CategorySelection
+    from tests.support.scenarionet_layouts import as_waymo, load_real, write_single_worker
 
     scenarios = [as_waymo(load_real(p)) for p in sorted(SCENARIONET.glob("*.pkl"))]
     with tempfile.TemporaryDirectory() as tmp:
@@ -60,6 +60,6 @@ def waymo_like(every: int = 10) -> list[dict]:
 
 
 def crowds(count: int) -> list[dict]:
-    from crowds import crowd_scenes
+    from tests.support.crowds import crowd_scenes
 
     return [s.to_dict() for s in crowd_scenes(count)]

@@ -5,7 +5,7 @@ paper's text read by Scenic would sample scenes the DSL does not describe. Inste
 helper per DSL relation (centre distance within the Range, a +-delta1 sector, a +-delta2 heading tolerance), and
 each entity is one statement naming its relation. Compile with scenic.scenarioFromString(text, mode2D=True).
 
-What the text relies on, each point checked against scenic 3.1.1 (tests/test_scenic.py samples real programs
+What the text relies on, each point checked against scenic 3.1.1 (tests/synth/test_scenic.py samples real programs
 and runs every sampled scene through synth.semantics.check):
 - Headings: Scenic's are radians counter-clockwise from +y, ours degrees counter-clockwise from +y; `deg` converts.
   An object's heading is its yaw exactly (global parent orientation), so no quaternion round trip blurs it.
@@ -16,7 +16,7 @@ and runs every sampled scene through synth.semantics.check):
 - Bearings are taken as `angle from (0 @ 0) to (q - p)`: scenic 3.1.1 fails to sample `angle from p to q` when
   p is the position of a random object ("cannot iterate through a random value"); from a fixed origin it works.
 - Ranges are printed as in the DSL, unshrunk, with one exception. Scenic samples Range(a, b) with
-  random.uniform, so a bound itself can come out (tests/test_scenic.py forces every Range to its bounds); float
+  random.uniform, so a bound itself can come out (tests/synth/test_scenic.py forces every Range to its bounds); float
   rounding then moves a distance or an angle by ~1e-13, far inside the checker's 1e-9 slack. The exception is
   a distance Range that starts at 0 (the synthesizer clamps centred distances there): at distance 0 the bearing
   is undefined and the DSL's direction relations do not hold, and just above 0 the bearing the checker

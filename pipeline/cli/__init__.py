@@ -31,7 +31,7 @@ VERBS: dict[str, tuple[str, str]] = {
 
 # verb -> an example, one command a line, run from the repository's root on the data shipped there (after
 # `make setup`, with .venv/bin on PATH). Lines that make an input are repeated where a verb needs one, so that
-# each example runs alone; tests/test_cli_help.py runs them all.
+# each example runs alone; tests/pipeline/cli/test_cli_help.py runs them all.
 _SCENE = "r2s scene data/nuscenes-mini-keyframes/frames.parquet scene-0103/0 --out scene.json"
 _EXCERPT = "r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --out frames.parquet"
 EXAMPLES: dict[str, tuple[str, ...]] = {

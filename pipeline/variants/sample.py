@@ -10,7 +10,7 @@ recording; synth.collision_rule), which the emitted text states as requirements.
   record, after checking that the text is exactly what the emitter writes from that record.
 - `scenic`: the official compiler (scenic 3.1.1) compiles the text and rejection-samples whole scenes. Exact and
   independent, but its acceptance falls exponentially with the number of entities: the reference for small
-  scenes (tests/test_variants.py compares the two), and the only sampler for a hand-edited text (--trusted).
+  scenes (tests/synth/test_variants.py compares the two), and the only sampler for a hand-edited text (--trusted).
 
 Scenic draws from Python's `random` and numpy's global generators; both are seeded for a run and restored
 afterwards, so the same text and seed give the same scenes in any process, and a caller's own random state is

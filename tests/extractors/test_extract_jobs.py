@@ -1,0 +1,69 @@
+"""`r2s extract --jobs N` and dataset outputs, as a user runs them: the same frames as one reader gives, in the
+same order, whatever the number of workers; bad input leaves nothing behind."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pandas as pd
+
+from tests.support import ROOT, assert_one_line_error, run_r2s
+
+EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
+
+
+def _leftovers(out: Path) -> list[str]:
+    return [p.name for p in out.parent.iterdir() if p.name.startswith(f".{out.name}")]
+
+
+def test_parallel_extraction_gives_the_frames_of_one_reader(tmp_path):
+    one = tmp_path / "one.parquet"
+    assert run_r2s("extract", "scenarionet", str(EXCERPT), "--categories", "all", "--out", str(one)).returncode == 0
+    expected = pd.read_parquet(one)
+    for jobs, out in (("2", tmp_path / "frames"), ("2", tmp_path / "merged.parquet"), ("1", tmp_path / "seq")):
+        proc = run_r2s("extract", "scenarionet", str(EXCERPT), "--categories", "all", "--out", str(out),
+                       "--jobs", jobs)
+        assert proc.returncode == 0, proc.stderr
+        assert f"3 scenarios, {expected['frame_id'].nunique()} frames, {len(expected)} rows -> {out}" in proc.stderr
+        got = pd.read_parquet(out)
+        pd.testing.assert_frame_equal(got, expected)  # same rows, same order: parts follow the input's order
+        assert _leftovers(out) == []
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == [f"part-{i:06d}.parquet" for i in range(3)]
+    # A frames dataset is a run's input as it is.
+    proc = run_r2s("scene", str(tmp_path / "frames"), expected["frame_id"].iloc[-1])
+    assert proc.returncode == 0 and '"frame_id"' in proc.stdout
+
+
+def test_a_scene_given_twice_is_read_once_as_by_one_reader(tmp_path):
+    db = tmp_path / "db"
+    db.mkdir()
+    first = sorted(EXCERPT.glob("sd_*.pkl"))[0]
+    shutil.copy(first, db / "a.pkl")
+    shutil.copy(first, db / "b.pkl")  # the same scenario id in a second file
+    out = tmp_path / "frames"
+    proc = run_r2s("extract", "scenarionet", str(db), "--categories", "all", "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "skipping" in proc.stderr and "b.pkl" in proc.stderr and "already read from" in proc.stderr
+    assert [p.name for p in out.iterdir()] == ["part-000000.parquet"]
+
+
+def test_bad_input_writes_nothing_and_an_old_output_stays(tmp_path):
+    db = tmp_path / "db"
+    db.mkdir()
+    shutil.copy(sorted(EXCERPT.glob("sd_*.pkl"))[0], db / "a.pkl")
+    (db / "b.pkl").write_bytes(b"not a pickle")
+    out = tmp_path / "frames"
+    proc = run_r2s("extract", "scenarionet", str(db), "--out", str(out), "--jobs", "2")
+    assert_one_line_error(proc, 2)
+    assert not out.exists() and _leftovers(out) == []
+    assert run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(out), "--jobs", "2").returncode == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    proc = run_r2s("extract", "scenarionet", str(db), "--out", str(out), "--jobs", "2")
+    assert_one_line_error(proc, 2)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before and _leftovers(out) == []
+    (out / "notes.txt").write_text("mine")
+    proc = run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(out), "--jobs", "2")
+    assert_one_line_error(proc, 2, "not frames parts")
+    assert_one_line_error(run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(tmp_path / "x"), "--jobs", "0"),
+                          2, "--jobs")

@@ -1,0 +1,148 @@
+"""`r2s synth` and `r2s check` as a user runs them: formats, fields, exit codes, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.support import assert_one_line_error, run_r2s
+
+FIG2 = {"frame_id": "fig2", "entities": [
+    {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},
+    {"id": "car1", "type": "Car", "x": 3, "y": 8, "heading": 0},
+    {"id": "car2", "type": "Car", "x": 3, "y": 5, "heading": 0},
+    {"id": "car3", "type": "Car", "x": 0, "y": 5, "heading": 0},
+]}
+
+
+@pytest.fixture
+def fig2(tmp_path):
+    p = tmp_path / "fig2.json"
+    p.write_text(json.dumps(FIG2))
+    return p
+
+
+def test_json_output_has_the_contract_fields(fig2):
+    proc = run_r2s("synth", str(fig2), "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert set(doc) == {"frame_id", "status", "cost", "lower_bound", "n_entities", "program", "scenic", "certified", "stats"}
+    assert set(doc["stats"]) == {"runtime_s", "search_s", "smt_s", "smt_queries", "nodes_expanded", "peak_rss_mb"}
+    assert (doc["frame_id"], doc["status"], doc["cost"], doc["lower_bound"], doc["n_entities"]) == ("fig2", "optimal", 1, 1, 3)
+    assert doc["certified"] is True
+    statements = [line for line in doc["scenic"].splitlines() if not line.startswith("#")]
+    assert sum(" = new Car " in line for line in statements) == 4
+
+
+def test_dsl_output_round_trips_through_check(fig2, tmp_path):
+    proc = run_r2s("synth", str(fig2), "--strategy", "bfs-cpa", "--oracle", "smt")
+    assert proc.returncode == 0, proc.stderr
+    assert len(proc.stdout.strip().splitlines()) == 3
+    prog = tmp_path / "p.dsl"
+    prog.write_text(proc.stdout)
+    ok = run_r2s("check", str(fig2), str(prog))
+    assert ok.returncode == 0 and ok.stdout.startswith("ok"), ok.stdout + ok.stderr
+
+
+def test_check_reports_violations_with_exit_3(fig2, tmp_path):
+    prog = tmp_path / "p.dsl"
+    prog.write_text("car3 = new Car behind ego by Range(0, 5), facing away from ego\n"
+                    "car2 = new Car right of car3 by Range(0.5, 5.5), facing Range(-2.5, 2.5) deg relative to ego\n")
+    proc = run_r2s("check", str(fig2), str(prog))
+    assert proc.returncode == 3
+    out = proc.stdout
+    assert "car3: position" in out and "car1: missing" in out and "car2" not in out
+
+
+def test_out_file_and_scenic_format(fig2, tmp_path):
+    out = tmp_path / "sub" / "prog.scenic"
+    proc = run_r2s("synth", str(fig2), "--format", "scenic", "--out", str(out))
+    assert proc.returncode == 0 and proc.stdout == ""
+    assert "sector_ahead(ego" in out.read_text()
+    assert not list(out.parent.glob(".*.tmp"))
+
+
+def test_a_timeout_still_produces_a_program_and_says_so(tmp_path, real_frames):
+    scene = next(s for s in real_frames if len(s.others) == 12)
+    p = tmp_path / "s.json"
+    p.write_text(scene.to_json())
+    proc = run_r2s("synth", str(p), "--strategy", "bfs", "--oracle", "closed-form", "--time-limit", "0.01", "--format", "json")
+    assert proc.returncode == 0
+    doc = json.loads(proc.stdout)
+    assert doc["status"] in ("feasible", "timeout") and doc["lower_bound"] <= doc["cost"]
+    assert doc["status"] in proc.stderr
+
+
+BAD_SCENES = {
+    "not json": ("{ this is not json", "not valid JSON"),
+    "empty": ("", "empty"),
+    "nan": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": NaN, "y": 0, "heading": 0}]}', "NaN"),
+    "infinity": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 1, "y": Infinity, "heading": 0}]}', "Infinity"),
+    "huge number": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 1e999, "y": 0, "heading": 0}]}', "finite"),
+    "no ego": ('{"frame_id": "f", "entities": [{"id": "car1", "type": "Car", "x": 1, "y": 0, "heading": 0}]}', "ego"),
+    "two egos": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},'
+                 '{"id": "ego", "type": "Car", "x": 1, "y": 0, "heading": 0}]}', "duplicate"),
+    "duplicate id": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},'
+                     '{"id": "car1", "type": "Car", "x": 1, "y": 0, "heading": 0},'
+                     '{"id": "car1", "type": "Car", "x": 2, "y": 0, "heading": 0}]}', "duplicate"),
+    "non-identifier id": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},'
+                          '{"id": "car 1", "type": "Car", "x": 1, "y": 0, "heading": 0}]}', "identifier"),
+    "keyword id": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},'
+                   '{"id": "lambda", "type": "Car", "x": 1, "y": 0, "heading": 0}]}', "reserved"),
+    "string for number": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": "0", "y": 0, "heading": 0}]}', "number"),
+    "bool for number": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": true, "y": 0, "heading": 0}]}', "number"),
+    "unknown type": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Spaceship", "x": 0, "y": 0, "heading": 0}]}', "unknown type"),
+    "missing field": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "heading": 0}]}', "lacks y"),
+    "entities not a list": ('{"frame_id": "f", "entities": {"ego": 1}}', "list"),
+    "top level list": ('[1, 2, 3]', "object"),
+    "negative length": ('{"frame_id": "f", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0, "length": -1}]}', "positive"),
+    "binary": ("\udcff\udcfe", "UTF-8"),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_SCENES))
+def test_bad_scenes_exit_2_with_one_clear_line(name, tmp_path):
+    text, needle = BAD_SCENES[name]
+    p = tmp_path / "bad.json"
+    p.write_bytes(text.encode("utf-8", "surrogateescape"))
+    out = tmp_path / "out.dsl"
+    assert_one_line_error(run_r2s("synth", str(p), "--out", str(out)), 2, needle)
+    assert not out.exists()
+
+
+def test_missing_file_and_directory_and_bad_usage(tmp_path):
+    assert_one_line_error(run_r2s("synth", str(tmp_path / "nope.json")), 2, "does not exist")
+    assert_one_line_error(run_r2s("synth", str(tmp_path)), 2, "directory")
+    assert_one_line_error(run_r2s("synth"), 2)
+    assert_one_line_error(run_r2s("synth", "x.json", "--strategy", "magic"), 2, "invalid choice")
+    assert_one_line_error(run_r2s("frobnicate"), 2, "unknown verb")
+
+
+def test_bad_config_and_unavailable_dreal_are_usage_errors(fig2, tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[synth]\ndelta1 = 100\n")
+    assert_one_line_error(run_r2s("synth", str(fig2), "--config", str(cfg)), 2, "delta1")
+    cfg.write_text("[synth]\nspeed = 3\n")
+    assert_one_line_error(run_r2s("synth", str(fig2), "--config", str(cfg)), 2, "unknown config key")
+    cfg.write_text("[synth\n")
+    assert_one_line_error(run_r2s("synth", str(fig2), "--config", str(cfg)), 2, "TOML")
+    try:
+        import dreal  # noqa: F401
+    except ImportError:
+        assert_one_line_error(run_r2s("synth", str(fig2), "--solver", "dreal"), 2, "libibex")
+
+
+def test_bad_program_for_check(fig2, tmp_path):
+    prog = tmp_path / "p.dsl"
+    prog.write_text("car1 = new Car ahead of car9 by Range(0, 5), facing away from ego\n")
+    assert_one_line_error(run_r2s("check", str(fig2), str(prog)), 2, "car9")
+
+
+def test_entity_cap_on_the_command_line(tmp_path):
+    doc = {"frame_id": "many", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0}] +
+           [{"id": f"car{i}", "type": "Car", "x": 3.0 * i, "y": 0, "heading": 0} for i in range(1, 6)]}
+    p = tmp_path / "s.json"
+    p.write_text(json.dumps(doc))
+    assert_one_line_error(run_r2s("synth", str(p), "--max-entities", "3"), 2, "cap of 3")
+    assert run_r2s("synth", str(p), "--max-entities", "10").returncode == 0

@@ -1,0 +1,160 @@
+"""`r2s render`: the bird's-eye view's geometry, the images it writes, and its one-line errors."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pipeline.variants.render import Box, ego_frame, references
+from synth.dsl import parse_program
+from synth.scene import scene_from_dict
+from synth.synthesize import synthesize
+from tests.support import assert_one_line_error, run_r2s
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def test_ego_frame_puts_ego_at_the_origin_facing_up():
+    # ego at (10, 5) facing 90 deg (-x); car1 10 m ahead of it, facing the same way; ped1 4 m to its right.
+    scene = scene_from_dict({"frame_id": "f", "entities": [
+        {"id": "ego", "type": "Car", "x": 10, "y": 5, "heading": 90},
+        {"id": "car1", "type": "Car", "x": 0, "y": 5, "heading": 90},
+        {"id": "ped1", "type": "Pedestrian", "x": 10, "y": 9, "heading": 0}]})
+    boxes = ego_frame(scene)
+    ego, car, ped = boxes["ego"], boxes["car1"], boxes["ped1"]
+    assert (ego.x, ego.y, ego.heading) == (0, 0, 0)
+    assert car.x == pytest.approx(0, abs=1e-9) and car.y == pytest.approx(10) and car.heading == 0
+    assert ped.x == pytest.approx(4) and ped.y == pytest.approx(0, abs=1e-9) and ped.heading == 270
+
+
+def test_box_corners_follow_the_heading():
+    b = Box("car1", "Car", 1.0, 2.0, 90.0, 4.0, 2.0)  # facing -x: length along x, width along y
+    xs = sorted(round(c[0], 9) for c in b.corners())
+    ys = sorted(round(c[1], 9) for c in b.corners())
+    assert xs == [-1, -1, 3, 3] and ys == [1, 1, 3, 3]
+    fx, fy = b.front()
+    assert (round(fx, 9), round(fy, 9)) == (-1, 2)
+    assert math.isclose(abs(_area(b.corners())), 8.0)
+
+
+def _area(pts):
+    return sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(pts, pts[1:] + pts[:1])) / 2
+
+
+def test_references_name_each_relation_kind():
+    program = parse_program(
+        "car1 = new Car ahead of ego by Range(5, 10), facing toward ego\n"
+        "car2 = new Car on Range(1, 6) @ Range(0, 5) relative to car1, facing Range(0, 5) deg relative to ego\n"
+        "car3 = new Car on Range(1, 6) @ Range(0, 5), facing Range(0, 5) deg\n")
+    arrows, marks = references(program)
+    assert [(r.ref, r.entity, r.kind) for r in arrows] == [
+        ("ego", "car1", "sector"), ("ego", "car1", "facing"),
+        ("car1", "car2", "relative_xy"), ("ego", "car2", "relative_heading")]
+    assert [(m.entity, m.kind) for m in marks] == [("car3", "absolute_position"), ("car3", "absolute_heading")]
+
+
+@pytest.fixture(scope="module")
+def inputs(real_frames, tmp_path_factory):
+    d = tmp_path_factory.mktemp("render")
+    scene = next(s for s in real_frames if s.frame_id == "scene-0757/0")  # all categories, 11 entities
+    (d / "scene.json").write_text(scene.to_json())
+    (d / "p.dsl").write_text(str(synthesize(scene).program))
+    return d
+
+
+def _png_size(path):
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    return width, height
+
+
+def test_render_writes_a_png(inputs, tmp_path):
+    out = tmp_path / "bev.png"
+    proc = run_r2s("render", str(inputs / "scene.json"), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    w, h = _png_size(out)
+    assert w > 600 and h > 400
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(out)
+    assert pixels.std() > 0.05  # something is drawn, not a blank canvas
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_render_with_program_and_samples_is_reproducible(inputs, tmp_path):
+    pytest.importorskip("scenic", reason="scenic (3.1.1) is not importable here: --samples needs the compiler")
+    plain, a, b = tmp_path / "plain.png", tmp_path / "a.png", tmp_path / "b.png"
+    base = ("render", str(inputs / "scene.json"), "--program", str(inputs / "p.dsl"))
+    assert run_r2s(*base, "--out", str(plain)).returncode == 0
+    for out in (a, b):
+        proc = run_r2s(*base, "--samples", "6", "--seed", "3", "--allow-collisions", "--out", str(out))
+        assert proc.returncode == 0, proc.stderr
+    _png_size(a)
+    assert a.read_bytes() == b.read_bytes()  # same seed, same picture
+    assert a.read_bytes() != plain.read_bytes()  # the variants are drawn
+
+
+def test_render_svg(inputs, tmp_path):
+    out = tmp_path / "bev.svg"
+    assert run_r2s("render", str(inputs / "scene.json"), "--program", str(inputs / "p.dsl"), "--out", str(out)).returncode == 0
+    assert out.read_text().lstrip().startswith("<?xml")
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing scene", "does not exist"),
+    ("bad scene", "not valid JSON"),
+    ("bad program", "line 1"),
+    ("foreign program", "not an entity"),
+    ("samples without program", "--samples needs --program"),
+    ("bad suffix", "must end in"),
+    ("negative samples", "--samples"),
+])
+def test_bad_input_is_one_line_exit_2_and_nothing_written(inputs, tmp_path, case, message):
+    (tmp_path / "bad.json").write_text("{ nope")
+    (tmp_path / "bad.dsl").write_text("car1 = new Car sideways of ego\n")
+    (tmp_path / "foreign.dsl").write_text("ghost1 = new Car ahead of ego by Range(1, 6), facing toward ego\n")
+    scene, program, out = str(inputs / "scene.json"), str(inputs / "p.dsl"), tmp_path / "bev.png"
+    args = {
+        "missing scene": (str(tmp_path / "nope.json"),),
+        "bad scene": (str(tmp_path / "bad.json"),),
+        "bad program": (scene, "--program", str(tmp_path / "bad.dsl")),
+        "foreign program": (scene, "--program", str(tmp_path / "foreign.dsl")),
+        "samples without program": (scene, "--samples", "3"),
+        "bad suffix": (scene, "--out", str(tmp_path / "bev.txt")),
+        "negative samples": (scene, "--program", program, "--samples", "-2"),
+    }[case]
+    if "--out" not in args:
+        args = (*args, "--out", str(out))
+    proc = run_r2s("render", *args)
+    assert_one_line_error(proc, 2, contains=message)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.dsl", "bad.json", "foreign.dsl"]
+
+
+def test_motion_references_are_drawn(tmp_path):
+    from pipeline.variants.render import View, draw, save
+    from synth.scene import scene_from_dict
+
+    program = parse_program(
+        "car1 = new Car ahead of ego by Range(5, 10), facing toward ego, moving like ego\n"
+        "car2 = new Car ahead of car1 by Range(0, 5), facing Range(0, 5) deg relative to ego, stationary\n"
+        "car3 = new Car on Range(1, 6) @ Range(0, 5), facing Range(0, 5) deg, moving Range(2, 4) m/s relative to car1\n"
+        "car4 = new Car on Range(1, 6) @ Range(5, 10), facing Range(0, 5) deg, moving Range(0, 2) m/s\n")
+    arrows, marks = references(program)
+    motion = [(r.ref, r.entity, r.kind) for r in arrows if r.kind in ("moving_like", "relative_speed")]
+    assert motion == [("ego", "car1", "moving_like"), ("car1", "car3", "relative_speed")]
+    assert [(m.entity, m.kind) for m in marks if m.kind in ("stationary", "absolute_speed")] == [
+        ("car2", "stationary"), ("car4", "absolute_speed")]
+    scene = scene_from_dict({"frame_id": "m", "entities": [
+        {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0, "speed": 5},
+        {"id": "car1", "type": "Car", "x": 0, "y": 8, "heading": 180, "speed": 5.5},
+        {"id": "car2", "type": "Car", "x": 0, "y": 11, "heading": 2, "speed": 0},
+        {"id": "car3", "type": "Car", "x": 3, "y": 3, "heading": 2, "speed": 8},
+        {"id": "car4", "type": "Car", "x": 3, "y": 8, "heading": 2, "speed": 1}]})
+    fig = draw(View(scene, program))
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any("moving like" in t for t in labels) and any("stationary" in t for t in labels)
+    assert any("relative to\n(motion" in t for t in labels) and any("absolute speed" in t for t in labels)
+    save(fig, tmp_path / "m.png")
+    assert (tmp_path / "m.png").stat().st_size > 10_000
