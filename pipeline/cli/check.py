@@ -5,26 +5,22 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.cli.options import add_config_option
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene JSON file")
     p.add_argument("program", help="DSL program file")
-    p.add_argument("--config", metavar="NAME|F",
-                   help="preset (default, paper) or TOML file: the tolerances delta1, delta2 (default: default)")
+    add_config_option(p, ": the tolerances delta1, delta2")
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.cli.inputs import load_config, read_scene, read_text_file
-    from pipeline.errors import UserError
-    from synth.dsl import DslError, parse_program
+    from pipeline.cli.inputs import load_config, read_program, read_scene
     from synth.semantics import check
 
     config = load_config(args.config)
     scene = read_scene(args.scene)
-    try:
-        program = parse_program(read_text_file(args.program, "program"))
-    except DslError as exc:
-        raise UserError(f"{args.program}: {exc}") from None
+    program = read_program(args.program)
     result = check(program, scene, config)
     if result.ok:
         print(f"ok: the program contains scene {scene.frame_id} (cost {program.cost})")

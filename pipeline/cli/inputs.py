@@ -30,6 +30,16 @@ def read_text_file(path: str, what: str) -> str:
         raise UserError(f"{what} {path} is not UTF-8 text") from None
 
 
+def read_program(path: str):
+    """A DSL program file (r2s check, and the --program of r2s sample and r2s render)."""
+    from synth.dsl import DslError, parse_program
+
+    try:
+        return parse_program(read_text_file(path, "program"))
+    except DslError as exc:
+        raise UserError(f"{path}: {exc}") from None
+
+
 def read_scene(path: str, max_entities: int | None = None) -> Scene:
     """A scene JSON file, or standard input for "-" (so `r2s scene F ID | r2s render - ...` works)."""
     if path == "-":

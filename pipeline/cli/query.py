@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pipeline.cli.options import add_config_option
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("frames", help="frames Parquet file or dataset directory (from r2s extract)")
@@ -17,9 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="F", help="matches Parquet file (written atomically)")
     p.add_argument("--all", action="store_true", dest="all_bindings",
                    help="one row per binding instead of one per frame (with the first binding)")
-    p.add_argument("--config", metavar="NAME|F",
-                   help="preset (default, paper) or TOML file: the tolerances delta1, delta2; motion v_stop, dv "
-                         "(default: default)")
+    add_config_option(p, ": the tolerances delta1, delta2; motion v_stop, dv")
     p.add_argument("--threads", type=int, metavar="N", help="DuckDB threads (default: every core)")
     p.add_argument("--memory-limit", type=int, metavar="MB",
                    help="DuckDB memory limit; beyond it the join spills beside --out (default: DuckDB's, 80%% of RAM)")

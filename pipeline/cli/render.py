@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.cli.sample import add_sampling_arguments, bounded_int, sample_options
+from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,17 +21,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(r2s run's output) by its frame id, instead of --program")
     p.add_argument("--samples", type=bounded_int(0, 1000), default=0, metavar="K",
                    help="overlay K variants sampled from the program (needs --program)")
-    p.add_argument("--config", metavar="NAME|F",
-                   help="preset (default, paper) or TOML file: the tolerances delta1, delta2 (default: default)")
+    add_config_option(p, ": the tolerances delta1, delta2")
     p.add_argument("--out", required=True, metavar="F", help="image file: .png, .svg or .pdf")
-    add_sampling_arguments(p)
+    add_sampling_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from pipeline.cli.inputs import load_config, read_scene
-    from pipeline.cli.sample import read_dsl_program
+    from pipeline.cli.inputs import load_config, read_program, read_scene
     from pipeline.errors import UserError
     from pipeline.variants.render import FORMATS, View, draw, save
     from synth.semantics import check
@@ -60,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{args.programs}, frame {scene.frame_id}: {exc}") from None
         where = f"the program of {scene.frame_id} in {args.programs}"
     elif args.program is not None:
-        program, where = read_dsl_program(args.program), args.program
+        program, where = read_program(args.program), args.program
     if program is not None:
         ids = {e.id for e in scene.entities}
         missing = next((s.id for s in program.statements if s.id not in ids), None)

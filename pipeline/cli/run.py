@@ -11,8 +11,7 @@ import argparse
 import signal
 import sys
 
-from pipeline.cli.synth import uncertainty_arg
-from synth.config import ORACLES, SOLVERS, STRATEGIES
+from pipeline.cli.options import add_synthesis_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -24,22 +23,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "ends in .parquet; an existing output is resumed: frames done with the same config are kept")
     p.add_argument("--jobs", type=int, metavar="N", help="parallel workers (default: all cores; "
                    "with --backend dask and --scheduler: all workers of the cluster)")
-    p.add_argument("--time-limit", type=float, metavar="S", help="seconds of search per frame; the best program "
-                   "found and a proven lower bound are recorded (status feasible or timeout; default: no limit)")
-    p.add_argument("--memory-limit", type=float, metavar="MB", help="resident memory per frame: the search stops "
-                   "past it (status memout, its best program kept); with loky a hard cap 50%% (at least 256 MB) "
-                   "above it ends the frame (default: no limit)")
-    p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
-    p.add_argument("--oracle", choices=ORACLES, help="relation oracle (default: hybrid)")
-    p.add_argument("--solver", choices=SOLVERS, help="SMT solver (default: z3)")
-    p.add_argument("--config", metavar="NAME|F",
-                   help="preset (default, paper) or TOML file; the options here override it (default: default)")
-    p.add_argument("--motion", action="store_const", const=True, default=None,
-                   help="statements also say how fast entities move, as in r2s synth (needs the frames' speed "
-                        "column; a frame with an entity lacking speed is an error row naming it)")
-    p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG[,SPEED_MPS]",
-                   help="robust synthesis, as in r2s synth (frames' pos_sigma / heading_sigma / speed_sigma columns "
-                        "override)")
+    add_synthesis_options(p, {
+        "time_limit": "seconds of search per frame; the best program found and a proven lower bound are recorded "
+                      "(status feasible or timeout; default: no limit)",
+        "memory_limit": "resident memory per frame: the search stops past it (status memout, its best program "
+                        "kept); with loky a hard cap 50%% (at least 256 MB) above it ends the frame (default: no "
+                        "limit)",
+        "motion": "statements also say how fast entities move, as in r2s synth (needs the frames' speed column; a "
+                  "frame with an entity lacking speed is an error row naming it)",
+        "uncertainty": "robust synthesis, as in r2s synth (frames' pos_sigma / heading_sigma / speed_sigma columns "
+                       "override)",
+    })
     p.add_argument("--backend", choices=("loky", "dask"), default="loky",
                    help="loky: local worker processes (default); dask: a dask.distributed cluster")
     p.add_argument("--scheduler", metavar="ADDR", help="dask scheduler address (tcp://host:8786); without it, "
@@ -55,12 +49,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.batch.stage import run_frames
-    from pipeline.cli.inputs import load_config
+    from pipeline.cli.options import synthesis_config
 
-    config = load_config(args.config).with_(
-        strategy=args.strategy, oracle=args.oracle, solver=args.solver,
-        time_limit=args.time_limit, memory_limit=args.memory_limit, motion=args.motion, **(args.uncertainty or {}),
-    )
+    config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,

@@ -21,47 +21,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.variants.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
-
-
-def bounded_int(lo: int, hi: int):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
-        return v
-
-    return parse
-
-
-def add_sampling_arguments(p: argparse.ArgumentParser) -> None:
-    """The options every verb that samples shares (sample, render)."""
-    from synth.gibbs import DEFAULT_BURN_IN, DEFAULT_THIN
-
-    p.add_argument("--seed", type=bounded_int(0, MAX_SEED), default=0, help="random seed (default 0)")
-    p.add_argument("--sampler", choices=SAMPLERS, default=None,
-                   help="gibbs: r2sgen's chain, any scene size (default); scenic: Scenic's rejection sampler, small "
-                        "scenes only (the default for a --trusted edited file)")
-    p.add_argument("--burn-in", type=bounded_int(0, 10**6), default=None, metavar="S",
-                   help=f"gibbs: sweeps from the recorded scene to the first variant (default {DEFAULT_BURN_IN})")
-    p.add_argument("--thin", type=bounded_int(1, 10**6), default=None, metavar="S",
-                   help=f"gibbs: sweeps between variants (default {DEFAULT_THIN})")
-    p.add_argument("--max-iterations", type=bounded_int(1, 10**7), default=DEFAULT_MAX_ITERATIONS, metavar="M",
-                   help=f"scenic: rejection-sampling iterations per scene (default {DEFAULT_MAX_ITERATIONS})")
-    p.add_argument("--allow-collisions", action="store_true",
-                   help="drop the collision rule (by default two boxes may overlap only if they overlap in the "
-                        "recorded scene)")
-
-
-def sample_options(args: argparse.Namespace, n: int):
-    from pipeline.variants.sample import SampleOptions
-
-    return SampleOptions(n=n, seed=args.seed, max_iterations=args.max_iterations,
-                         allow_collisions=args.allow_collisions, sampler=args.sampler, burn_in=args.burn_in,
-                         thin=args.thin)
+from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -72,22 +32,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "files you checked)")
     p.add_argument("--program", dest="dsl_file", metavar="P.dsl", help="sample from a DSL program instead (with --scene)")
     p.add_argument("--scene", metavar="S.json", help="the scene the DSL program was synthesized for (ego, sizes)")
-    p.add_argument("--config", metavar="NAME|F",
-                   help="preset (default, paper) or TOML file: the tolerances, for the DSL route (default: default)")
+    add_config_option(p, ": the tolerances, for the DSL route")
     p.add_argument("--n", type=bounded_int(1, 100_000), default=1, metavar="K", help="number of scenes (default 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for sample_000.json ...")
-    add_sampling_arguments(p)
-
-
-def read_dsl_program(path: str):
-    from pipeline.cli.inputs import read_text_file
-    from pipeline.errors import UserError
-    from synth.dsl import DslError, parse_program
-
-    try:
-        return parse_program(read_text_file(path, "program"))
-    except DslError as exc:
-        raise UserError(f"{path}: {exc}") from None
+    add_sampling_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -95,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from extractors.atomic import write_text_atomic
-    from pipeline.cli.inputs import load_config, read_scene, read_text_file
+    from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
     from pipeline.errors import UserError
     from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
 
@@ -109,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         if args.scene is None:
             raise UserError("--program needs --scene (the scene it was synthesized for)")
         config = load_config(args.config)
-        program, scene = read_dsl_program(args.dsl_file), read_scene(args.scene)
+        program, scene = read_program(args.dsl_file), read_scene(args.scene)
         progress = ProgressReport("r2s sample")
         try:
             samples = sample_program(program, scene, config, options, progress)
