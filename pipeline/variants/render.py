@@ -71,7 +71,7 @@ class Family:
     types: tuple[str, ...]
 
 
-# Box colours by kind of road user; ego stands out in red.
+# Footprint colours by kind of road user; ego stands out in red.
 FAMILIES: dict[str, Family] = {
     "vehicle": Family("#a6bddb", "#2b5a9b",
                       ("Car", "Truck", "Bus", "Trailer", "ConstructionVehicle", "EmergencyVehicle")),
@@ -88,7 +88,9 @@ def family_of(etype: str) -> str:
 
 
 @dataclass(frozen=True)
-class Box:
+class Footprint:
+    """An entity as drawn: its oriented rectangle in ego's frame (not extractors.base.Box, a detection)."""
+
     id: str
     type: str
     x: float
@@ -109,14 +111,14 @@ class Box:
         return (self.x + fx * self.length / 2, self.y + fy * self.length / 2)
 
 
-def ego_frame(scene: Scene) -> dict[str, Box]:
+def ego_frame(scene: Scene) -> dict[str, Footprint]:
     """Every entity as a box in ego's frame (ego at the origin facing +y), by id, in scene order."""
     ego = scene.ego
     out = {}
     for e in scene.entities:
         lx, ly = to_local(e.x - ego.x, e.y - ego.y, ego.heading)
         length, width = e.dimensions()
-        out[e.id] = Box(e.id, e.type, lx, ly, normalize(e.heading - ego.heading), length, width)
+        out[e.id] = Footprint(e.id, e.type, lx, ly, normalize(e.heading - ego.heading), length, width)
     return out
 
 
@@ -153,7 +155,7 @@ def references(program: Program) -> tuple[tuple[Reference, ...], tuple[Mark, ...
     return tuple(arrows), tuple(marks)
 
 
-def _extent(boxes: Sequence[Box], margin: float) -> tuple[float, float, float, float]:
+def _extent(boxes: Sequence[Footprint], margin: float) -> tuple[float, float, float, float]:
     xs = [c[0] for b in boxes for c in b.corners()]
     ys = [c[1] for b in boxes for c in b.corners()]
     return (min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin)

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from pipeline.variants.render import Box, ego_frame
+from pipeline.variants.render import Footprint, ego_frame
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.geometry import angular_difference
@@ -46,7 +46,7 @@ box = st.tuples(st.floats(-6, 6), st.floats(-6, 6), st.floats(0, 360), st.floats
 
 @given(box, box)
 def test_separating_axes_agree_with_shapely(a, b):
-    pa, pb = (shapely.Polygon(Box("a", "Car", *v).corners()) for v in (a, b))
+    pa, pb = (shapely.Polygon(Footprint("a", "Car", *v).corners()) for v in (a, b))
     assume(pa.distance(pb) > 1e-7 or pa.intersection(pb).area > 1e-7)  # not a float tie at the boundary
     assert bool(boxes_overlap(*a, *b)) == pa.intersects(pb) == boxes_overlap(*a, *b, xp=math)
 

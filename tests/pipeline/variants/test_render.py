@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from pipeline.variants.render import Box, ego_frame, references
+from pipeline.variants.render import Footprint, ego_frame, references
 from synth.dsl import parse_program
 from synth.scene import scene_from_dict
 from synth.synthesize import synthesize
@@ -29,7 +29,7 @@ def test_ego_frame_puts_ego_at_the_origin_facing_up():
 
 
 def test_box_corners_follow_the_heading():
-    b = Box("car1", "Car", 1.0, 2.0, 90.0, 4.0, 2.0)  # facing -x: length along x, width along y
+    b = Footprint("car1", "Car", 1.0, 2.0, 90.0, 4.0, 2.0)  # facing -x: length along x, width along y
     xs = sorted(round(c[0], 9) for c in b.corners())
     ys = sorted(round(c[1], 9) for c in b.corners())
     assert xs == [-1, -1, 3, 3] and ys == [1, 1, 3, 3]
