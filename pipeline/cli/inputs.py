@@ -40,6 +40,17 @@ def read_program(path: str):
         raise UserError(f"{path}: {exc}") from None
 
 
+def read_pattern(path: str):
+    """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables."""
+    from synth.dsl import DslError
+    from synth.pattern import parse_pattern
+
+    try:
+        return parse_pattern(read_text_file(path, "pattern"))
+    except DslError as exc:
+        raise UserError(f"{path}: {exc}") from None
+
+
 def read_scene(path: str, max_entities: int | None = None) -> Scene:
     """A scene JSON file, or standard input for "-" (so `r2s scene F ID | r2s render - ...` works)."""
     if path == "-":

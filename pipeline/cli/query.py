@@ -26,11 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.cli.inputs import load_config, read_text_file
+    from pipeline.cli.inputs import load_config, read_pattern
     from pipeline.errors import UserError
     from pipeline.query.mining import query_frames
-    from synth.dsl import DslError
-    from synth.pattern import parse_pattern
 
     for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):
         if value is not None and value < 1:
@@ -38,10 +36,7 @@ def run(args: argparse.Namespace) -> int:
     if Path(args.out).is_dir():
         raise UserError(f"--out {args.out} is a directory; matches are one Parquet file")
     config = load_config(args.config)
-    try:
-        pattern = parse_pattern(read_text_file(args.pattern, "pattern"))
-    except DslError as exc:
-        raise UserError(f"{args.pattern}: {exc}") from None
+    pattern = read_pattern(args.pattern)
     summary = query_frames(args.frames, pattern, args.out, all_bindings=args.all_bindings, config=config,
                            threads=args.threads, memory_limit_mb=args.memory_limit)
     print(f"r2s query: {summary.line()} -> {args.out}")

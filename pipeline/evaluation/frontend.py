@@ -7,7 +7,8 @@ unmatched prediction a false positive, an unmatched ground-truth object a false 
 class (the paper scores vehicles as one class); per-category figures attribute a pair to its ground-truth type.
 A frame present in only one file counts wholly as misses (ground truth only) or false alarms (predictions only).
 
-Pure math on plain values: reading files, writing outputs and the plot live in pipeline.cli.eval_frontend.
+Pure math on plain values (objects_by_frame turns frames rows into them): reading files and writing outputs
+live in pipeline.cli.eval_frontend, the plot in pipeline.evaluation.plot.
 """
 
 from __future__ import annotations
@@ -239,3 +240,17 @@ def table_md(doc: Mapping[str, Any], method: str) -> str:
     for b, r in doc["recall_by_range"].items():
         lines.append(f"| {b} | {r['gt']} | {r['tp']} | {_cell(r['recall'], 3)} |")
     return "\n".join(lines) + "\n"
+
+
+def objects_by_frame(df) -> dict:
+    """frame_id -> its non-ego objects as Detected, range measured from the frame's ego row."""
+    out = {}
+    for fid, rows in df.groupby("frame_id", sort=False):
+        ego = rows[rows["is_ego"].astype(bool)].iloc[0]
+        others = rows[~rows["is_ego"].astype(bool)]
+        out[str(fid)] = tuple(
+            Detected(str(r.type), float(r.x), float(r.y), float(r.heading),
+                     math.hypot(float(r.x) - float(ego.x), float(r.y) - float(ego.y)))
+            for r in others.itertuples(index=False)
+        )
+    return out
