@@ -19,7 +19,7 @@ from synth.perturbation import bounds_of
 from synth.relations import settle_exactly
 from synth.robust import robust_parts, settle_conservatively
 from synth.scene import Entity, Scene
-from synth.smt import make_backend
+from synth.smt import SolverBackend, make_backend
 from synth.tables import NONE, UNDECIDED, RelationTable, scene_arrays
 
 
@@ -31,7 +31,7 @@ class RelationOracle:
     config: SynthConfig
     ids: tuple[str, ...] = ()
     table: RelationTable | None = None
-    backend: object | None = None
+    backend: SolverBackend | None = None
     parts: tuple[Part, ...] = ()
     # The paper's M_smt: (relation, target index, reference index) -> does the relation hold.
     cache: dict[tuple[str, int, int], bool] = field(default_factory=dict)

@@ -21,7 +21,7 @@ axis is r.heading + phi (eta of the reference); for facing relations v = +-(e - 
    (with R = 0 also c != 0, since v = 0 has no bearing). The floats decide that with a guard band.
 
 The floats are a pre-filter only: outside the guard band they answer, inside it the solver decides the
-existentially quantified violation (Z3Backend.robust_cone: is there a v in the disc outside the cone? unsat =
+existentially quantified violation (ExactBackend.robust_cone: is there a v in the disc outside the cone? unsat =
 the relation holds), and the closed-form oracle answers "no" (conservative: a relation is never claimed that
 might not hold). Ranges are computed from exact rationals and rounded outward to cents.
 """

@@ -15,9 +15,10 @@ form (cost 2). The rest of the core is written once, over parts:
   Scenic                keyword, scenic, needs_own_position, scenic_requirements, scenic_prelude -> emit_scenic
   report                kinds, kind                           -> pipeline.report.stats
 
-The SMT methods take the backend as an argument and build formulas from its primitives (q, var, offset, cone,
-distance_in, angle_in, check, fresh_check, robust_cone, And, Not, Or, BoolVal), so one encoding serves z3 and
-dReal. A clause is a frozen dataclass with `cost`, `ref` (None for absolute forms) and `__str__` (its DSL text).
+The SMT methods take the backend as an argument and build formulas from its primitives (synth.smt.backend:
+constant, var, offset, cone, distance_in, And, Or, Not, check; the exact backend adds angle_in, perturbed_offset,
+cone_fails, robust_cone, check_quantified), so one encoding serves z3 and dReal. relation and solver_measure get any
+backend; the robust, certification and model questions get the exact one (z3). A clause is a frozen dataclass with `cost`, `ref` (None for absolute forms) and `__str__` (its DSL text).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from synth.perturbation import Bounds, bounds_of
 from synth.scene import Entity, Scene
 from synth.syntax import Line
 from synth.tables import SceneArrays
+
+if TYPE_CHECKING:
+    from synth.smt.backend import ExactBackend, SolverBackend
 
 Clause = Any  # a part's clause dataclass: .cost, .ref, str()
 Formula = Any  # a solver term of the backend at hand
@@ -77,27 +81,27 @@ class Part(ABC):
 
     # ------------------------------------------------------------------------------- SMT
     @abstractmethod
-    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def relation(self, backend: SolverBackend, code: int, ref: Entity, e: Entity) -> bool:
         """The solver's answer to: does relation `code` (with some Range, where it has one) hold?"""
 
     @abstractmethod
-    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def robust_relation(self, backend: ExactBackend, code: int, ref: Entity, e: Entity) -> bool:
         """The solver's answer to: does it hold for every perturbation (is its violation unsat)?"""
 
     @abstractmethod
-    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Formula:
+    def any_relation(self, backend: ExactBackend, ref: Entity, e: Entity) -> Formula:
         """A formula true iff some witness relation of e with ref holds (the monolithic baseline)."""
 
     @abstractmethod
-    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
         """(constraints, variables) whose unique model values are the exact quantity (see quantity())."""
 
     @abstractmethod
-    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Formula:
+    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Formula:
         """The clause's semantics on the scene, Range bounds at their printed values (certification)."""
 
     @abstractmethod
-    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
+    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
         """Ways the clause could fail under a perturbation within the bounds: each must be unsat."""
 
     # ------------------------------------------------------------------------------- exact, without a solver
@@ -121,7 +125,7 @@ class Part(ABC):
     def float_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         """The quantity from float geometry (the closed-form oracle)."""
 
-    def solver_measure(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+    def solver_measure(self, backend: SolverBackend, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         """The quantity as a solver without models of its own measures it (dReal); floats unless overridden."""
         return self.float_measure(quantity, target, ref)
 

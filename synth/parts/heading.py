@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from synth.ranges import centred
 from synth.scene import Entity
 from synth.syntax import Line, Range, printed
 from synth.tables import NONE, SceneArrays, exact_within, mark, no_self_witness, unit_vectors, within
+
+if TYPE_CHECKING:
+    from synth.smt.backend import ExactBackend, SolverBackend
 
 FACINGS: dict[str, str] = {"toward": "toward", "away": "away from"}
 FACING_NAMES = ("toward", "away")  # index = code in the tables
@@ -111,8 +114,8 @@ class HeadingPart(Part):
 
     def robust_closed_form(self, arrays: SceneArrays, bounds: list[Bounds], config: SynthConfig) -> np.ndarray:
         x, y, h = arrays.x, arrays.y, arrays.heading
-        rho = np.array([q.pos for q in bounds])
-        eta = np.array([q.heading for q in bounds])
+        rho = np.array([b.pos for b in bounds])
+        eta = np.array([b.heading for b in bounds])
         dx = x[None, :] - x[:, None]
         dy = y[None, :] - y[:, None]
         radius = rho[:, None] + rho[None, :]
@@ -130,33 +133,33 @@ class HeadingPart(Part):
         return exact_within(vx, vy, exact_heading_vector(e.heading), exact_cos_squared(config.delta2))
 
     # ------------------------------------------------------------------------------- SMT
-    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def relation(self, backend: SolverBackend, code: int, ref: Entity, e: Entity) -> bool:
         vx, vy = backend.offset(ref, e)
         if FACING_NAMES[code] == "toward":
             vx, vy = -vx, -vy
         return backend.check(backend.cone(vx, vy, e.heading, backend.config.delta2))
 
-    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def robust_relation(self, backend: ExactBackend, code: int, ref: Entity, e: Entity) -> bool:
         cfg = backend.config
         cx, cy = exact_offset(ref, e)
         sign = -1 if FACING_NAMES[code] == "toward" else 1
         cone = narrowed(cfg.delta2, bounds_of(e, cfg).heading)
         return backend.robust_cone((sign * cx, sign * cy), radius_of(ref, e, cfg), e.heading, cone)
 
-    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Any:
+    def any_relation(self, backend: ExactBackend, ref: Entity, e: Entity) -> Any:
         vx, vy = backend.offset(ref, e)
         delta = backend.config.delta2
         return backend.Or(backend.cone(-vx, -vy, e.heading, delta), backend.cone(vx, vy, e.heading, delta))
 
-    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
         base = ref.heading if quantity == "angle" else 0.0
         # The offset in (-180, 180]: headings are in [0, 360), so one of three turns fits.
         gap = Fraction(target.heading) - Fraction(base)
         alpha = backend.var("alpha")
-        return [alpha > -180, alpha <= 180, backend.Or(*(alpha == backend.q(gap - 360 * k) for k in (-1, 0, 1)))], \
-            [alpha]
+        turns = backend.Or(*(alpha == backend.constant(gap - 360 * k) for k in (-1, 0, 1)))
+        return [alpha > -180, alpha <= 180, turns], [alpha]
 
-    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Any:
+    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
         if isinstance(clause, AbsoluteHeading):
             return backend.angle_in(e.heading, 0.0, printed(clause.angle.lo), printed(clause.angle.hi))
         if isinstance(clause, RelativeHeading):
@@ -166,8 +169,8 @@ class HeadingPart(Part):
             vx, vy = -vx, -vy
         return backend.cone(vx, vy, e.heading, backend.config.delta2)
 
-    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
-        q, cfg = backend.q, backend.config
+    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
+        const, cfg = backend.constant, backend.config
         if isinstance(clause, FacingRelation):
             sign = -1 if clause.mode == "toward" else 1
             cx, cy = exact_offset(ref, e)
@@ -180,8 +183,8 @@ class HeadingPart(Part):
         alpha = gap - 360 * ((gap - lo) // 360)
         eta = Fraction(bounds_of(e, cfg).heading) + (Fraction(bounds_of(ref, cfg).heading) if ref else 0)
         turn = backend.var("theta")
-        return [backend.And(-q(eta) <= turn, turn <= q(eta), bad)
-                for bad in (q(alpha) + turn < q(lo), q(alpha) + turn > q(hi))]
+        return [backend.And(-const(eta) <= turn, turn <= const(eta), bad)
+                for bad in (const(alpha) + turn < const(lo), const(alpha) + turn > const(hi))]
 
     # ------------------------------------------------------------------------------- exact, without a solver
     def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from synth.ranges import centred
 from synth.scene import Entity
 from synth.syntax import Line, Range, fmt_number, printed
 from synth.tables import GUARD, NONE, UNDECIDED, SceneArrays, mark, no_self_witness
+
+if TYPE_CHECKING:
+    from synth.smt.backend import ExactBackend, SolverBackend
 
 MOTION_NAMES = ("stationary", "like")  # index = code in the tables
 STATIONARY, LIKE = 0, 1
@@ -126,69 +129,71 @@ class MotionPart(Part):
         return abs(se - Fraction(ref.speed)) <= Fraction(config.dv)
 
     # ------------------------------------------------------------------------------- SMT
-    def _speed(self, backend: Any, e: Entity) -> Any:
+    def _speed(self, backend: SolverBackend, e: Entity) -> Any:
         """A solver variable pinned to e's speed (a term, so that every backend gets a formula, not a bool)."""
         v = backend.var("v")
-        return v, v == backend.q(e.speed)
+        return v, v == backend.constant(e.speed)
 
-    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
-        q, cfg = backend.q, backend.config
+    def relation(self, backend: SolverBackend, code: int, ref: Entity, e: Entity) -> bool:
+        const, cfg = backend.constant, backend.config
         ve, pin_e = self._speed(backend, e)
         if code == STATIONARY:
-            return backend.check(pin_e, ve <= q(cfg.v_stop))
+            return backend.check(pin_e, ve <= const(cfg.v_stop))
         vr, pin_r = self._speed(backend, ref)
-        return backend.check(pin_e, pin_r, ve - vr <= q(cfg.dv), vr - ve <= q(cfg.dv))
+        return backend.check(pin_e, pin_r, ve - vr <= const(cfg.dv), vr - ve <= const(cfg.dv))
 
-    def _boxed(self, backend: Any, e: Entity) -> tuple[Any, list[Any]]:
+    def _boxed(self, backend: ExactBackend, e: Entity) -> tuple[Any, list[Any]]:
         """A variable over every speed e may have had (speed_box), with its constraints."""
         lo, hi = speed_box(e, backend.config)
         v = backend.var("v")
-        return v, [backend.q(lo) <= v, v <= backend.q(hi)]
+        return v, [backend.constant(lo) <= v, v <= backend.constant(hi)]
 
-    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
-        q, cfg = backend.q, backend.config
+    def robust_relation(self, backend: ExactBackend, code: int, ref: Entity, e: Entity) -> bool:
+        const, cfg = backend.constant, backend.config
         ve, box_e = self._boxed(backend, e)
         if code == STATIONARY:
-            return not backend.fresh_check(*box_e, ve > q(cfg.v_stop))
+            return not backend.check_quantified(*box_e, ve > const(cfg.v_stop))
         vr, box_r = self._boxed(backend, ref)
-        return not backend.fresh_check(*box_e, *box_r, backend.Or(ve - vr > q(cfg.dv), vr - ve > q(cfg.dv)))
+        apart = backend.Or(ve - vr > const(cfg.dv), vr - ve > const(cfg.dv))
+        return not backend.check_quantified(*box_e, *box_r, apart)
 
-    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Any:
-        q, cfg = backend.q, backend.config
-        like = backend.And(q(e.speed) - q(ref.speed) <= q(cfg.dv), q(ref.speed) - q(e.speed) <= q(cfg.dv))
-        return backend.Or(q(e.speed) <= q(cfg.v_stop), like) if ref.is_ego else like
+    def any_relation(self, backend: ExactBackend, ref: Entity, e: Entity) -> Any:
+        const, cfg = backend.constant, backend.config
+        speed_e, speed_r = const(e.speed), const(ref.speed)
+        like = backend.And(speed_e - speed_r <= const(cfg.dv), speed_r - speed_e <= const(cfg.dv))
+        return backend.Or(speed_e <= const(cfg.v_stop), like) if ref.is_ego else like
 
-    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
         v = backend.var("v")
-        base = backend.q(ref.speed) if quantity == "speed_offset" else backend.q(0)
-        return [v == backend.q(target.speed) - base], [v]
+        base = backend.constant(ref.speed) if quantity == "speed_offset" else backend.constant(0)
+        return [v == backend.constant(target.speed) - base], [v]
 
-    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Any:
-        q, cfg = backend.q, backend.config
-        se = q(e.speed)
+    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
+        const, cfg = backend.constant, backend.config
+        se = const(e.speed)
         if isinstance(clause, Stationary):
-            return se <= q(cfg.v_stop)
+            return se <= const(cfg.v_stop)
         if isinstance(clause, AbsoluteSpeed):
-            return backend.And(q(printed(clause.speed.lo)) <= se, se <= q(printed(clause.speed.hi)))
-        gap = se - q(ref.speed)
+            return backend.And(const(printed(clause.speed.lo)) <= se, se <= const(printed(clause.speed.hi)))
+        gap = se - const(ref.speed)
         if isinstance(clause, MovingLike):
-            return backend.And(gap <= q(cfg.dv), -gap <= q(cfg.dv))
-        return backend.And(q(printed(clause.speed.lo)) <= gap, gap <= q(printed(clause.speed.hi)))
+            return backend.And(gap <= const(cfg.dv), -gap <= const(cfg.dv))
+        return backend.And(const(printed(clause.speed.lo)) <= gap, gap <= const(printed(clause.speed.hi)))
 
-    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
-        q, cfg = backend.q, backend.config
+    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
+        const, cfg = backend.constant, backend.config
         ve, box = self._boxed(backend, e)
         if isinstance(clause, Stationary):
-            return [backend.And(*box, ve > q(cfg.v_stop))]
+            return [backend.And(*box, ve > const(cfg.v_stop))]
         if isinstance(clause, AbsoluteSpeed):
-            bad = (ve < q(printed(clause.speed.lo)), ve > q(printed(clause.speed.hi)))
+            bad = (ve < const(printed(clause.speed.lo)), ve > const(printed(clause.speed.hi)))
             return [backend.And(*box, b) for b in bad]
         vr, box_r = self._boxed(backend, ref)
         gap = ve - vr
         if isinstance(clause, MovingLike):
-            bad = (gap > q(cfg.dv), -gap > q(cfg.dv))
+            bad = (gap > const(cfg.dv), -gap > const(cfg.dv))
         else:
-            bad = (gap < q(printed(clause.speed.lo)), gap > q(printed(clause.speed.hi)))
+            bad = (gap < const(printed(clause.speed.lo)), gap > const(printed(clause.speed.hi)))
         return [backend.And(*box, *box_r, b) for b in bad]
 
     # ------------------------------------------------------------------------------- exact, without a solver

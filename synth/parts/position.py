@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,6 +44,9 @@ from synth.ranges import centred
 from synth.scene import Entity
 from synth.syntax import DslError, Line, Range, fmt_number, printed
 from synth.tables import NONE, SceneArrays, exact_within, mark, no_self_witness, unit_vectors, within
+
+if TYPE_CHECKING:
+    from synth.smt.backend import ExactBackend, SolverBackend
 
 # Direction -> (printed words, phi in degrees, counter-clockwise from the reference's heading).
 DIRECTIONS: dict[str, tuple[str, float]] = {
@@ -121,8 +124,8 @@ class PositionPart(Part):
 
     def robust_closed_form(self, arrays: SceneArrays, bounds: list[Bounds], config: SynthConfig) -> np.ndarray:
         x, y, h = arrays.x, arrays.y, arrays.heading
-        rho = np.array([q.pos for q in bounds])
-        eta = np.array([q.heading for q in bounds])
+        rho = np.array([b.pos for b in bounds])
+        eta = np.array([b.heading for b in bounds])
         dx = x[None, :] - x[:, None]
         dy = y[None, :] - y[:, None]
         radius = rho[:, None] + rho[None, :]
@@ -139,18 +142,18 @@ class PositionPart(Part):
         return exact_within(vx, vy, u, exact_cos_squared(config.delta1))
 
     # ------------------------------------------------------------------------------- SMT
-    def relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def relation(self, backend: SolverBackend, code: int, ref: Entity, e: Entity) -> bool:
         """Is there a Range(a, a + C_dist), a >= 0, such that `e = ... direction ref by Range(a, ...)` holds?"""
         cfg = backend.config
         vx, vy = backend.offset(ref, e)
         a = backend.var("a")
         return backend.check(
             a >= 0,
-            backend.distance_in(vx, vy, a, a + backend.q(cfg.c_dist)),
+            backend.distance_in(vx, vy, a, a + backend.constant(cfg.c_dist)),
             backend.cone(vx, vy, ref.heading + DIRECTIONS[DIRECTION_NAMES[code]][1], cfg.delta1),
         )
 
-    def robust_relation(self, backend: Any, code: int, ref: Entity, e: Entity) -> bool:
+    def robust_relation(self, backend: ExactBackend, code: int, ref: Entity, e: Entity) -> bool:
         """Does it hold for every perturbation? The Range then widens to cover every distance (robust_clause),
         so only the sector is in question."""
         cfg = backend.config
@@ -158,62 +161,62 @@ class PositionPart(Part):
         return backend.robust_cone(exact_offset(ref, e), radius_of(ref, e, cfg),
                                    ref.heading + DIRECTIONS[DIRECTION_NAMES[code]][1], cone)
 
-    def any_relation(self, backend: Any, ref: Entity, e: Entity) -> Any:
+    def any_relation(self, backend: ExactBackend, ref: Entity, e: Entity) -> Any:
         vx, vy = backend.offset(ref, e)
         return backend.Or(*(backend.cone(vx, vy, ref.heading + phi, backend.config.delta1)
                             for _, phi in DIRECTIONS.values()))
 
-    def measure_terms(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
         vx, vy = backend.offset(ref, target)
         if quantity == "distance":
             d = backend.var("d")
             return [d >= 0, d * d == vx * vx + vy * vy], [d]
-        ux, uy = (backend.q(c) for c in exact_heading_vector(ref.heading))
+        ux, uy = (backend.constant(c) for c in exact_heading_vector(ref.heading))
         # cos t = uy, sin t = -ux for the heading vector (-sin t, cos t).
         lx, ly = backend.var("lx"), backend.var("ly")
         return [lx == vx * uy - vy * ux, ly == vy * uy + vx * ux], [lx, ly]
 
-    def formula(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> Any:
-        q, cfg = backend.q, backend.config
+    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
+        const, cfg = backend.constant, backend.config
         if isinstance(clause, AbsoluteXYPos):
             pairs = ((clause.x, e.x), (clause.y, e.y))
-            return backend.And(*(q(printed(b.lo)) <= q(v) for b, v in pairs),
-                               *(q(v) <= q(printed(b.hi)) for b, v in pairs))
+            return backend.And(*(const(printed(b.lo)) <= const(v) for b, v in pairs),
+                               *(const(v) <= const(printed(b.hi)) for b, v in pairs))
         vx, vy = backend.offset(ref, e)
         if isinstance(clause, DirectionPos):
             lo, hi = printed(clause.distance.lo), printed(clause.distance.hi)
             # lo <= |v| <= hi with 0 <= lo, squared: no square root, a ground formula.
             return backend.And(
-                q(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= q(hi * hi),
+                const(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= const(hi * hi),
                 backend.cone(vx, vy, ref.heading + DIRECTIONS[clause.direction][1], cfg.delta1),
             )
-        ux, uy = (q(c) for c in exact_heading_vector(ref.heading))
+        ux, uy = (const(c) for c in exact_heading_vector(ref.heading))
         lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
         return backend.And(
-            q(printed(clause.lateral.lo)) <= lx, lx <= q(printed(clause.lateral.hi)),
-            q(printed(clause.forward.lo)) <= ly, ly <= q(printed(clause.forward.hi)),
+            const(printed(clause.lateral.lo)) <= lx, lx <= const(printed(clause.lateral.hi)),
+            const(printed(clause.forward.lo)) <= ly, ly <= const(printed(clause.forward.hi)),
         )
 
-    def violations(self, backend: Any, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
+    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
         """A position depends on p_e - p_r only, which ranges over the disc of radius rho_e + rho_r (Minkowski
         sum); the reference frame of a local position turns by (c, s) on the unit circle with c >= cos(eta), the
         rational of the float cos(eta) (the constant synth.perturbation widens by); sectors narrow by reduction 1."""
-        q, cfg, out = backend.q, backend.config, []
+        const, cfg, out = backend.constant, backend.config, []
 
         def outside(v: Any, rng: Range) -> list[Any]:
-            return [v < q(printed(rng.lo)), v > q(printed(rng.hi))]
+            return [v < const(printed(rng.lo)), v > const(printed(rng.hi))]
 
         if isinstance(clause, AbsoluteXYPos):
             rho = Fraction(bounds_of(e, cfg).pos)
             wx, wy = backend.var("wx"), backend.var("wy")
-            disc = wx * wx + wy * wy <= q(rho * rho)
-            x, y = q(e.x) + wx, q(e.y) + wy
+            disc = wx * wx + wy * wy <= const(rho * rho)
+            x, y = const(e.x) + wx, const(e.y) + wy
             return [backend.And(disc, bad) for bad in outside(x, clause.x) + outside(y, clause.y)]
         if isinstance(clause, DirectionPos):
             vx, vy, cons = backend.perturbed_offset(exact_offset(ref, e), radius_of(ref, e, cfg))
             lo, hi = max(printed(clause.distance.lo), Fraction(0)), printed(clause.distance.hi)
             sq = vx * vx + vy * vy
-            out += [backend.And(*cons, sq < q(lo * lo)), backend.And(*cons, sq > q(hi * hi))]
+            out += [backend.And(*cons, sq < const(lo * lo)), backend.And(*cons, sq > const(hi * hi))]
             out.append(backend.cone_fails(vx, vy, cons, ref.heading + DIRECTIONS[clause.direction][1],
                                           narrowed(cfg.delta1, bounds_of(ref, cfg).heading)))
             return out
@@ -224,16 +227,16 @@ class PositionPart(Part):
         cx, cy = exact_offset(ref, e)
         ux, uy = exact_heading_vector(ref.heading)
         ax, ay = cx * uy - cy * ux, cy * uy + cx * ux
-        lx, ly, cons = q(ax), q(ay), []
+        lx, ly, cons = const(ax), const(ay), []
         eta = bounds_of(ref, cfg).heading
         if eta > 0:
             c, s = backend.var("c"), backend.var("s")
-            cons += [c * c + s * s == 1, c >= q(Fraction(math.cos(math.radians(eta))))]
-            lx, ly = c * q(ax) - s * q(ay), s * q(ax) + c * q(ay)
+            cons += [c * c + s * s == 1, c >= const(Fraction(math.cos(math.radians(eta))))]
+            lx, ly = c * const(ax) - s * const(ay), s * const(ax) + c * const(ay)
         radius = radius_of(ref, e, cfg)
         if radius > 0:
             bx, by = backend.var("bx"), backend.var("by")
-            cons.append(bx * bx + by * by <= q(radius * radius * (ux * ux + uy * uy)))
+            cons.append(bx * bx + by * by <= const(radius * radius * (ux * ux + uy * uy)))
             lx, ly = lx + bx, ly + by
         return [backend.And(*cons, bad) for bad in outside(lx, clause.lateral) + outside(ly, clause.forward)]
 
@@ -281,7 +284,7 @@ class PositionPart(Part):
         lx, ly = to_local(target.x - ref.x, target.y - ref.y, ref.heading)
         return (Fraction(lx), Fraction(ly))
 
-    def solver_measure(self, backend: Any, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+    def solver_measure(self, backend: SolverBackend, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         if quantity != "distance":
             return self.float_measure(quantity, target, ref)
         return (backend.distance_value(target.x - ref.x, target.y - ref.y),)

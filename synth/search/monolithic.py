@@ -20,7 +20,8 @@ from synth.smt import Z3Backend
 
 def monolithic(cm: CostModel, budget: Budget) -> SearchResult:
     oracle = cm.oracle
-    smt = oracle.backend if isinstance(oracle.backend, Z3Backend) else Z3Backend(oracle.config)
+    # The frame's exact backend (z3) where a solver oracle made one; its encoding, z3's Optimize around it.
+    smt = oracle.backend.exact if oracle.backend is not None else Z3Backend(oracle.config)
     z3 = smt.z3
     ents = oracle.entities()  # 0 is ego
     n = cm.n

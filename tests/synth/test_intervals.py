@@ -21,6 +21,7 @@ from synth.parts.heading import AbsoluteHeading, FacingRelation, RelativeHeading
 from synth.parts.position import DIRECTION_NAMES, DIRECTIONS, AbsoluteXYPos, DirectionPos, LocalXYPos
 from synth.scene import Entity
 from synth.smt import Z3Backend
+from synth.smt.measure import model_measure
 from synth.syntax import Range, fmt_number
 
 CFG = SynthConfig()
@@ -161,7 +162,7 @@ def test_exact_range_values_centre_ranges_as_the_solver_model_does(real_frames):
         ents = (scene.ego,) + scene.others
         requests = [MeasureRequest(e, (Want(POSITION, "distance", r), Want(POSITION, "local", r), Want(HEADING, "angle", r)))
                     for e in ents[1:] for r in ents[:3] if r is not e]
-        model = backend._model_measure(requests)
+        model = model_measure(backend, requests)
         exact = [tuple(w.part.exact_measure(w.quantity, q.target, w.ref) for w in q.wants) for q in requests]
         for m, x in zip(model, exact):
             for vm, vx in zip(m, x):
