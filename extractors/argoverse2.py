@@ -20,11 +20,11 @@ import numpy as np
 import pyarrow as pa
 
 from extractors.base import (
-    Box,
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    RecordedObject,
     quaternion_yaw,
     require_path,
     vehicle_to_ego,
@@ -128,14 +128,14 @@ def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder,
         if index % builder.options.every:
             continue
         rows = order[bounds[index]:bounds[index + 1]]
-        ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=ego_speed[index])
+        ego = RecordedObject("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=ego_speed[index])
         boxes = []
         for i in rows:
             cat = str(cols["category"][i])
             if cat == EGO_CATEGORY:
-                ego = Box(str(cols["track_uuid"][i]), cat, 0.0, 0.0, 0.0, cols["length_m"][i], cols["width_m"][i],
-                          speed=ego_speed[index])
+                ego = RecordedObject(str(cols["track_uuid"][i]), cat, 0.0, 0.0, 0.0, cols["length_m"][i],
+                                     cols["width_m"][i], speed=ego_speed[index])
                 continue
-            boxes.append(Box(str(cols["track_uuid"][i]), cat, float(x[i]), float(y[i]), float(heading[i]),
-                             cols["length_m"][i], cols["width_m"][i], speed=speed[i]))
+            boxes.append(RecordedObject(str(cols["track_uuid"][i]), cat, float(x[i]), float(y[i]), float(heading[i]),
+                                        cols["length_m"][i], cols["width_m"][i], speed=speed[i]))
         yield builder.frame(log_id, index, int(stamp) // 1000, ego, boxes)

@@ -59,7 +59,7 @@ class ExtractOptions:
 
 
 @dataclass(frozen=True)
-class Box:
+class RecordedObject:
     """One recorded object in the ego frame (+x right, +y forward, heading degrees CCW from +y).
 
     `fallback` is a coarser type to classify by when the taxonomy does not know `category` (ScenarioNet tracks
@@ -177,7 +177,7 @@ class FrameBuilder:
         if self.tally is None:
             object.__setattr__(self, "tally", ExtractTally())
 
-    def classify(self, b: Box) -> str | None:
+    def classify(self, b: RecordedObject) -> str | None:
         """The Scenic class of a box under --categories, or None to leave it out; a category no map knows is
         classified by the box's fallback if that is known, else as UNKNOWN_CLASS, and counted either way."""
         select = self.options.categories.select
@@ -195,8 +195,8 @@ class FrameBuilder:
         scene: str,
         frame_index: int,
         timestamp_us: int | None,
-        ego: Box,
-        others: Iterable[Box],
+        ego: RecordedObject,
+        others: Iterable[RecordedObject],
         frame_id: str | None = None,
     ) -> list[dict[str, Any]]:
         opts = self.options
@@ -219,7 +219,7 @@ class FrameBuilder:
         return frame_rows(self.source, scene, frame_index, timestamp_us, _as_entity(ego, "Car"), kept, fid)
 
 
-def _as_entity(b: Box, cls: str) -> dict[str, Any]:
+def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:
     return {"track_id": b.track_id, "type": cls, "category": b.category, "x": b.x, "y": b.y,
             "heading": b.heading, "length": _dim(b.length), "width": _dim(b.width), "speed": known_speed(b.speed)}
 

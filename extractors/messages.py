@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 
 from extractors.base import (
-    Box,
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    RecordedObject,
     global_to_ego,
     quaternion_yaw,
     vehicle_to_ego,
@@ -56,12 +56,13 @@ POSE_TOLERANCE_NS = 100_000_000  # an ego pose further than 0.1 s from the annot
 MARKER_CUBE, MARKER_ADD = 1, 0
 
 
-def g(obj: Any, *names: str, default: Any = None) -> Any:
-    """The first present field of obj among names (dict key or attribute)."""
-    for n in names:
-        v = obj.get(n) if isinstance(obj, dict) else getattr(obj, n, None)
-        if v is not None:
-            return v
+def first_field(obj: Any, *names: str, default: Any = None) -> Any:
+    """The first present field of obj among names (dict key or attribute): the layouts spell one field
+    differently (sec / secs / seconds), and a message may be a dict, a ROS object or a protobuf."""
+    for name in names:
+        value = obj.get(name) if isinstance(obj, dict) else getattr(obj, name, None)
+        if value is not None:
+            return value
     return default
 
 
@@ -69,13 +70,14 @@ def stamp_ns(t: Any) -> int | None:
     """A ROS 1 / ROS 2 / foxglove / protobuf timestamp in nanoseconds; None if absent or zero."""
     if t is None:
         return None
-    sec = g(t, "sec", "secs", "seconds", default=0)
-    nsec = g(t, "nsec", "nanosec", "nsecs", "nanos", default=0)
+    sec = first_field(t, "sec", "secs", "seconds", default=0)
+    nsec = first_field(t, "nsec", "nanosec", "nsecs", "nanos", default=0)
     ns = int(sec) * 1_000_000_000 + int(nsec)
     return ns or None
 
 
-def _f(v: Any) -> float:
+def _float_or_zero(v: Any) -> float:
+    """An absent coordinate is 0, as the message layouts default it."""
     return float(v) if v is not None else 0.0
 
 
@@ -83,21 +85,23 @@ def _planar_speed(v: Any) -> float:
     """|(x, y)| of a velocity or twist field (Twist, TwistWithCovariance, a plain vector), NaN without one."""
     if v is None:
         return math.nan
-    v = g(v, "twist", default=v)  # TwistWithCovariance wraps the twist once more
-    v = g(v, "linear", default=v)
-    return math.hypot(_f(g(v, "x")), _f(g(v, "y")))
+    v = first_field(v, "twist", default=v)  # TwistWithCovariance wraps the twist once more
+    v = first_field(v, "linear", default=v)
+    return math.hypot(_float_or_zero(first_field(v, "x")), _float_or_zero(first_field(v, "y")))
 
 
 def _message_speed(obj: Any) -> float | None:
-    s = _planar_speed(g(obj, "velocity", "twist"))
+    s = _planar_speed(first_field(obj, "velocity", "twist"))
     return s if math.isfinite(s) else None
 
 
 def _pose(p: Any) -> tuple[float, float, float]:
     """(x, y, yaw) of a geometry pose (position + orientation quaternion)."""
-    pos, q = g(p, "position", "translation", default={}), g(p, "orientation", "rotation", default={})
-    yaw = quaternion_yaw(_f(g(q, "w", default=1.0)), _f(g(q, "x")), _f(g(q, "y")), _f(g(q, "z")))
-    return _f(g(pos, "x")), _f(g(pos, "y")), float(yaw)
+    pos = first_field(p, "position", "translation", default={})
+    q = first_field(p, "orientation", "rotation", default={})
+    w = _float_or_zero(first_field(q, "w", default=1.0))
+    yaw = quaternion_yaw(w, *(_float_or_zero(first_field(q, axis)) for axis in ("x", "y", "z")))
+    return _float_or_zero(first_field(pos, "x")), _float_or_zero(first_field(pos, "y")), float(yaw)
 
 
 @dataclass(frozen=True)
@@ -120,44 +124,49 @@ def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
     boxes: list[RawBox] = []
     stamp = None
     if schema in SCENE_UPDATE:
-        for ent in g(msg, "entities", default=[]):
-            cubes = list(g(ent, "cubes", default=[]))
+        for ent in first_field(msg, "entities", default=[]):
+            cubes = list(first_field(ent, "cubes", default=[]))
             if not cubes:
                 continue
-            meta = {g(kv, "key"): g(kv, "value") for kv in g(ent, "metadata", default=[])}
-            x, y, yaw = _pose(g(cubes[0], "pose", default={}))
-            size = g(cubes[0], "size", default={})
-            eid = str(g(ent, "id", default=""))
-            boxes.append(RawBox(str(g(ent, "frame_id", default="")), eid, str(meta.get("category") or eid), x, y,
-                                yaw, g(size, "x"), g(size, "y"), _message_speed(ent)))
-            stamp = stamp or stamp_ns(g(ent, "timestamp"))
+            meta = {first_field(kv, "key"): first_field(kv, "value") for kv in first_field(ent, "metadata", default=[])}
+            x, y, yaw = _pose(first_field(cubes[0], "pose", default={}))
+            size = first_field(cubes[0], "size", default={})
+            eid = str(first_field(ent, "id", default=""))
+            frame = str(first_field(ent, "frame_id", default=""))
+            boxes.append(RawBox(frame, eid, str(meta.get("category") or eid), x, y, yaw,
+                                first_field(size, "x"), first_field(size, "y"), _message_speed(ent)))
+            stamp = stamp or stamp_ns(first_field(ent, "timestamp"))
     elif schema in DETECTIONS:
-        header = g(msg, "header", default={})
-        stamp = stamp_ns(g(header, "stamp"))
-        for i, det in enumerate(g(msg, "detections", default=[])):
-            results = list(g(det, "results", default=[]))
+        header = first_field(msg, "header", default={})
+        stamp = stamp_ns(first_field(header, "stamp"))
+        for i, det in enumerate(first_field(msg, "detections", default=[])):
+            results = list(first_field(det, "results", default=[]))
             if results:
-                hyp = g(results[0], "hypothesis")
-                cat = str(g(hyp, "class_id") if hyp is not None else g(results[0], "id", default=""))
+                hyp = first_field(results[0], "hypothesis")
+                cat = first_field(hyp, "class_id") if hyp is not None else first_field(results[0], "id", default="")
+                cat = str(cat)
             else:
                 cat = ""
-            bbox = g(det, "bbox", default={})
-            x, y, yaw = _pose(g(bbox, "center", default={}))
-            size = g(bbox, "size", default={})
-            frame = g(g(det, "header", default={}), "frame_id") or g(header, "frame_id", default="")
-            boxes.append(RawBox(str(frame), str(g(det, "id") or i), cat, x, y, yaw, g(size, "x"), g(size, "y"),
-                                _message_speed(det)))
+            bbox = first_field(det, "bbox", default={})
+            x, y, yaw = _pose(first_field(bbox, "center", default={}))
+            size = first_field(bbox, "size", default={})
+            frame = (first_field(first_field(det, "header", default={}), "frame_id")
+                     or first_field(header, "frame_id", default=""))
+            boxes.append(RawBox(str(frame), str(first_field(det, "id") or i), cat, x, y, yaw,
+                                first_field(size, "x"), first_field(size, "y"), _message_speed(det)))
     elif schema in MARKERS:
-        for m in g(msg, "markers", default=[]):
-            if int(g(m, "type", default=-1)) != MARKER_CUBE or int(g(m, "action", default=0)) != MARKER_ADD:
+        for m in first_field(msg, "markers", default=[]):
+            if (int(first_field(m, "type", default=-1)) != MARKER_CUBE
+                    or int(first_field(m, "action", default=0)) != MARKER_ADD):
                 continue
-            header = g(m, "header", default={})
-            stamp = stamp or stamp_ns(g(header, "stamp"))
-            x, y, yaw = _pose(g(m, "pose", default={}))
-            scale = g(m, "scale", default={})
-            ns = str(g(m, "ns", default=""))
-            boxes.append(RawBox(str(g(header, "frame_id", default="")), f"{ns}/{g(m, 'id', default=0)}", ns, x, y, yaw,
-                                g(scale, "x"), g(scale, "y")))
+            header = first_field(m, "header", default={})
+            stamp = stamp or stamp_ns(first_field(header, "stamp"))
+            x, y, yaw = _pose(first_field(m, "pose", default={}))
+            scale = first_field(m, "scale", default={})
+            ns = str(first_field(m, "ns", default=""))
+            track = f"{ns}/{first_field(m, 'id', default=0)}"
+            boxes.append(RawBox(str(first_field(header, "frame_id", default="")), track, ns, x, y, yaw,
+                                first_field(scale, "x"), first_field(scale, "y")))
     else:  # pragma: no cover - callers pass only ANNOTATION_TYPES
         raise ValueError(schema)
     return stamp, boxes
@@ -169,21 +178,21 @@ def pose_samples(msg: Any, schema: str, options: ExtractOptions,
     odometry's twist where the message is Odometry, else NaN."""
     out = []
     if schema in TF_TYPES:
-        transforms = g(msg, "transforms")
+        transforms = first_field(msg, "transforms")
         for tf in (transforms if transforms is not None else [msg]):
-            header = g(tf, "header")
-            parent = g(header, "frame_id") if header is not None else g(tf, "parent_frame_id")
-            if parent != options.fixed_frame or g(tf, "child_frame_id") != options.ego_frame:
+            header = first_field(tf, "header")
+            parent = first_field(header, "frame_id") if header is not None else first_field(tf, "parent_frame_id")
+            if parent != options.fixed_frame or first_field(tf, "child_frame_id") != options.ego_frame:
                 continue
-            t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(tf, "timestamp"))
-            body = g(tf, "transform", default=tf)
+            t = stamp_ns(first_field(header, "stamp")) if header is not None else stamp_ns(first_field(tf, "timestamp"))
+            body = first_field(tf, "transform", default=tf)
             out.append((t or log_ns, *_pose(body), math.nan))
     else:
-        header = g(msg, "header")
-        t = stamp_ns(g(header, "stamp")) if header is not None else stamp_ns(g(msg, "timestamp"))
-        pose = g(msg, "pose", default={})
-        pose = g(pose, "pose", default=pose)  # Odometry / PoseWithCovariance wrap the pose once more
-        out.append((t or log_ns, *_pose(pose), _planar_speed(g(msg, "twist"))))
+        header = first_field(msg, "header")
+        t = stamp_ns(first_field(header, "stamp")) if header is not None else stamp_ns(first_field(msg, "timestamp"))
+        pose = first_field(msg, "pose", default={})
+        pose = first_field(pose, "pose", default=pose)  # Odometry / PoseWithCovariance wrap the pose once more
+        out.append((t or log_ns, *_pose(pose), _planar_speed(first_field(msg, "twist"))))
     return out
 
 
@@ -255,9 +264,10 @@ def _differenced(track: str, cur: _Message, prev: _Message | None, nxt: _Message
     return math.hypot(x1 - x0, y1 - y0) / ((b.t - a.t) * 1e-9)
 
 
-def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions, where: str) -> list[Box]:
+def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions,
+                 where: str) -> list[RecordedObject]:
     """Boxes in the ego frame: from the vehicle frame directly, from the fixed frame through the ego pose."""
-    out: list[Box] = []
+    out: list[RecordedObject] = []
     in_ego = [b for b in raw if b.frame == options.ego_frame]
     in_fixed = [b for b in raw if b.frame == options.fixed_frame]
     other = {b.frame for b in raw} - {options.ego_frame, options.fixed_frame}
@@ -268,8 +278,8 @@ def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOp
         )
     if in_ego:
         x, y, h = vehicle_to_ego([b.x for b in in_ego], [b.y for b in in_ego], [b.yaw for b in in_ego])
-        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width, speed=b.speed)
-                for i, b in enumerate(in_ego)]
+        out += [RecordedObject(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width,
+                               speed=b.speed) for i, b in enumerate(in_ego)]
     if in_fixed:
         pose = poses.at(t)
         if pose is None:
@@ -278,8 +288,8 @@ def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOp
                 f"{POSE_TOLERANCE_NS / 1e9:g} s of the annotations at t={t / 1e9:.3f} s (see --pose-topic)"
             )
         x, y, h = global_to_ego(*pose, [b.x for b in in_fixed], [b.y for b in in_fixed], [b.yaw for b in in_fixed])
-        out += [Box(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width, speed=b.speed)
-                for i, b in enumerate(in_fixed)]
+        out += [RecordedObject(b.track_id, b.category, float(x[i]), float(y[i]), float(h[i]), b.length, b.width,
+                               speed=b.speed) for i, b in enumerate(in_fixed)]
     return out
 
 
@@ -328,7 +338,7 @@ def message_frames(
         boxes = to_ego_boxes(cur.raw, cur.t, poses, options, f"{where} message {cur.index}")
         boxes = [b if b.speed is not None else replace(b, speed=_differenced(b.track_id, cur, prev, nxt))
                  for b in boxes]
-        ego = Box("ego", "ego", 0.0, 0.0, 0.0, speed=poses.speed_at(cur.t))
+        ego = RecordedObject("ego", "ego", 0.0, 0.0, 0.0, speed=poses.speed_at(cur.t))
         return builder.frame(scene, cur.index, cur.t // 1000, ego, boxes)
 
     window: list[_Message] = []  # the previous message, the one whose frame is due, the next one

@@ -20,11 +20,11 @@ from typing import Any
 import numpy as np
 
 from extractors.base import (
-    Box,
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    RecordedObject,
     global_to_ego,
     quaternion_yaw,
     require_path,
@@ -117,10 +117,10 @@ def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: Fram
         [float(quaternion_yaw(*a["rotation"])) for a in anns],
     )
     # nuScenes sizes are [width, length, height]
-    boxes = [Box(a["instance_token"], a["category_name"], float(x[i]), float(y[i]), float(h[i]),
-                 a["size"][1], a["size"][0], speed=_ground_speed(nusc.box_velocity(a["token"])))
+    boxes = [RecordedObject(a["instance_token"], a["category_name"], float(x[i]), float(y[i]), float(h[i]),
+                            a["size"][1], a["size"][0], speed=_ground_speed(nusc.box_velocity(a["token"])))
              for i, a in enumerate(anns)]
-    ego = Box("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=_ground_speed(ego_velocity(nusc, sample)))
+    ego = RecordedObject("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=_ground_speed(ego_velocity(nusc, sample)))
     return builder.frame(scene, index, int(sample["timestamp"]), ego, boxes)
 
 

@@ -21,11 +21,11 @@ from typing import Any
 import numpy as np
 
 from extractors.base import (
-    Box,
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    RecordedObject,
     global_to_ego,
     require_path,
 )
@@ -184,12 +184,12 @@ def scenario_frames(
         others = [i for i in np.flatnonzero(valid[:, step]) if i != ego_i]
         x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
                                 yaw[others, step])
-        boxes = [Box(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step], width[i, step],
-                     coarse[i], speed[i, step]) for k, i in enumerate(others)]
+        boxes = [RecordedObject(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step],
+                                width[i, step], coarse[i], speed[i, step]) for k, i in enumerate(others)]
         # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
         # than it is long, so the ego's box is read with its sides in order.
         ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)
-        ego = Box(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w, speed=speed[ego_i, step])
+        ego = RecordedObject(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w, speed=speed[ego_i, step])
         yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
 
 

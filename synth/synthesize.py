@@ -121,10 +121,10 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     oracle = make_oracle(scene, config)
     if config.strategy == "auto":
         oracle.full_table()
-    cm = CostModel(oracle)
+    cost_model = CostModel(oracle)
     t = time.perf_counter()
     oracle_s = t - started
-    found = search(config.strategy, cm, budget)
+    found = search(config.strategy, cost_model, budget)
     search_s = time.perf_counter() - t
     t = time.perf_counter()
     # Search indices are oracle indices minus one (oracle index 0 is ego).

@@ -89,7 +89,7 @@ def family_of(etype: str) -> str:
 
 @dataclass(frozen=True)
 class Footprint:
-    """An entity as drawn: its oriented rectangle in ego's frame (not extractors.base.Box, a detection)."""
+    """An entity as drawn: its oriented rectangle in ego's frame (not extractors.base.RecordedObject, a recorded detection)."""
 
     id: str
     type: str

@@ -13,22 +13,22 @@ from synth.search.monolithic import monolithic
 
 _STRATEGIES = {
     "auto": auto,
-    "bfs": lambda cm, b: bfs(cm, b, cpa=False),
-    "bfs-cpa": lambda cm, b: bfs(cm, b, cpa=True),
-    "dfs": lambda cm, b: dfs(cm, b, bnb=False, cpa=False),
-    "dfs-bnb": lambda cm, b: dfs(cm, b, bnb=True, cpa=False),
-    "dfs-cpa": lambda cm, b: dfs(cm, b, bnb=False, cpa=True),
-    "dfs-bnb-cpa": lambda cm, b: dfs(cm, b, bnb=True, cpa=True),
-    "astar": lambda cm, b: astar(cm, b, cpa=False),
-    "astar-cpa": lambda cm, b: astar(cm, b, cpa=True),
+    "bfs": lambda cost_model, budget: bfs(cost_model, budget, cpa=False),
+    "bfs-cpa": lambda cost_model, budget: bfs(cost_model, budget, cpa=True),
+    "dfs": lambda cost_model, budget: dfs(cost_model, budget, bnb=False, cpa=False),
+    "dfs-bnb": lambda cost_model, budget: dfs(cost_model, budget, bnb=True, cpa=False),
+    "dfs-cpa": lambda cost_model, budget: dfs(cost_model, budget, bnb=False, cpa=True),
+    "dfs-bnb-cpa": lambda cost_model, budget: dfs(cost_model, budget, bnb=True, cpa=True),
+    "astar": lambda cost_model, budget: astar(cost_model, budget, cpa=False),
+    "astar-cpa": lambda cost_model, budget: astar(cost_model, budget, cpa=True),
     "monolithic": monolithic,
 }
 
 
-def search(strategy: str, cm: CostModel, budget: Budget) -> SearchResult:
-    if cm.n == 0:
+def search(strategy: str, cost_model: CostModel, budget: Budget) -> SearchResult:
+    if cost_model.n == 0:
         return SearchResult((), 0, 0, "optimal", 0)
-    return _STRATEGIES[strategy](cm, budget)
+    return _STRATEGIES[strategy](cost_model, budget)
 
 
 __all__ = ["Budget", "CostModel", "SearchResult", "search"]

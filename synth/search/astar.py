@@ -14,8 +14,8 @@ from synth.search.common import SearchResult, finish, greedy_completion
 from synth.search.costs import CostModel, bits
 
 
-def astar(cm: CostModel, budget: Budget, cpa: bool) -> SearchResult:
-    floors = cm.floors()
+def astar(cost_model: CostModel, budget: Budget, cpa: bool) -> SearchResult:
+    floors = cost_model.floors()
     h0 = sum(floors)
     # (f, -depth, tie, g, declared, order): deeper first among equal f, then first generated.
     heap = [(h0, 0, 0, 0, 0, ())]
@@ -27,10 +27,10 @@ def astar(cm: CostModel, budget: Budget, cpa: bool) -> SearchResult:
             f, _, _, g, declared, order = heapq.heappop(heap)
             if cpa and g > best_g.get(declared, g):
                 continue
-            if declared == cm.all:
-                return finish(cm, order, f, budget.nodes, None)
-            for e in bits(cm.all & ~declared):
-                g2 = g + cm.delta(e, declared)
+            if declared == cost_model.all:
+                return finish(cost_model, order, f, budget.nodes, None)
+            for e in bits(cost_model.all & ~declared):
+                g2 = g + cost_model.delta(e, declared)
                 d2 = declared | (1 << e)
                 if cpa:
                     if d2 in best_g and best_g[d2] <= g2:
@@ -41,4 +41,4 @@ def astar(cm: CostModel, budget: Budget, cpa: bool) -> SearchResult:
         raise AssertionError("A* ran out of states before declaring everything")
     except BudgetExhausted as stop:
         f, _, _, g, declared, order = heap[0]
-        return finish(cm, greedy_completion(cm, order, declared), f, budget.nodes, stop.reason)
+        return finish(cost_model, greedy_completion(cost_model, order, declared), f, budget.nodes, stop.reason)

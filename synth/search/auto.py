@@ -43,10 +43,10 @@ from synth.search.costs import CostModel, bits
 Unmet = int  # CostModel.unmet: per part, who has a witness but none declared, packed into one int
 
 
-def _least_regret(cm: CostModel, unmet: Unmet, todo: int) -> tuple[int, int]:
+def _least_regret(cost_model: CostModel, unmet: Unmet, todo: int) -> tuple[int, int]:
     """(least regret over todo, the entities that have it), by counting set membership bit-parallel."""
-    if not todo & ~cm.union(unmet):
-        parts = cm.parts_of(unmet)
+    if not todo & ~cost_model.union(unmet):
+        parts = cost_model.parts_of(unmet)
         at_least = [todo] + [0] * len(parts)
         for u in parts:
             for j in range(len(parts), 0, -1):
@@ -58,10 +58,10 @@ def _least_regret(cm: CostModel, unmet: Unmet, todo: int) -> tuple[int, int]:
                 return j, exactly
     if not todo:
         raise ValueError("empty todo")
-    return 0, todo & ~cm.union(unmet)
+    return 0, todo & ~cost_model.union(unmet)
 
 
-def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
+def closure(cost_model: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
             within: int) -> tuple[tuple[int, ...], int, Unmet, int]:
     """Declare zero-regret entities of `within` until none is left, in passes over the undeclared in index order
     (lowest first; within a pass each declaration counts for the entities after it).
@@ -73,7 +73,7 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
     while todo:
         above, progressed = todo, False
         while True:
-            free = above & todo & ~cm.union(unmet)
+            free = above & todo & ~cost_model.union(unmet)
             if not free:
                 break
             low = free & -free
@@ -81,8 +81,8 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
             out.append(e)
             declared |= low
             todo &= ~low
-            unmet = cm.declare(unmet, e)
-            added += cm.floor_of[e]
+            unmet = cost_model.declare(unmet, e)
+            added += cost_model.floor_of[e]
             above &= ~((low << 1) - 1)
             progressed = True
         if not progressed:
@@ -90,16 +90,16 @@ def closure(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
     return tuple(out), declared, unmet, added
 
 
-def closed_sources(cm: CostModel, unmet: Unmet, todo: int) -> list[int]:
+def closed_sources(cost_model: CostModel, unmet: Unmet, todo: int) -> list[int]:
     """Every closed source (see the module's note), of every part, as a bitset of its members."""
     out = []
-    for k, u in enumerate(cm.parts_of(unmet)):
+    for k, u in enumerate(cost_model.parts_of(unmet)):
         a = u & todo
         if not a:
             continue
         # Every witness of an unmet entity is undeclared. One with a witness outside `a` is fed from elsewhere,
         # and so is everything downstream of it within `a`; the rest is closed under witnesses.
-        pred = {x: cm._mask[k][x] for x in bits(a)}
+        pred = {x: cost_model._mask[k][x] for x in bits(a)}
         fed = 0
         for x, p in pred.items():
             if p & ~a:
@@ -135,10 +135,10 @@ def closed_sources(cm: CostModel, unmet: Unmet, todo: int) -> list[int]:
     return out
 
 
-def components(cm: CostModel, rest: int) -> list[int]:
+def components(cost_model: CostModel, rest: int) -> list[int]:
     """Strongly connected components of the witness graph on `rest` (r -> e when r witnesses e), as bitsets,
     upstream first: among the components whose upstream is already listed, the one with the lowest member."""
-    preds = {e: cm.witness_mask(e) & rest for e in bits(rest)}
+    preds = {e: cost_model.witness_mask(e) & rest for e in bits(rest)}
     succs = dict.fromkeys(preds, 0)
     for e, p in preds.items():
         for r in bits(p):
@@ -175,19 +175,19 @@ def components(cm: CostModel, rest: int) -> list[int]:
     return out
 
 
-def _greedy(cm: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
+def _greedy(cost_model: CostModel, order: tuple[int, ...], declared: int, unmet: Unmet,
             within: int) -> tuple[tuple[int, ...], int]:
     """common.greedy_completion within a component (the least regret, lowest index first), and its cost."""
     out, cost = list(order), 0
     todo = within & ~declared
     while todo:
-        regret, who = _least_regret(cm, unmet, todo)
+        regret, who = _least_regret(cost_model, unmet, todo)
         low = who & -who
         e = low.bit_length() - 1
         out.append(e)
-        cost += cm.floor_of[e] + regret
+        cost += cost_model.floor_of[e] + regret
         todo &= ~low
-        unmet = cm.declare(unmet, e)
+        unmet = cost_model.declare(unmet, e)
     return tuple(out), cost
 
 
@@ -195,12 +195,12 @@ class _Bound:
     """h_closed of the states below one root: the closed sources at the root that no declaration has touched
     (declaring an entity removes only its own part's source, and no new one ever appears: module note)."""
 
-    def __init__(self, cm: CostModel, comp: int, unmet: Unmet, todo: int):
-        self.cm, self.comp = cm, comp
-        self.sources = closed_sources(cm, unmet, todo)
+    def __init__(self, cost_model: CostModel, comp: int, unmet: Unmet, todo: int):
+        self.cost_model, self.comp = cost_model, comp
+        self.sources = closed_sources(cost_model, unmet, todo)
 
     def __call__(self, declared: int) -> int:
-        return self.cm.floor_sum(self.comp & ~declared) + sum(not (s & declared) for s in self.sources)
+        return self.cost_model.floor_sum(self.comp & ~declared) + sum(not (s & declared) for s in self.sources)
 
     def open_members(self, declared: int) -> int:
         """Entities whose declaration opens a closed source (one per part it opens, at most one per part)."""
@@ -220,19 +220,21 @@ def _free_moves(paying: int, todo: int, opening: int) -> int:
     return (todo & ~pays) | (pays & opening)
 
 
-def _moves(cm: CostModel, bound: _Bound, todo: int, declared: int, unmet: Unmet, may_waste: bool) -> int:
+def _moves(cost_model: CostModel, bound: _Bound, todo: int, declared: int, unmet: Unmet, may_waste: bool) -> int:
     """The entities worth declaring next: all of todo, or only those that waste nothing (_free_moves)."""
-    return todo if may_waste else _free_moves(cm.union(unmet), todo, bound.open_members(declared))
+    return todo if may_waste else _free_moves(cost_model.union(unmet), todo, bound.open_members(declared))
 
 
-def _move(cm: CostModel, comp: int, g: int, order: tuple[int, ...], declared: int, unmet: Unmet,
+def _move(cost_model: CostModel, comp: int, g: int, order: tuple[int, ...], declared: int, unmet: Unmet,
           e: int) -> tuple[int, tuple[int, ...], int, Unmet]:
     """Declare e, then the closure: the child's (g, order, declared, unmet)."""
-    order2, declared2, unmet2, forced = closure(cm, order + (e,), declared | 1 << e, cm.declare(unmet, e), comp)
-    return g + cm.floor_of[e] + cm.regret(unmet, e) + forced, order2, declared2, unmet2
+    order2, declared2, unmet2, forced = closure(cost_model, order + (e,), declared | 1 << e,
+                                                cost_model.declare(unmet, e), comp)
+    return g + cost_model.floor_of[e] + cost_model.regret(unmet, e) + forced, order2, declared2, unmet2
 
 
-def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budget: Budget) -> tuple[int, tuple, int]:
+def _optimum(cost_model: CostModel, comp: int, root: tuple, ub: int, bound: _Bound,
+             budget: Budget) -> tuple[int, tuple, int]:
     """Pass 1: the optimal cost of the component, by A* on g + max(h, h_closed) (admissible) with branch and bound
     on the incumbent. Returns (cost, an order reaching it, the least f left when the budget ran out, else cost)."""
     root_order, root_declared, root_unmet, root_g = root
@@ -246,8 +248,8 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
         if g > best_g.get(declared, g):
             continue
         # A move that wastes one over h_closed reaches the incumbent when the slack is one.
-        for e in bits(_moves(cm, bound, comp & ~declared, declared, unmet, ub - (g + bound(declared)) > 1)):
-            g2, order2, declared2, unmet2 = _move(cm, comp, g, order, declared, unmet, e)
+        for e in bits(_moves(cost_model, bound, comp & ~declared, declared, unmet, ub - (g + bound(declared)) > 1)):
+            g2, order2, declared2, unmet2 = _move(cost_model, comp, g, order, declared, unmet, e)
             if declared2 & comp == comp:
                 if g2 < ub:
                     ub, best_order = g2, order2
@@ -255,7 +257,7 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
             if declared2 in best_g and best_g[declared2] <= g2:
                 continue
             todo2 = comp & ~declared2
-            f2 = g2 + max(bound(declared2), cm.floor_sum(todo2) + _least_regret(cm, unmet2, todo2)[0])
+            f2 = g2 + max(bound(declared2), cost_model.floor_sum(todo2) + _least_regret(cost_model, unmet2, todo2)[0])
             if f2 >= ub:
                 continue
             best_g[declared2] = g2
@@ -265,7 +267,7 @@ def _optimum(cm: CostModel, comp: int, root: tuple, ub: int, bound: _Bound, budg
 
 
 def solve_component(
-    cm: CostModel, comp: int, base: int, budget: Budget
+    cost_model: CostModel, comp: int, base: int, budget: Budget
 ) -> tuple[tuple[int, ...], int, int, str | None]:
     """Optimal order of one component given `base` declared. Returns (order, cost, lower bound, stop reason).
 
@@ -279,19 +281,19 @@ def solve_component(
         todo = comp & ~declared
         if not todo:
             return 0
-        return cm.floor_sum(todo) + _least_regret(cm, unmet, todo)[0]
+        return cost_model.floor_sum(todo) + _least_regret(cost_model, unmet, todo)[0]
 
-    root = closure(cm, (), base, cm.unmet(base), comp)
+    root = closure(cost_model, (), base, cost_model.unmet(base), comp)
     root_order, root_declared, root_unmet, root_g = root
     if root_declared & comp == comp:
         return root_order, root_g, root_g, None
-    ub_order, rest = _greedy(cm, root_order, root_declared, root_unmet, comp)
+    ub_order, rest = _greedy(cost_model, root_order, root_declared, root_unmet, comp)
     ub = root_g + rest
-    bound = _Bound(cm, comp, root_unmet, comp & ~root_declared)
+    bound = _Bound(cost_model, comp, root_unmet, comp & ~root_declared)
     if root_g + bound(root_declared) >= ub:
         return ub_order, ub, ub, None  # the greedy incumbent meets the bound
     try:
-        opt, opt_order, _ = _optimum(cm, comp, root, ub, bound, budget)
+        opt, opt_order, _ = _optimum(cost_model, comp, root, ub, bound, budget)
     except BudgetExhausted as stop:
         return ub_order, ub, root_g + bound(root_declared), stop.reason
     if opt == ub:
@@ -308,8 +310,8 @@ def solve_component(
             slack = opt - (g + bound(declared))  # how much this node may still waste and reach the optimum
             if slack < 0:
                 continue
-            for e in bits(_moves(cm, bound, comp & ~declared, declared, unmet, slack > 0)):
-                g2, order2, declared2, unmet2 = _move(cm, comp, g, order, declared, unmet, e)
+            for e in bits(_moves(cost_model, bound, comp & ~declared, declared, unmet, slack > 0)):
+                g2, order2, declared2, unmet2 = _move(cost_model, comp, g, order, declared, unmet, e)
                 if declared2 & comp == comp:
                     if g2 < ub:
                         ub, ub_order = g2, order2
@@ -329,17 +331,17 @@ def solve_component(
         return opt_order, opt, opt, stop.reason
 
 
-def auto(cm: CostModel, budget: Budget) -> SearchResult:
-    order, declared, unmet, lb = closure(cm, (), 0, cm.unmet(0), cm.all)
+def auto(cost_model: CostModel, budget: Budget) -> SearchResult:
+    order, declared, unmet, lb = closure(cost_model, (), 0, cost_model.unmet(0), cost_model.all)
     stopped: str | None = None
-    for comp in components(cm, cm.all & ~declared):
+    for comp in components(cost_model, cost_model.all & ~declared):
         if stopped is None:
-            sub, _cost, sub_lb, stopped = solve_component(cm, comp, declared, budget)
+            sub, _cost, sub_lb, stopped = solve_component(cost_model, comp, declared, budget)
         else:
             # Out of budget: later components get a greedy order and the floor bound.
-            sub, _ = _greedy(cm, (), declared, cm.unmet(declared), comp)
-            sub_lb = floor_bound(cm, comp)
+            sub, _ = _greedy(cost_model, (), declared, cost_model.unmet(declared), comp)
+            sub_lb = floor_bound(cost_model, comp)
         order += sub
         lb += sub_lb
         declared |= comp
-    return finish(cm, order, lb, budget.nodes, stopped)
+    return finish(cost_model, order, lb, budget.nodes, stopped)

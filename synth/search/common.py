@@ -16,24 +16,25 @@ class SearchResult:
     nodes_expanded: int
 
 
-def floor_bound(cm: CostModel, undeclared: int) -> int:
+def floor_bound(cost_model: CostModel, undeclared: int) -> int:
     """Sum of floors of the undeclared entities: admissible (each costs at least its floor)."""
-    floors = cm.floors()
+    floors = cost_model.floors()
     return sum(floors[e] for e in bits(undeclared))
 
 
-def greedy_completion(cm: CostModel, order: tuple[int, ...], declared: int, within: int | None = None) -> tuple[int, ...]:
+def greedy_completion(cost_model: CostModel, order: tuple[int, ...], declared: int,
+                      within: int | None = None) -> tuple[int, ...]:
     """Complete an order by always declaring the entity that loses least against its floor (ties: lowest index).
 
     `within` limits the completion to a subset (the rest of it); default: every undeclared entity.
     """
-    floors = cm.floors()
-    todo = (cm.all if within is None else within) & ~declared
+    floors = cost_model.floors()
+    todo = (cost_model.all if within is None else within) & ~declared
     out = list(order)
     while todo:
-        best, best_regret = -1, cm.kinds + 1  # above any regret: each part loses at most 1
+        best, best_regret = -1, cost_model.kinds + 1  # above any regret: each part loses at most 1
         for e in bits(todo):
-            regret = cm.delta(e, declared) - floors[e]
+            regret = cost_model.delta(e, declared) - floors[e]
             if regret < best_regret:
                 best, best_regret = e, regret
                 if regret == 0:
@@ -44,16 +45,17 @@ def greedy_completion(cm: CostModel, order: tuple[int, ...], declared: int, with
     return tuple(out)
 
 
-def finish(cm: CostModel, order: tuple[int, ...], lower_bound: int, nodes: int, stopped: str | None) -> SearchResult:
+def finish(cost_model: CostModel, order: tuple[int, ...], lower_bound: int, nodes: int,
+           stopped: str | None) -> SearchResult:
     """The anytime answer: optimal when the bound meets the cost; else feasible, or timeout / memout when the
     best program found is no better than declaring everything by fallback (cost 1 per part and entity)."""
-    cost = cm.order_cost(order)
+    cost = cost_model.order_cost(order)
     lower_bound = min(lower_bound, cost)
     if cost == lower_bound:
         status = "optimal"
     elif stopped == "memout":
         status = "memout"
-    elif stopped and cost >= cm.kinds * cm.n:
+    elif stopped and cost >= cost_model.kinds * cost_model.n:
         status = "timeout"
     else:
         status = "feasible"

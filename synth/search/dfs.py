@@ -11,7 +11,7 @@ from synth.search.common import SearchResult, finish, floor_bound, greedy_comple
 from synth.search.costs import CostModel, bits
 
 
-def dfs(cm: CostModel, budget: Budget, bnb: bool, cpa: bool) -> SearchResult:
+def dfs(cost_model: CostModel, budget: Budget, bnb: bool, cpa: bool) -> SearchResult:
     best_cost, best_order = float("inf"), None
     seen: dict[int, int] = {}
     stack: list[tuple[int, int, tuple[int, ...]]] = [(0, 0, ())]
@@ -25,17 +25,17 @@ def dfs(cm: CostModel, budget: Budget, bnb: bool, cpa: bool) -> SearchResult:
                 seen[declared] = cost
             if bnb and cost >= best_cost:
                 continue
-            if declared == cm.all:
+            if declared == cost_model.all:
                 if cost < best_cost:
                     best_cost, best_order = cost, order
                 continue
             # Pushed in reverse so that the lowest index is explored first.
-            for e in sorted(bits(cm.all & ~declared), reverse=True):
-                stack.append((cost + cm.delta(e, declared), declared | (1 << e), order + (e,)))
-        return finish(cm, best_order, best_cost, budget.nodes, None)
+            for e in sorted(bits(cost_model.all & ~declared), reverse=True):
+                stack.append((cost + cost_model.delta(e, declared), declared | (1 << e), order + (e,)))
+        return finish(cost_model, best_order, best_cost, budget.nodes, None)
     except BudgetExhausted as stop:
-        lb = floor_bound(cm, cm.all)
+        lb = floor_bound(cost_model, cost_model.all)
         if best_order is None:
             cost, declared, order = stack[-1] if stack else (0, 0, ())
-            best_order = greedy_completion(cm, order, declared)
-        return finish(cm, best_order, lb, budget.nodes, stop.reason)
+            best_order = greedy_completion(cost_model, order, declared)
+        return finish(cost_model, best_order, lb, budget.nodes, stop.reason)

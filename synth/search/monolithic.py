@@ -18,13 +18,13 @@ from synth.search.costs import CostModel
 from synth.smt import Z3Backend
 
 
-def monolithic(cm: CostModel, budget: Budget) -> SearchResult:
-    oracle = cm.oracle
+def monolithic(cost_model: CostModel, budget: Budget) -> SearchResult:
+    oracle = cost_model.oracle
     # The frame's exact backend (z3) where a solver oracle made one; its encoding, z3's Optimize around it.
     smt = oracle.backend.exact if oracle.backend is not None else Z3Backend(oracle.config)
     z3 = smt.z3
     ents = oracle.entities()  # 0 is ego
-    n = cm.n
+    n = cost_model.n
     o = [z3.Int(f"o{e}") for e in range(n)]
     opt = z3.Optimize()
     remaining = budget.remaining()
@@ -47,8 +47,8 @@ def monolithic(cm: CostModel, budget: Budget) -> SearchResult:
         m = opt.model()
         order = tuple(sorted(range(n), key=lambda e: m.eval(o[e]).as_long()))
         robust = robust_parts(oracle.scene, oracle.config, oracle.parts)
-        bound = floor_bound(cm, cm.all) if robust else cm.order_cost(order)
-        return finish(cm, order, bound, budget.nodes, None)
+        bound = floor_bound(cost_model, cost_model.all) if robust else cost_model.order_cost(order)
+        return finish(cost_model, order, bound, budget.nodes, None)
     # unknown: out of time (z3 keeps no usable incumbent we can trust here).
-    order = greedy_completion(cm, (), 0) if result == z3.unknown else ()
-    return finish(cm, order, floor_bound(cm, cm.all), budget.nodes, "timeout")
+    order = greedy_completion(cost_model, (), 0) if result == z3.unknown else ()
+    return finish(cost_model, order, floor_bound(cost_model, cost_model.all), budget.nodes, "timeout")

@@ -108,15 +108,15 @@ def test_motion_tables_of_all_oracles_are_equal_and_match_the_definition():
 def test_declaring_costs_depend_on_the_set_and_only_fall_as_it_grows(seed, n):
     rng = random.Random(seed)
     scene = scene_from_dict(random_scene_dict(rng, n, speeds=True))
-    cm = CostModel(make_oracle(scene, MOTION_ON.with_(oracle="closed-form")))
+    cost_model = CostModel(make_oracle(scene, MOTION_ON.with_(oracle="closed-form")))
     lazy = CostModel(make_oracle(scene, MOTION_ON.with_(oracle="smt")))  # asks in its own order
     for _ in range(20):
         e = rng.randrange(n)
         small = sum(1 << r for r in range(n) if r != e and rng.random() < 0.4)
         big = small | sum(1 << r for r in range(n) if r != e and rng.random() < 0.5)
-        assert cm.delta(e, small) >= cm.delta(e, big) >= cm.floors()[e]
-        assert lazy.delta(e, big) == cm.delta(e, big) and lazy.delta(e, small) == cm.delta(e, small)
-        assert 0 <= cm.delta(e, small) <= 3
+        assert cost_model.delta(e, small) >= cost_model.delta(e, big) >= cost_model.floors()[e]
+        assert lazy.delta(e, big) == cost_model.delta(e, big) and lazy.delta(e, small) == cost_model.delta(e, small)
+        assert 0 <= cost_model.delta(e, small) <= 3
 
 
 def test_declaring_a_moving_car_first_lets_others_move_like_it():

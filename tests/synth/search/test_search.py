@@ -123,25 +123,25 @@ def test_mutual_witnesses_form_a_component_that_a_star_solves():
         {"id": "car1", "type": "Car", "x": 20, "y": 20, "heading": 0},
         {"id": "car2", "type": "Car", "x": 20, "y": 25, "heading": 180},
     ]})
-    cm = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
-    assert cm.floors() == [0, 0]
-    order, declared, _, _ = closure(cm, (), 0, cm.unmet(0), cm.all)
-    assert declared == 0 and components(cm, cm.all) == [0b11]
+    cost_model = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
+    assert cost_model.floors() == [0, 0]
+    order, declared, _, _ = closure(cost_model, (), 0, cost_model.unmet(0), cost_model.all)
+    assert declared == 0 and components(cost_model, cost_model.all) == [0b11]
     # Two closed sources (the pair for position, the pair for heading): the closed-group bound is the optimum.
-    assert len(closed_sources(cm, cm.unmet(0), cm.all)) == 2
+    assert len(closed_sources(cost_model, cost_model.unmet(0), cost_model.all)) == 2
     assert_optimal_and_contained(synthesize(scene, SynthConfig(oracle="closed-form")), scene, 2)
     assert optimal_cost(scene) == 2
 
 
-def _cost_to_go(cm, declared: int) -> int:
+def _cost_to_go(cost_model, declared: int) -> int:
     """The least cost of declaring everything not in `declared` (dynamic programming over subsets)."""
     from functools import cache
 
     @cache
     def best(d: int) -> int:
-        if d == cm.all:
+        if d == cost_model.all:
             return 0
-        return min(cm.delta(e, d) + best(d | 1 << e) for e in range(cm.n) if not d >> e & 1)
+        return min(cost_model.delta(e, d) + best(d | 1 << e) for e in range(cost_model.n) if not d >> e & 1)
 
     return best(declared)
 
@@ -159,21 +159,22 @@ def test_the_closed_group_bound_is_admissible_and_consistent(seed, n, crowd):
     rng = random.Random(seed)
     scene = crowd_scene(seed % 1000, pedestrians=n, barriers=1, cones=0, cars=0) if crowd else \
         scene_from_dict(random_scene_dict(rng, n))
-    cm = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
+    cost_model = CostModel(make_oracle(scene, SynthConfig(oracle="closed-form")))
 
     def h(d: int) -> int:
-        todo = cm.all & ~d
-        return cm.floor_sum(todo) + len(closed_sources(cm, cm.unmet(d), todo))
+        todo = cost_model.all & ~d
+        return cost_model.floor_sum(todo) + len(closed_sources(cost_model, cost_model.unmet(d), todo))
 
-    root = closed_sources(cm, cm.unmet(0), cm.all)
+    root = closed_sources(cost_model, cost_model.unmet(0), cost_model.all)
     for _ in range(6):
-        d = rng.getrandbits(cm.n) & cm.all
-        assert h(d) <= _cost_to_go(cm, d)
+        d = rng.getrandbits(cost_model.n) & cost_model.all
+        assert h(d) <= _cost_to_go(cost_model, d)
         # Declarations only remove sources, never add one: the search counts the root's untouched ones.
-        assert sorted(closed_sources(cm, cm.unmet(d), cm.all & ~d)) == sorted(x for x in root if not x & d)
-        for e in range(cm.n):
+        sources = closed_sources(cost_model, cost_model.unmet(d), cost_model.all & ~d)
+        assert sorted(sources) == sorted(x for x in root if not x & d)
+        for e in range(cost_model.n):
             if not d >> e & 1:
-                assert h(d) <= cm.delta(e, d) + h(d | 1 << e)
+                assert h(d) <= cost_model.delta(e, d) + h(d | 1 << e)
 
 
 @settings(max_examples=80)
