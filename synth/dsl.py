@@ -123,17 +123,9 @@ def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statemen
     return Statement(name, etype, **clauses)
 
 
-def iter_references(program: Program) -> Iterator[tuple[str, str, str]]:
-    """(entity, part name, reference) for every reference a program makes."""
-    for s in program.statements:
-        for part, clause in s.clauses():
-            if clause.ref is not None:
-                yield (s.id, part.name, clause.ref)
-
-
 __all__ = [
     "DIRECTIONS", "FACINGS", "AbsoluteHeading", "AbsoluteSpeed", "AbsoluteXYPos", "DirectionPos", "DslError",
     "FacingRelation", "Heading", "LocalXYPos", "Motion", "MovingLike", "Position", "Program", "Range",
     "RelativeHeading", "RelativeSpeed", "Stationary", "Statement", "fmt_number",
-    "format_program", "iter_references", "parse_program", "parse_statements",
+    "format_program", "parse_program", "parse_statements",
 ]

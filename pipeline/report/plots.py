@@ -25,15 +25,14 @@ from pipeline.report.stats import (
     per_n,
     plot_points,
 )
+from synth.parts import CLAUSE_KINDS
 
 # Okabe & Ito (2008), most distinct first.
 PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000")
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 REFERENCE = "#555555"  # the absolute-coordinate baseline and other guides
 DPI = 110
-KIND_COST = {**dict.fromkeys(("ahead", "behind", "left", "right", "toward", "away", "stationary", "moving like"), 0),
-             "relative position": 1, "relative heading": 1, "relative speed": 1, "absolute position": 2,
-             "absolute heading": 2, "absolute speed": 2}
+KIND_COST = {k.label: k.cost for k in CLAUSE_KINDS}  # synth.parts: the clause's cost
 # Every file all_plots writes, in report order; `r2s report` may replace a directory holding only these.
 PLOT_FILES = ("runtime_vs_n.png", "cost_vs_n.png", "cost_distribution.png", "cost_vs_absolute.png",
               "relation_usage.png")

@@ -11,20 +11,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from synth.dsl import (
-    AbsoluteHeading,
-    AbsoluteSpeed,
-    AbsoluteXYPos,
-    DirectionPos,
-    FacingRelation,
-    LocalXYPos,
-    MovingLike,
-    Program,
-    RelativeHeading,
-    RelativeSpeed,
-    Stationary,
-)
+from synth.dsl import Program
 from synth.geometry import heading_vector, normalize, to_local
+from synth.parts import CLAUSE_KINDS
 from synth.scene import Scene
 
 FORMATS = ("png", "svg", "pdf")
@@ -135,11 +124,9 @@ class Mark:
     kind: str  # a key of MARK_KINDS
 
 
-# Every clause of the DSL by what it draws: an arrow from its reference, or a mark on the entity.
-_KINDS = {DirectionPos: "sector", LocalXYPos: "relative_xy", FacingRelation: "facing",
-          RelativeHeading: "relative_heading", MovingLike: "moving_like", RelativeSpeed: "relative_speed",
-          AbsoluteXYPos: "absolute_position", AbsoluteHeading: "absolute_heading", Stationary: "stationary",
-          AbsoluteSpeed: "absolute_speed"}
+# Every clause of the DSL by what it draws (synth.parts.CLAUSE_KINDS): an arrow from its reference, or a mark on
+# the entity.
+_KINDS = {k.clause: k.drawn_as for k in CLAUSE_KINDS}
 
 
 def references(program: Program) -> tuple[tuple[Reference, ...], tuple[Mark, ...]]:

@@ -13,7 +13,7 @@ form (cost 2). The rest of the core is written once, over parts:
   semantics             holds, observed                       -> semantics (the independent checker)
   syntax                parse (printing is the clause's __str__) -> dsl
   Scenic                keyword, scenic, needs_own_position, scenic_requirements, scenic_prelude -> emit_scenic
-  report                kinds, kind                           -> pipeline.report.stats
+  report                clause_kinds (kinds, kind)            -> pipeline.report.stats, report.plots, variants.render
 
 The SMT methods take the backend as an argument and build formulas from its primitives (synth.smt.backend:
 constant, var, offset, cone, distance_in, And, Or, Not, check; the exact backend adds angle_in, perturbed_offset,
@@ -49,7 +49,14 @@ class Part(ABC):
     # Codes that need no reference: always available, like ego, so they are recorded in ego's row (index 0).
     refless: ClassVar[frozenset[int]] = frozenset()
     keyword: ClassVar[str]  # the Scenic specifier the clause becomes (at, facing, with speed)
-    kinds: ClassVar[tuple[str, ...]]  # report labels of the part's relation kinds, grammar order
+    # Every kind of clause the part has, grammar order: the one classification the report, its plots and the
+    # pictures read (labels, costs, how a picture draws it).
+    clause_kinds: ClassVar[tuple[ClauseKind, ...]]
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The report labels of the part's relation kinds, grammar order."""
+        return tuple(k.label for k in self.clause_kinds)
 
     # ------------------------------------------------------------------------------- relations and costs
     def codes_from(self, ref_is_ego: bool) -> tuple[int, ...]:
@@ -169,9 +176,30 @@ class Part(ABC):
         return ""
 
     # ------------------------------------------------------------------------------- report
-    @abstractmethod
     def kind(self, clause: Clause) -> str:
         """The report label of a clause (one of kinds)."""
+        return self.clause_kind(clause).label
+
+    def clause_kind(self, clause: Clause) -> ClauseKind:
+        return next(k for k in self.clause_kinds if k.matches(clause))
+
+
+@dataclass(frozen=True)
+class ClauseKind:
+    """One kind of clause, as the report counts it and a picture draws it: a clause class, narrowed to one value of
+    a field where the class holds several kinds (the four directions, the two facings)."""
+
+    label: str  # the report's name (relation_usage, docs/formats.md)
+    clause: type  # the clause dataclass; its `cost` is the kind's
+    drawn_as: str  # pipeline.variants.render: an arrow from the reference, or a mark on the entity (no reference)
+    field: tuple[str, str] | None = None  # (clause field, value) that singles the kind out of its class
+
+    @property
+    def cost(self) -> int:
+        return self.clause.cost
+
+    def matches(self, clause: Clause) -> bool:
+        return type(clause) is self.clause and (self.field is None or getattr(clause, self.field[0]) == self.field[1])
 
 
 @dataclass(frozen=True)

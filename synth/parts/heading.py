@@ -28,7 +28,7 @@ from synth.geometry import (
     normalize,
     signed,
 )
-from synth.parts.base import Clause, Part
+from synth.parts.base import Clause, ClauseKind, Part
 from synth.perturbation import Bounds, angle_range, bounds_of, disc_in_cone, narrowed, narrowed_cones, radius_of
 from synth.ranges import centred
 from synth.scene import Entity
@@ -92,7 +92,11 @@ class HeadingPart(Part):
     name = "heading"
     relations = FACING_NAMES
     keyword = "facing"
-    kinds = ("toward", "away", "relative heading", "absolute heading")
+    clause_kinds = (
+        *(ClauseKind(mode, FacingRelation, "facing", ("mode", mode)) for mode in FACING_NAMES),
+        ClauseKind("relative heading", RelativeHeading, "relative_heading"),
+        ClauseKind("absolute heading", AbsoluteHeading, "absolute_heading"),
+    )
 
     def perturbed(self, b: Bounds) -> bool:
         return b.pos != 0.0 or b.heading != 0.0
@@ -274,10 +278,5 @@ class HeadingPart(Part):
         return isinstance(clause, FacingRelation)
 
     # ------------------------------------------------------------------------------- report
-    def kind(self, clause: Clause) -> str:
-        if isinstance(clause, FacingRelation):
-            return clause.mode
-        return "relative heading" if isinstance(clause, RelativeHeading) else "absolute heading"
-
 
 HEADING = HeadingPart()

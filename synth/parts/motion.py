@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from synth.config import SynthConfig
-from synth.parts.base import Clause, Part
+from synth.parts.base import Clause, ClauseKind, Part
 from synth.perturbation import Bounds, covering, speed_box
 from synth.ranges import centred
 from synth.scene import Entity
@@ -95,7 +95,12 @@ class MotionPart(Part):
     relations = MOTION_NAMES
     refless = frozenset({STATIONARY})
     keyword = "with speed"
-    kinds = ("stationary", "moving like", "relative speed", "absolute speed")
+    clause_kinds = (
+        ClauseKind("stationary", Stationary, "stationary"),
+        ClauseKind("moving like", MovingLike, "moving_like"),
+        ClauseKind("relative speed", RelativeSpeed, "relative_speed"),
+        ClauseKind("absolute speed", AbsoluteSpeed, "absolute_speed"),
+    )
 
     def perturbed(self, b: Bounds) -> bool:
         return b.speed != 0.0
@@ -295,10 +300,6 @@ class MotionPart(Part):
         return MOTION_PRELUDE.format(v_stop=fmt_number(config.v_stop), dv=fmt_number(config.dv))
 
     # ------------------------------------------------------------------------------- report
-    def kind(self, clause: Clause) -> str:
-        return {Stationary: "stationary", MovingLike: "moving like", RelativeSpeed: "relative speed",
-                AbsoluteSpeed: "absolute speed"}[type(clause)]
-
 
 MOTION_PRELUDE = '''\
 # Motion (r2sgen's MOTION clause): every object gets its speed; Scenic derives its velocity along its heading.

@@ -29,7 +29,7 @@ from synth.geometry import (
     sqrt_rational,
     to_local,
 )
-from synth.parts.base import Clause, Part
+from synth.parts.base import Clause, ClauseKind, Part
 from synth.perturbation import (
     Bounds,
     bounds_of,
@@ -104,7 +104,11 @@ class PositionPart(Part):
     name = "position"
     relations = DIRECTION_NAMES
     keyword = "at"
-    kinds = ("ahead", "behind", "left", "right", "relative position", "absolute position")
+    clause_kinds = (
+        *(ClauseKind(d, DirectionPos, "sector", ("direction", d)) for d in ("ahead", "behind", "left", "right")),
+        ClauseKind("relative position", LocalXYPos, "relative_xy"),
+        ClauseKind("absolute position", AbsoluteXYPos, "absolute_position"),
+    )
 
     def perturbed(self, b: Bounds) -> bool:
         return b.pos != 0.0 or b.heading != 0.0
@@ -355,11 +359,6 @@ class PositionPart(Part):
         raise TypeError(f"not a DSL position: {clause!r}")
 
     # ------------------------------------------------------------------------------- report
-    def kind(self, clause: Clause) -> str:
-        if isinstance(clause, DirectionPos):
-            return clause.direction
-        return "relative position" if isinstance(clause, LocalXYPos) else "absolute position"
-
 
 def sampled_distance(r: Range) -> tuple[float, float]:
     """The distance interval Scenic draws for a sector's Range (kept off 0, where no bearing exists)."""
