@@ -8,30 +8,12 @@ from typing import Any
 
 import pyarrow as pa
 
-PROGRAMS_SCHEMA = pa.schema(
-    [
-        ("frame_id", pa.string()),
-        ("status", pa.string()),  # optimal | feasible | timeout | memout | error
-        ("cost", pa.int32()),  # null when status is error (or memout before any program)
-        ("lower_bound", pa.int32()),
-        ("n_entities", pa.int32()),
-        ("program", pa.string()),  # DSL text
-        ("scenic", pa.string()),  # Scenic 3 text
-        ("certified", pa.bool_()),
-        ("strategy", pa.string()),
-        ("oracle", pa.string()),
-        ("solver", pa.string()),
-        ("runtime_s", pa.float64()),
-        ("search_s", pa.float64()),
-        ("smt_s", pa.float64()),
-        ("smt_queries", pa.int64()),
-        ("nodes_expanded", pa.int64()),
-        ("peak_rss_mb", pa.float64()),
-        ("error", pa.string()),
-        ("config_hash", pa.string()),
-        ("version", pa.string()),
-    ]
-)
+from synth.synthesize import RESULT_FIELDS
+
+_ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(), "float64": pa.float64(),
+                "bool": pa.bool_()}
+# The columns are the result fields (synth.synthesize.RESULT_FIELDS, the one declaration), in their order.
+PROGRAMS_SCHEMA = pa.schema([(f.name, _ARROW_TYPES[f.type]) for f in RESULT_FIELDS])
 PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
 STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
 
@@ -42,33 +24,26 @@ class ProgramsError(ValueError):
 
 def result_row(result: Any, config_hash: str) -> dict[str, Any]:
     """A programs row from a synth.synthesize.SynthResult."""
-    from synth import __version__
-
-    s, c = result.stats, result.config
-    return {
-        "frame_id": result.frame_id, "status": result.status, "cost": result.cost,
-        "lower_bound": result.lower_bound, "n_entities": result.n_entities, "program": str(result.program),
-        "scenic": result.scenic, "certified": result.certified, "strategy": c.strategy, "oracle": c.oracle,
-        "solver": c.solver, "runtime_s": s.runtime_s, "search_s": s.search_s, "smt_s": s.smt_s,
-        "smt_queries": s.smt_queries, "nodes_expanded": s.nodes_expanded, "peak_rss_mb": s.peak_rss_mb,
-        "error": None, "config_hash": config_hash, "version": __version__,
-    }
+    return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"}, **_run_fields(None, config_hash)}
 
 
 def failure_row(frame_id: str, status: str, message: str, n_entities: int, config: Any, config_hash: str,
                 runtime_s: float = 0.0, peak_rss_mb: float = 0.0) -> dict[str, Any]:
     """A row for a frame that produced no program (error, or a worker killed at its memory limit)."""
-    from synth import __version__
-
     if status not in STATUSES:
         raise ValueError(f"unknown status {status!r}")
-    return {
-        "frame_id": frame_id, "status": status, "cost": None, "lower_bound": None, "n_entities": n_entities,
-        "program": None, "scenic": None, "certified": False, "strategy": config.strategy, "oracle": config.oracle,
-        "solver": config.solver, "runtime_s": runtime_s, "search_s": None, "smt_s": None, "smt_queries": None,
-        "nodes_expanded": None, "peak_rss_mb": peak_rss_mb, "error": message, "config_hash": config_hash,
-        "version": __version__,
-    }
+    row = dict.fromkeys(PROGRAMS_COLUMNS)  # null where there is no program
+    row.update({f.name: getattr(config, f.name) for f in RESULT_FIELDS if f.source == "config"})
+    row.update(frame_id=frame_id, status=status, n_entities=n_entities, certified=False, runtime_s=runtime_s,
+               peak_rss_mb=peak_rss_mb, **_run_fields(message, config_hash))
+    return row
+
+
+def _run_fields(error: str | None, config_hash: str) -> dict[str, Any]:
+    """The batch stage's own fields of a row (RESULT_FIELDS' "run" source)."""
+    from synth import __version__
+
+    return {"error": error, "config_hash": config_hash, "version": __version__}
 
 
 def programs_table(rows: list[dict[str, Any]]) -> pa.Table:

@@ -40,6 +40,31 @@ class SynthStats:
 
 
 @dataclass(frozen=True)
+class ResultField:
+    """One field of a synthesis result as the outputs carry it (docs/formats.md): a key of the `r2s synth --format
+    json` document and a column of programs Parquet, in this order."""
+
+    name: str
+    type: str  # its Parquet type: string, int32, int64, float64, bool
+    # Where a result's value is: "result" (a SynthResult field; the program as its DSL text), "stats" (a SynthStats
+    # field; the JSON nests these under "stats"), "config" (a SynthConfig field) or "run" (the batch stage's own:
+    # Parquet only).
+    source: str
+
+
+# The one declaration of the result fields: SynthResult.to_json_dict, pipeline.programs' rows and schema read it.
+# By source, each as name:Parquet type, in contract order (docs/formats.md says what each means).
+RESULT_FIELDS: tuple[ResultField, ...] = tuple(ResultField(name, type_, source) for source, spec in (
+    ("result", "frame_id:string status:string cost:int32 lower_bound:int32 n_entities:int32 program:string "
+               "scenic:string certified:bool"),
+    ("config", "strategy:string oracle:string solver:string"),
+    ("stats", "runtime_s:float64 search_s:float64 smt_s:float64 smt_queries:int64 nodes_expanded:int64 "
+              "peak_rss_mb:float64"),
+    ("run", "error:string config_hash:string version:string"),
+) for name, type_ in (field.split(":") for field in spec.split()))
+
+
+@dataclass(frozen=True)
 class SynthResult:
     """The program synthesized for one scene, with its cost, status and certificate (docs/dsl.md, "What synthesis
     returns"). `str(result.program)` is the DSL text, `result.scenic` the Scenic text, `to_json_dict()` the
@@ -56,26 +81,16 @@ class SynthResult:
     stats: SynthStats
     config: SynthConfig
 
+    def value(self, result_field: ResultField) -> Any:
+        """The value of a result field that is not the batch stage's own (RESULT_FIELDS)."""
+        holder = {"result": self, "stats": self.stats, "config": self.config}[result_field.source]
+        value = getattr(holder, result_field.name)
+        return str(value) if result_field.name == "program" else value
+
     def to_json_dict(self) -> dict:
-        """The `r2s synth --format json` document (docs/formats.md)."""
-        return {
-            "frame_id": self.frame_id,
-            "status": self.status,
-            "cost": self.cost,
-            "lower_bound": self.lower_bound,
-            "n_entities": self.n_entities,
-            "program": str(self.program),
-            "scenic": self.scenic,
-            "certified": self.certified,
-            "stats": {
-                "runtime_s": self.stats.runtime_s,
-                "search_s": self.stats.search_s,
-                "smt_s": self.stats.smt_s,
-                "smt_queries": self.stats.smt_queries,
-                "nodes_expanded": self.stats.nodes_expanded,
-                "peak_rss_mb": self.stats.peak_rss_mb,
-            },
-        }
+        """The `r2s synth --format json` document (docs/formats.md): the result's fields, then its stats."""
+        return {**{f.name: self.value(f) for f in RESULT_FIELDS if f.source == "result"},
+                "stats": {f.name: self.value(f) for f in RESULT_FIELDS if f.source == "stats"}}
 
 
 class SpeedMissing(SceneError):
