@@ -136,8 +136,8 @@ def test_the_layout_map_names_every_room_and_module():
 
 
 def test_the_tests_mirror_the_code():
-    """Every folder of tests/ (but data/ and support/) is a package of the code, and no test imports conftest
-    (helpers are in tests/support), so a test is where docs/layout.md says it is."""
+    """Every folder of tests/ (but data/ and support/) is a package of the code, and no test imports conftest or
+    another test module (helpers are in tests/support), so a test is where docs/layout.md says it is."""
     tests = ROOT / "tests"
     folders = [d for d in tests.rglob("*") if d.is_dir() and "__pycache__" not in d.parts
                and not {"data", "support"} & set(d.relative_to(tests).parts)]
@@ -145,5 +145,6 @@ def test_the_tests_mirror_the_code():
     strays = [str(d.relative_to(tests)) for d in folders if not (ROOT / d.relative_to(tests) / "__init__.py").exists()]
     assert not strays, strays
     importers = [str(f.relative_to(ROOT)) for f in tests.rglob("*.py")
-                 if re.search(r"^\s*(from conftest import|import conftest)", f.read_text(), flags=re.M)]
+                 if re.search(r"^\s*(from conftest import|import conftest|from tests\.(?!support\b)|import tests\.(?!support\b))",
+                              f.read_text(), flags=re.M)]
     assert not importers, importers

@@ -16,7 +16,6 @@ from extractors.base import MAX_NAMES, ExtractOptions, ExtractTally
 from extractors.categories import ALL, VEHICLES
 from extractors.frames import read_frames
 from extractors.scenarionet import extract
-from tests.extractors.test_extract_scenarionet_databases import assert_rows_match, real_scenarios
 from tests.support.extract import frames_of, r2s
 from tests.support.scenarionet_layouts import (
     as_av2,
@@ -27,6 +26,7 @@ from tests.support.scenarionet_layouts import (
     write_single_worker,
     write_to_directory,
 )
+from tests.support.scenarionet_rows import assert_rows_match, real_scenarios
 
 # The class each MetaDrive type is documented to become (extractors/categories.py).
 METADRIVE_CLASS = {"VEHICLE": "Car", "PEDESTRIAN": "Pedestrian", "CYCLIST": "Bicycle", "OTHER": "Object",
