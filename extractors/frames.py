@@ -16,6 +16,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from synth.errors import InputError
 from synth.scene import EGO_ID, Scene, SceneError, make_scene
 
 FRAMES_SCHEMA = pa.schema(
@@ -46,7 +47,7 @@ OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_s
 EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])])
 
 
-class FramesError(ValueError):
+class FramesError(InputError, ValueError):
     """A frames file or table that is not what the schema says. One line, fit for a user."""
 
 

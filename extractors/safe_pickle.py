@@ -30,6 +30,7 @@ from numpy.core import multiarray as _multiarray
 from numpy.core import numeric as _numeric
 
 from extractors.base import ExtractError
+from synth.errors import InputError
 
 ALLOWED_GLOBALS: dict[tuple[str, str], Any] = {
     ("numpy", "ndarray"): np.ndarray,
@@ -54,7 +55,7 @@ MAX_PICKLE_BYTES = 2 * 2**30
 DEFAULT_FACTORIES = (int, float, str, list, dict, set, tuple)
 
 
-class RefusedGlobal(pickle.UnpicklingError):
+class RefusedGlobal(InputError, pickle.UnpicklingError):
     pass
 
 

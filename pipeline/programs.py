@@ -8,6 +8,7 @@ from typing import Any
 
 import pyarrow as pa
 
+from synth.errors import InputError
 from synth.synthesize import RESULT_FIELDS
 
 _ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(), "float64": pa.float64(),
@@ -18,7 +19,7 @@ PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
 STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
 
 
-class ProgramsError(ValueError):
+class ProgramsError(InputError, ValueError):
     """A programs file that is not what the schema says. One line, fit for a user."""
 
 

@@ -19,6 +19,7 @@ __version__ = "0.1.0"
 # synthesize shares its name with its module, which every import of that module would bind here (the import
 # system sets the attribute after loading a submodule): importing the module now binds the function for good.
 from synth.config import ConfigError, SynthConfig  # noqa: E402
+from synth.errors import ExitCode, InputError, R2sError  # noqa: E402
 from synth.scene import Entity, Scene, SceneError, scene_from_dict, scene_from_json  # noqa: E402
 from synth.synthesize import SynthResult, SynthStats, synthesize  # noqa: E402
 
@@ -32,8 +33,9 @@ _LAZY = {
 }
 
 __all__ = [
-    "CheckResult", "ConfigError", "DslError", "Entity", "Program", "Scene", "SceneError", "SynthConfig",
-    "SynthResult", "SynthStats", "check", "parse_program", "scene_from_dict", "scene_from_json", "synthesize",
+    "CheckResult", "ConfigError", "DslError", "Entity", "ExitCode", "InputError", "Program", "R2sError", "Scene",
+    "SceneError", "SynthConfig", "SynthResult", "SynthStats", "check", "parse_program", "scene_from_dict",
+    "scene_from_json", "synthesize",
 ]
 
 

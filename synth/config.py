@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from synth.errors import InputError
 from synth.scene import MAX_HEADING_SIGMA, MAX_POS_SIGMA, MAX_SPEED_SIGMA
 
 STRATEGIES = (
@@ -27,7 +28,7 @@ ORACLES = ("hybrid", "smt", "closed-form")
 SOLVERS = ("z3", "dreal")
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError, ValueError):
     """A configuration value is out of range or unknown. One line, fit for a user."""
 
 

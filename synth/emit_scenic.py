@@ -57,6 +57,7 @@ from typing import Any
 from synth.collision_rule import collision_rule
 from synth.config import SynthConfig
 from synth.dsl import Program, Statement, parse_program
+from synth.errors import InputError
 from synth.parts import MOTION
 from synth.parts.position import DIRECTIONS, MIN_DISTANCE
 from synth.scene import ENTITY_TYPES, Entity, Scene, SceneError, scene_from_dict
@@ -242,7 +243,7 @@ def _source_record(program: Program, scene: Scene, config: SynthConfig, header: 
             **consts, "entities": [_entity_record(scene.ego, motion), *others], "program": str(program)}
 
 
-class NotGenerated(ValueError):
+class NotGenerated(InputError, ValueError):
     """Scenic text that this emitter did not write (or that was edited since). One line."""
 
 

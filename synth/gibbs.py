@@ -45,6 +45,7 @@ import numpy as np
 from synth.collision_rule import CollisionRule, collision_rule
 from synth.config import SynthConfig
 from synth.dsl import Program
+from synth.errors import SamplingError
 from synth.overlap import box_radius, boxes_overlap
 from synth.parameters import SPEED, Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
@@ -87,7 +88,7 @@ class Variants:
     stats: ChainStats
 
 
-class NoVariant(ValueError):
+class NoVariant(SamplingError, ValueError):
     """No state satisfies the program and the collision rule within the budget. Names the colliding pairs."""
 
     def __init__(self, message: str, pairs: tuple[tuple[str, str], ...]):

@@ -16,6 +16,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
+from synth.errors import InputError
+
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
 ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
     "Car": (4.6, 1.9),
@@ -66,7 +68,7 @@ RESERVED_IDS = frozenset(keyword.kwlist) | frozenset(keyword.softkwlist) | _SCEN
 ) | frozenset(ENTITY_TYPES)
 
 
-class SceneError(ValueError):
+class SceneError(InputError, ValueError):
     """The input is not a valid scene. The message is one line, fit for a user."""
 
 

@@ -11,10 +11,11 @@ import re
 from dataclasses import dataclass
 from fractions import Fraction
 
+from synth.errors import InputError
 from synth.scene import EGO_ID
 
 
-class DslError(ValueError):
+class DslError(InputError, ValueError):
     """A program text that is not in the DSL. One line, with its position."""
 
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from synth import __version__
 from synth.config import SynthConfig, as_config
+from synth.errors import InternalError
 from synth.scene import Scene, SceneError, as_scene
 
 if TYPE_CHECKING:
@@ -105,7 +106,7 @@ def require_speeds(scene: Scene) -> None:
         raise SpeedMissing(f"entity {missing[0]!r}{more} has no speed, which motion (--motion) needs")
 
 
-class CertificationError(RuntimeError):
+class CertificationError(InternalError, RuntimeError):
     """The solver could not confirm a statement of the synthesized program: an internal error, never silent."""
 
 

@@ -27,9 +27,10 @@ from typing import Any, Protocol
 import pyarrow as pa
 
 from pipeline.batch.task import ChunkTask, one_line, run_chunk
+from synth.errors import InternalError
 
 
-class WorkerLost(Exception):
+class WorkerLost(InternalError):
     """Every chunk in flight was lost with the pool. `in_flight`: (task, index of the frame it was running, -1
     when it had not started, None when unknown). `blamed`: keys of the tasks whose running frame is to blame
     (empty when nobody knows which worker died first)."""

@@ -27,6 +27,7 @@ from extractors.frames import FramesError, frame_to_scene
 from extractors.frames_dataset import read_rows
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
+from synth.errors import InternalError
 from synth.scene import Scene
 from synth.search.budget import current_rss_mb, peak_rss_mb
 from synth.synthesize import synthesize
@@ -89,7 +90,7 @@ class ChunkTask:
         return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
 
 
-class ChunkUnreadable(Exception):
+class ChunkUnreadable(InternalError):
     """A worker could not read its chunk (the file moved, or a cluster worker does not see the path)."""
 
 

@@ -3,9 +3,10 @@
 Each verb lives in its own module with `add_arguments(parser)` and `run(args) -> int`, imported only when
 that verb runs, so `r2s synth` never pays for pandas, Scenic or the dataset readers. `r2s VERB --help` shows the
 options with their defaults, an example that runs on the data shipped in the repository (EXAMPLES; the tests run
-every one) and the exit codes (docs/cli.md): 0 done; 2 bad input or usage (one line on stderr, nothing written);
-1 internal error; 3 from r2s check (the program does not contain the scene); 4 from r2s sample and render (no
-variant found: the one-line error's class carries `exit_code`).
+every one) and the exit codes (docs/cli.md). An error reaches main() as an R2sError (synth.errors) whose kind
+names the exit code: InputError 2 (bad input or usage: one line on stderr, nothing written), CheckFailed 3 (r2s
+check: the program does not contain the scene), SamplingError 4 (r2s sample and render: no variant found); any
+other exception is a bug: 1.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import argparse
 import importlib
 import os
 import sys
+
+from synth.errors import ExitCode, exit_code
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -54,14 +57,16 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                       "r2s eval-frontend vehicles.parquet gt.parquet --out eval --name vehicles-only"),
 }
 
-EXIT_CODES = "0 done; 2 bad input or usage (one line on stderr, nothing written); 1 internal error (R2S_DEBUG=1: traceback)"
+EXIT_CODES = (f"{ExitCode.OK} done; {ExitCode.BAD_INPUT} bad input or usage (one line on stderr, nothing written); "
+              f"{ExitCode.INTERNAL_ERROR} internal error (R2S_DEBUG=1: traceback)")
 # Exit codes beyond EXIT_CODES, by verb.
 MORE_EXIT_CODES: dict[str, str] = {
-    "check": "3 the program does not contain the scene (the violations on stdout)",
-    "sample": "4 sampling failed: no variant satisfies the program and the collision rule within the budget "
-              "(one line naming the colliding entities; nothing written)",
-    "render": "4 with --samples: no variant found (as r2s sample)",
-    "run": "130 / 143 stopped by Ctrl-C / SIGTERM (finished frames kept: the same command resumes)",
+    "check": f"{ExitCode.CHECK_FAILED} the program does not contain the scene (the violations on stdout)",
+    "sample": f"{ExitCode.SAMPLING_FAILED} sampling failed: no variant satisfies the program and the collision rule "
+              "within the budget (one line naming the colliding entities; nothing written)",
+    "render": f"{ExitCode.SAMPLING_FAILED} with --samples: no variant found (as r2s sample)",
+    "run": f"{ExitCode.INTERRUPTED} / {ExitCode.TERMINATED} stopped by Ctrl-C / SIGTERM (finished frames kept: the "
+           "same command resumes)",
 }
 
 
@@ -89,15 +94,16 @@ def _epilog(verb: str) -> str:
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line and exit 2, as for any bad input
         sys.stderr.write(f"{self.prog}: {message}\n")
-        sys.exit(2)
+        sys.exit(ExitCode.BAD_INPUT)
 
 
 def _top_help() -> str:
     width = max(map(len, VERBS))
     rows = "\n".join(f"  {v.ljust(width)}  {h}" for v, (_, h) in VERBS.items())
     return (f"usage: r2s VERB [options]\n\nverbs:\n{rows}\n\n`r2s VERB --help` for a verb's options, defaults and an "
-            f"example.\nexit codes: {EXIT_CODES}; 3 r2s check: the program does not contain the scene; 4 r2s sample, "
-            "r2s render --samples: no variant found\nthe specification: docs/spec.md\n")
+            f"example.\nexit codes: {EXIT_CODES}; {ExitCode.CHECK_FAILED} r2s check: the program does not contain the "
+            f"scene; {ExitCode.SAMPLING_FAILED} r2s sample, r2s render --samples: no variant found\n"
+            "the specification: docs/spec.md\n")
 
 
 def build_parser(verb: str) -> argparse.ArgumentParser:
@@ -113,32 +119,31 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
         sys.stdout.write(_top_help())
-        return 0 if argv else 2
+        return ExitCode.OK if argv else ExitCode.BAD_INPUT
     if argv[0] == "--version":
         from synth import __version__
 
         print(f"r2sgen {__version__}")
-        return 0
+        return ExitCode.OK
     verb = argv[0]
     if verb not in VERBS:
         sys.stderr.write(f"r2s: unknown verb {verb!r} (verbs: {', '.join(VERBS)})\n")
-        return 2
+        return ExitCode.BAD_INPUT
     module = importlib.import_module(VERBS[verb][0])
     args = build_parser(verb).parse_args(argv[1:])
-    from pipeline.errors import user_error_types
-
     try:
-        return int(module.run(args) or 0)
-    except user_error_types() as exc:
-        sys.stderr.write(f"r2s {verb}: {exc}\n")
-        return getattr(exc, "exit_code", 2)
+        return int(module.run(args) or ExitCode.OK)
     except KeyboardInterrupt:
         sys.stderr.write(f"r2s {verb}: interrupted\n")
-        return 130
+        return ExitCode.INTERRUPTED
     except BrokenPipeError:
-        return 0
-    except Exception as exc:  # a bug: one line by default, the traceback on request
-        if os.environ.get("R2S_DEBUG"):
+        return ExitCode.OK
+    except Exception as exc:  # the one place where an error becomes an exit code (its kind's, synth.errors)
+        code = exit_code(exc)
+        if code != ExitCode.INTERNAL_ERROR:  # bad input, a failed check, no variant: its one line says it all
+            sys.stderr.write(f"r2s {verb}: {exc}\n")
+            return code
+        if os.environ.get("R2S_DEBUG"):  # a bug: one line by default, the traceback on request
             raise
         sys.stderr.write(f"r2s {verb}: internal error: {type(exc).__name__}: {exc} (R2S_DEBUG=1 shows the traceback)\n")
-        return 1
+        return code

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from pipeline.cli.options import add_config_option
 
@@ -16,6 +15,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_program, read_scene
+    from pipeline.errors import CheckFailed
     from synth.semantics import check
 
     config = load_config(args.config)
@@ -27,5 +27,4 @@ def run(args: argparse.Namespace) -> int:
         return 0
     for v in result.violations:
         print(f"violation: {v}")
-    sys.stderr.write(f"r2s check: the program does not contain the scene ({len(result.violations)} violations)\n")
-    return 3
+    raise CheckFailed(f"the program does not contain the scene ({len(result.violations)} violations)")

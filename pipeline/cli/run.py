@@ -12,6 +12,7 @@ import signal
 import sys
 
 from pipeline.cli.options import add_synthesis_options
+from synth.errors import ExitCode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))
     run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every)
     return 0

@@ -33,7 +33,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from pipeline.errors import UserError
+from pipeline.errors import SamplingError, UserError
 from synth.config import SynthConfig
 from synth.dsl import Program
 from synth.emit_scenic import (
@@ -53,18 +53,15 @@ from synth.semantics import check
 DEFAULT_MAX_ITERATIONS = 2000  # Scenic's own default for one scene
 MAX_SEED = 2**32 - 1  # numpy's seed range
 SAMPLERS = ("gibbs", "scenic")
-SAMPLING_FAILED_EXIT = 4
 
 
 class ScenicProgramError(UserError):
     """The Scenic text does not compile, or fails while sampling, or is not an r2sgen program. One line."""
 
 
-class SamplingFailed(UserError):
-    """No variant satisfies the program and the collision rule within the budget: exit 4 (not bad input: the
-    program and scene are valid, the sampler could not find a variant). One line naming the pairs that block."""
-
-    exit_code = SAMPLING_FAILED_EXIT
+class SamplingFailed(SamplingError):
+    """No variant satisfies the program and the collision rule within the budget (not bad input: the program
+    and scene are valid, the sampler could not find a variant). One line naming the pairs that block."""
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,8 @@ import resource
 import time
 from dataclasses import dataclass, field
 
+from synth.errors import InternalError
+
 _PAGE_MB = resource.getpagesize() / (1024 * 1024)
 
 
@@ -35,7 +37,7 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-class BudgetExhausted(Exception):
+class BudgetExhausted(InternalError):
     """Raised inside a search when its budget runs out; the search catches it and answers anytime."""
 
     def __init__(self, reason: str):

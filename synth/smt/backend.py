@@ -17,6 +17,7 @@ from fractions import Fraction
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from synth.config import SynthConfig
+from synth.errors import InputError
 from synth.parts import HEADING, POSITION, MeasureRequest, Part
 from synth.parts.heading import FACING_NAMES
 from synth.parts.position import DIRECTION_NAMES
@@ -32,7 +33,7 @@ Formula = Any  # a term of the backend at hand
 Measurements = list[tuple[tuple[Fraction, ...], ...]]
 
 
-class SolverUnavailable(RuntimeError):
+class SolverUnavailable(InputError, RuntimeError):
     """The chosen solver cannot be loaded here. One line, fit for a user."""
 
 

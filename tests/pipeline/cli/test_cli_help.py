@@ -33,10 +33,11 @@ def test_help_shows_defaults_an_example_and_the_exit_codes(verb):
 
 def test_the_sampling_exit_code_is_the_one_sampling_raises():
     from pipeline.cli import MORE_EXIT_CODES
-    from pipeline.variants.sample import SAMPLING_FAILED_EXIT, SamplingFailed
+    from pipeline.variants.sample import SamplingFailed
+    from synth.errors import ExitCode
 
-    assert SamplingFailed.exit_code == SAMPLING_FAILED_EXIT
-    assert all(MORE_EXIT_CODES[v].startswith(f"{SAMPLING_FAILED_EXIT} ") for v in ("sample", "render"))
+    assert SamplingFailed.exit_code == ExitCode.SAMPLING_FAILED
+    assert all(MORE_EXIT_CODES[v].startswith(f"{ExitCode.SAMPLING_FAILED} ") for v in ("sample", "render"))
 
 
 def test_top_level_help_lists_the_exit_codes():
