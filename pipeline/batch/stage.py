@@ -49,13 +49,16 @@ def run_frames(
     log: Callable[[str], None] | None = None,
     log_every_s: float = 30.0,
     terminal: bool | None = None,
+    synthesizer: Callable | None = None,
 ) -> Summary:
     """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
     (a dataset directory, or one file if the name ends in .parquet); frames already in `out` with the same
     config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults (docs/api.md).
     Returns the summary; raises UserError / FramesError / ProgramsError / ConfigError on bad input (nothing
     written then). `log` receives one line at a time (default: stderr); `terminal` forces the progress bar on or
-    off (default: a bar when stderr is a terminal, else a log line every `log_every_s` seconds)."""
+    off (default: a bar when stderr is a terminal, else a log line every `log_every_s` seconds). `synthesizer`:
+    what each frame runs instead of synth.synthesize (same signature; a module-level function or a partial of one,
+    which the tasks carry to the workers by reference)."""
     config = as_config(config)
     if jobs is not None and jobs < 1:
         raise UserError(f"--jobs must be at least 1, got {jobs}")
@@ -69,7 +72,7 @@ def run_frames(
         raise UserError("--scheduler needs --backend dask")
     _check_apart(str(frames), Path(out))
     return _Run(str(frames), Path(out), config, jobs, backend, scheduler, chunk_size, part_rows,
-                log or _stderr, log_every_s, terminal).go()
+                log or _stderr, log_every_s, terminal, synthesizer).go()
 
 
 def _stderr(line: str) -> None:
@@ -94,11 +97,12 @@ class _Run:
     """One invocation: check, plan, workers, parts, summary."""
 
     def __init__(self, frames, out, config, jobs, backend, scheduler, chunk_size, part_rows, log, log_every_s,
-                 terminal) -> None:
+                 terminal, synthesizer) -> None:
         self.frames, self.out, self.config = frames, out, config
         self.jobs, self.backend, self.scheduler = jobs, backend, scheduler
         self.chunk_size, self.part_rows = chunk_size, part_rows
         self._log, self.log_every_s, self.terminal = log, log_every_s, terminal
+        self.synthesizer = synthesizer
         self.config_hash = config.semantic_hash()
         self.started = time.monotonic()
         self.first_result_s: float | None = None
@@ -161,9 +165,7 @@ class _Run:
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
 
     def _tasks(self, dataset, done, todo: int, slots: int, progress_dir: str | None) -> Iterator:
-        from pipeline.batch.task import TEST_HOOK_ENV, ChunkTask
-
-        hook = os.environ.get(TEST_HOOK_ENV) or None
+        from pipeline.batch.task import ChunkTask
 
         def runs():
             for r in dataset.runs():
@@ -174,7 +176,7 @@ class _Run:
         for n, (k, frames) in enumerate(chunks(runs(), sizes, MAX_SPAN_ROWS)):
             part = dataset.parts[k]
             yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.columns, self.config,
-                            self.config_hash, hard_cap=self.backend == "loky", test_hook=hook,
+                            self.config_hash, hard_cap=self.backend == "loky", synthesizer=self.synthesizer,
                             progress_dir=progress_dir)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:

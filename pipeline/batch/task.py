@@ -15,9 +15,8 @@ from __future__ import annotations
 
 import os
 import resource
-import signal
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
@@ -30,13 +29,11 @@ from synth.config import SynthConfig
 from synth.errors import InternalError
 from synth.scene import Scene
 from synth.search.budget import current_rss_mb, peak_rss_mb
-from synth.synthesize import synthesize
+from synth.synthesize import SynthResult, synthesize
 
-# Test-only fault injection: R2S_RUN_TEST_HOOK="ACTION[=ARG]@FRAME_ID" (FRAME_ID "*" = every frame). Actions:
-# kill (SIGKILL itself, as the kernel's OOM killer would), exit (os._exit(3)), alloc=MB (allocate MB under the
-# hard cap), raise, sleep=S, hang. Real runs never set it; the tests need a worker that dies on cue. The run
-# reads it once and hands it to every task (a reused or remote worker may not have the run's environment).
-TEST_HOOK_ENV = "R2S_RUN_TEST_HOOK"
+# What a frame runs when not synth.synthesize: a function of the same signature given to run_frames (a
+# module-level function or a functools.partial of one: the task carries it to the worker by reference).
+Synthesizer = Callable[[Scene, SynthConfig], SynthResult]
 
 # Room left above the soft limit before the hard cap: the Budget's RSS poll (every 4096 nodes) should stop the
 # search first and return its best program; the hard cap catches what the poll cannot see (allocation outside
@@ -53,7 +50,7 @@ class FrameTask:
     # Set only where the worker is a process of its own (loky): an address-space limit is per process, and a
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
-    test_hook: str | None = None  # see TEST_HOOK_ENV
+    synthesizer: Synthesizer | None = None  # None: synth.synthesize
 
 
 @dataclass(frozen=True)
@@ -68,7 +65,7 @@ class ChunkTask:
     config: SynthConfig
     config_hash: str
     hard_cap: bool = False
-    test_hook: str | None = None
+    synthesizer: Synthesizer | None = None  # None: synth.synthesize
     progress_dir: str | None = None  # where the marker goes; None: progress is not tracked (remote workers)
 
     @property
@@ -115,7 +112,7 @@ def run_chunk(task: ChunkTask) -> pa.Table:
             out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, task.config_hash))
             continue
         out.append(run_frame(FrameTask(frame_id, scene, task.config, task.config_hash, task.hard_cap,
-                                       task.test_hook)))
+                                       task.synthesizer)))
     if marker is not None:
         try:
             os.unlink(marker)
@@ -131,9 +128,7 @@ def run_frame(task: FrameTask) -> dict:
     _reset_peak_rss()
     try:
         with _hard_memory_cap(config.memory_limit if task.hard_cap else None):
-            if task.test_hook:
-                _test_hook(task.test_hook, task.frame_id)
-            return result_row(synthesize(task.scene, config), task.config_hash)
+            return result_row((task.synthesizer or synthesize)(task.scene, config), task.config_hash)
     except MemoryError:
         status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
     except Exception as exc:  # the run goes on: the frame is recorded as an error, with the reason
@@ -192,24 +187,3 @@ def _hard_memory_cap(limit_mb: float | None) -> Iterator[None]:
         yield
     finally:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
-
-
-def _test_hook(spec: str, frame_id: str) -> None:
-    action, _, target = spec.partition("@")
-    if target not in ("*", frame_id):
-        return
-    name, _, arg = action.partition("=")
-    if name == "kill":
-        os.kill(os.getpid(), signal.SIGKILL)
-    elif name == "exit":
-        os._exit(3)
-    elif name == "alloc":
-        blocks = [bytearray(2**20) for _ in range(int(arg))]  # touched pages: RSS, not only address space
-        del blocks
-    elif name == "raise":
-        raise RuntimeError(f"test hook raised in frame {frame_id}")
-    elif name == "sleep":
-        time.sleep(float(arg))
-    elif name == "hang":
-        while True:
-            time.sleep(1)

@@ -18,12 +18,13 @@ from extractors.frames import frame_to_scene, read_frames, scene_to_rows, write_
 from pipeline.batch import pool as run_pool
 from pipeline.batch.pool import LokyPool, compute
 from pipeline.batch.rules import PartBuffer, summarize
-from pipeline.batch.task import TEST_HOOK_ENV, ChunkTask
+from pipeline.batch.task import ChunkTask
 from pipeline.programs import failure_row, programs_table, read_programs
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check
 from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support.faults import fault, r2s_with_fault
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
 
@@ -124,11 +125,9 @@ def test_rerun_keeps_rows_and_a_new_config_replaces_them(small_frames, tmp_path)
 def test_killed_run_resumes_without_duplicates_or_recomputation(json_frames, tmp_path):
     out = tmp_path / "programs.parquet"
     parts = Path(f"{out}.parts")
-    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=0.4@*"})  # slow every frame so the kill lands mid-run
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", str(out), "--jobs", "2",
-         "--part-rows", "1"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+    proc = subprocess.Popen(  # every frame slowed down, so that the kill lands mid-run
+        r2s_with_fault("sleep=0.4@*", "run", str(json_frames), "--out", str(out), "--jobs", "2", "--part-rows", "1"),
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
     )
     try:
         deadline = time.monotonic() + 240
@@ -159,10 +158,9 @@ def test_a_second_run_on_the_same_out_is_refused_and_sigterm_stops_the_first(jso
     """Two runs on one output would overwrite each other's parts: the second is refused while the first holds
     the lock. A scheduler's stop must not wait for slow frames: their workers are killed, none is left behind."""
     out = tmp_path / "programs.parquet"
-    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=120@*"})  # every frame would take two minutes
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", str(out), "--jobs", "2"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+    proc = subprocess.Popen(  # every frame would take two minutes
+        r2s_with_fault("sleep=120@*", "run", str(json_frames), "--out", str(out), "--jobs", "2"),
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
     )
     try:
         time.sleep(4)  # workers started and sleeping in their first frames
@@ -227,7 +225,7 @@ def test_memory_limit_below_the_baseline_is_memout(real_frames, tmp_path):
         ("kill", None, "memout", "worker died (exit code SIGKILL(-9))"),  # as the OOM killer does
         ("exit", None, "error", "worker died (exit code"),
         ("alloc=4000", "300", "memout", "hard cap"),  # the RLIMIT_AS cap turns it into a MemoryError
-        ("raise", None, "error", "RuntimeError: test hook raised"),
+        ("raise", None, "error", "RuntimeError: fault injected in frame"),
     ],
 )
 def test_a_failing_frame_is_recorded_and_the_run_goes_on(small_frames, tmp_path, hook, limit, status, message):
@@ -235,8 +233,7 @@ def test_a_failing_frame_is_recorded_and_the_run_goes_on(small_frames, tmp_path,
     victim = order[2]
     out = tmp_path / "programs.parquet"
     args = ["run", str(small_frames), "--out", str(out), "--jobs", "2"] + (["--memory-limit", limit] if limit else [])
-    env = dict(os.environ, **{TEST_HOOK_ENV: f"{hook}@{victim}"})
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *args], cwd=ROOT, env=env, capture_output=True,
+    proc = subprocess.run(r2s_with_fault(f"{hook}@{victim}", *args), cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     df = _programs(out)
@@ -257,7 +254,7 @@ def _chunk_tasks(frames: Path, size: int, hook: str | None = None, progress: Pat
     dataset = FramesDataset.open(frames)
     runs = ((r.part, r.starts, r.lengths, r.ids, r.lengths > 0) for r in dataset.runs())
     return [ChunkTask(f"t{n}", "", dataset.parts[k].path, tuple(fr), dataset.parts[k].columns, config, "h",
-                      hard_cap=True, test_hook=hook, progress_dir=None if progress is None else str(progress))
+                      hard_cap=True, synthesizer=hook and fault(hook), progress_dir=None if progress is None else str(progress))
             for n, (k, fr) in enumerate(chunks(runs, size, 10**6))]
 
 
@@ -411,10 +408,10 @@ def test_dask_local_cluster_replaces_a_dead_worker(small_frames, tmp_path):
     victim = order[1]
     out = tmp_path / "programs.parquet"
     # No --scheduler: r2s run starts its own LocalCluster. Dask gives up on the task at its first worker death.
-    env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="0", **{TEST_HOOK_ENV: f"kill@{victim}"})
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out),
-                           "--backend", "dask", "--jobs", "2"], cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=300)
+    env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="0")
+    proc = subprocess.run(r2s_with_fault(f"kill@{victim}", "run", str(small_frames), "--out", str(out),
+                                         "--backend", "dask", "--jobs", "2"), cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     df = _programs(out)
     assert sorted(df["frame_id"]) == sorted(order)
@@ -589,11 +586,10 @@ def test_an_old_single_file_output_resumes_and_stays_one_file(small_frames, tmp_
 
 def test_progress_lines_without_a_terminal_and_a_stop_says_how_to_resume(small_frames, tmp_path):
     out = tmp_path / "programs"
-    env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=1@*"})  # four frames (4 s) are left when it is stopped
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out), "--jobs", "1",
-         "--chunk-size", "1", "--part-rows", "1", "--log-every", "0.5"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    proc = subprocess.Popen(  # a second a frame: four frames (4 s) are left when it is stopped
+        r2s_with_fault("sleep=1@*", "run", str(small_frames), "--out", str(out), "--jobs", "1", "--chunk-size", "1",
+                       "--part-rows", "1", "--log-every", "0.5"),
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
     try:
         deadline = time.monotonic() + 120
@@ -646,7 +642,11 @@ def test_a_dask_cluster_of_real_processes_loses_a_worker_mid_run(small_frames, t
     dask = Path(sys.executable).with_name("dask")
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, start_new_session=True)
+    # The tasks name the fault by its module (tests/faults.py): the scheduler (which unpickles the graph) and the
+    # workers find it as a cluster finds any code a task names, on their path.
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, start_new_session=True,
+                 env=dict(os.environ, PYTHONPATH=path))
     procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", str(port),
                                "--no-dashboard"], **quiet)]
     try:
@@ -654,10 +654,9 @@ def test_a_dask_cluster_of_real_processes_loses_a_worker_mid_run(small_frames, t
             procs.append(subprocess.Popen([str(dask), "worker", address, "--nthreads", "1", "--no-nanny",
                                            "--no-dashboard", "--host", "127.0.0.1"], **quiet))
         out = tmp_path / "programs"
-        env = dict(os.environ, **{TEST_HOOK_ENV: "sleep=1@*"})
-        run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(small_frames), "--out", str(out),
-                                "--backend", "dask", "--scheduler", address, "--part-rows", "1"],
-                               cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        run = subprocess.Popen(r2s_with_fault("sleep=1@*", "run", str(small_frames), "--out", str(out), "--backend",
+                                              "dask", "--scheduler", address, "--part-rows", "1"),
+                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 120
         while not list(out.glob("part-*.parquet")) and run.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)

@@ -1,0 +1,72 @@
+"""Faults injected into `r2s run`'s workers from the tests: each frame runs `fault(SPEC)` instead of synthesize.
+
+SPEC is ACTION[=ARG]@FRAME_ID (FRAME_ID "*": every frame). Actions: kill (the worker sends itself SIGKILL, as the
+kernel's OOM killer would), exit (os._exit(3)), alloc=MB (touch MB of memory, under the frame's hard cap), raise,
+sleep=S, hang; then the frame is synthesized as usual. The fault is given to run_frames (or to a ChunkTask) as
+its `synthesizer`; the task carries it to the worker process by reference to this module (tests.support.faults),
+which the workers import: loky and dask start them with the parent's sys.path, where the repository's root is.
+
+`python -m tests.support.faults SPEC VERB ARGS...` (from the repository's root) is the `r2s` command itself, with
+the fault in every frame that run_frames gives its workers (real processes, real signals, real exit codes).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import sys
+import time
+
+from synth.synthesize import synthesize
+
+
+def faulty_synthesize(spec: str, scene, config):
+    action, _, target = spec.partition("@")
+    if target in ("*", scene.frame_id):
+        name, _, arg = action.partition("=")
+        if name == "kill":
+            os.kill(os.getpid(), signal.SIGKILL)
+        elif name == "exit":
+            os._exit(3)
+        elif name == "alloc":
+            blocks = [bytearray(2**20) for _ in range(int(arg))]  # touched pages: RSS, not only address space
+            del blocks
+        elif name == "raise":
+            raise RuntimeError(f"fault injected in frame {scene.frame_id}")
+        elif name == "sleep":
+            time.sleep(float(arg))
+        elif name == "hang":
+            while True:
+                time.sleep(1)
+        else:
+            raise ValueError(f"unknown fault {spec!r}")
+    return synthesize(scene, config)
+
+
+def fault(spec: str):
+    """The synthesizer that injects SPEC (picklable: a partial of a function of this module)."""
+    return functools.partial(faulty_synthesize, spec)
+
+
+def r2s_with_fault(spec: str, *args: str) -> list[str]:
+    """The command line of `r2s ARGS...` with SPEC injected into its frames (subprocess.run / Popen, with the
+    repository's root as the working directory)."""
+    return [sys.executable, "-m", "tests.support.faults", spec, *args]
+
+
+def main(argv: list[str]) -> int:
+    import pipeline.batch.stage
+    from pipeline.cli import main as r2s
+
+    spec, *args = argv
+    # the verb imports run_frames when it runs: it gets this one
+    pipeline.batch.stage.run_frames = functools.partial(pipeline.batch.stage.run_frames, synthesizer=fault(spec))
+    return r2s(args)
+
+
+if __name__ == "__main__":
+    # this module under its importable name (not __main__): the tasks name its functions so
+    from tests.support.faults import main as main_by_name
+
+    sys.exit(main_by_name(sys.argv[1:]))
