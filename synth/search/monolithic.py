@@ -23,29 +23,30 @@ def monolithic(cost_model: CostModel, budget: Budget) -> SearchResult:
     # The frame's exact backend (z3) where a solver oracle made one; its encoding, z3's Optimize around it.
     smt = oracle.backend.exact if oracle.backend is not None else Z3Backend(oracle.config)
     z3 = smt.z3
-    ents = oracle.entities()  # 0 is ego
+    entities = oracle.entities()  # 0 is ego
     n = cost_model.n
-    o = [z3.Int(f"o{e}") for e in range(n)]
+    place = [z3.Int(f"o{e}") for e in range(n)]  # o_e: e's position in the declaration order
     opt = z3.Optimize()
     remaining = budget.remaining()
     if remaining is not None:
         opt.set(timeout=max(1, int(remaining * 1000)))
-    opt.add(z3.Distinct(*o), *(z3.And(0 <= v, v < n) for v in o))
+    opt.add(z3.Distinct(*place), *(z3.And(0 <= v, v < n) for v in place))
 
     costs = []
     for e in range(n):
-        te = ents[e + 1]
+        target = entities[e + 1]
         for part in oracle.parts:
-            ok = z3.Or(part.any_relation(smt, ents[0], te),
-                       *(z3.And(o[r] < o[e], part.any_relation(smt, ents[r + 1], te)) for r in range(n) if r != e))
-            costs.append(z3.If(ok, 0, 1))
+            witnessed = z3.Or(part.any_relation(smt, entities[0], target),
+                              *(z3.And(place[r] < place[e], part.any_relation(smt, entities[r + 1], target))
+                                for r in range(n) if r != e))
+            costs.append(z3.If(witnessed, 0, 1))
     total = z3.Sum(*costs) if costs else z3.IntVal(0)
     opt.minimize(total)
     budget.tick()
     result = opt.check()
     if result == z3.sat:
-        m = opt.model()
-        order = tuple(sorted(range(n), key=lambda e: m.eval(o[e]).as_long()))
+        model = opt.model()
+        order = tuple(sorted(range(n), key=lambda e: model.eval(place[e]).as_long()))
         robust = robust_parts(oracle.scene, oracle.config, oracle.parts)
         bound = floor_bound(cost_model, cost_model.all) if robust else cost_model.order_cost(order)
         return finish(cost_model, order, bound, budget.nodes, None)
