@@ -276,13 +276,12 @@ def relation_usage(db: ProgramsDB, examples: int = 3) -> RelationUsage:
     consistent = (f"statements = lines AND {k['ahead']} + {k['behind']} + {k['left']} + {k['right']} + {k['at']} "
                   f"= statements AND {k['toward']} + {k['away']} + {k['deg']} = statements AND "
                   f"{k['stationary']} + {k['moving like']} + {k['speed']} <= statements")  # motion is optional
-    kinds = {**{name: f"sum({k[name]})" for name in ("ahead", "behind", "left", "right", "relative position",
-                                                     "toward", "away", "relative heading", "stationary",
-                                                     "moving like", "relative speed")},
+    every = RELATION_KINDS + MOTION_KINDS
+    # Every kind with a substring of its own; an absolute form is its part's Ranges without `relative to`.
+    kinds = {**{name: f"sum({k[name]})" for name in every if name in _MARKS},
              "absolute position": f"sum({k['at']} - {k['relative position']})",
              "absolute heading": f"sum({k['deg']} - {k['relative heading']})",
              "absolute speed": f"sum({k['speed']} - {k['relative speed']})"}
-    every = RELATION_KINDS + MOTION_KINDS
     rows = db.sql(f"SELECT config, {', '.join(kinds[kind] for kind in every)} FROM p "
                   f"WHERE has_program AND {consistent} GROUP BY config")
     counts = pd.DataFrame(0, index=list(every), columns=list(db.overview.configs), dtype=int)
