@@ -2,7 +2,7 @@
 
 - keyframes: all 242 shipped nuScenes-mini keyframes, every category within 50 m (data/nuscenes-mini-keyframes).
 - waymo-like: real nuScenes-mini tracks (../shared/data/nuscenes-mini/scenarionet, the six scenes ScenarioNet
-  ships) re-laid out as ScenarioNet's Waymo converter writes them (tests/_scenarionet_layouts.as_waymo: float32
+  ships) re-laid out as ScenarioNet's Waymo converter writes them (tests/support/scenarionet_layouts.as_waymo: float32
   states, Waymo's four object types, string ids), written as a converter database and read back by
   `r2s extract scenarionet --categories all`, one frame every `every` steps of the 10 Hz tracks. The shared
   data has no Waymo recording; this is the Waymo layout and rate over real boxes. Steps 5k hold the nuScenes

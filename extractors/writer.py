@@ -35,6 +35,10 @@ class FramesWriter:
         if len(self._pending) >= ROW_GROUP_ROWS:
             self.flush()
 
+    @property
+    def frame_ids(self) -> frozenset[str]:
+        return frozenset(self._seen)
+
     def flush(self) -> None:
         if self._pending:
             self._writer.write_table(to_table(self._pending))

@@ -67,3 +67,26 @@ def test_bad_input_writes_nothing_and_an_old_output_stays(tmp_path):
     assert_one_line_error(proc, 2, "not frames parts")
     assert_one_line_error(run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(tmp_path / "x"), "--jobs", "0"),
                           2, "--jobs")
+
+
+def test_frame_ids_are_compared_across_parts_by_the_workers_hashes(tmp_path):
+    """The coordinator does not re-read the parts (each was validated as it was written): it compares the frame-id
+    hashes the workers return, and only a clash sends it to the full check, which names the frame."""
+    import pytest
+
+    from extractors.base import ExtractOptions
+    from extractors.categories import ALL
+    from extractors.frames import FramesError
+    from pipeline.batch.extract import _check, extract_unit
+
+    stage = tmp_path / "stage"
+    stage.mkdir()
+    scenario = str(sorted(EXCERPT.glob("sd_*.pkl"))[0])
+    first = extract_unit("scenarionet", scenario, 0, ExtractOptions(categories=ALL), str(stage))
+    again = extract_unit("scenarionet", scenario, 1, ExtractOptions(categories=ALL), str(stage))
+    assert first.frames > 0 and len(first.frame_hashes[0]) == first.frames
+    with pytest.raises(FramesError, match="two places"):
+        _check(stage, [first, again])
+    # Distinct ids: the parts are not opened (an unreadable one stays unnoticed here; the writer validated it).
+    (stage / "part-000001.parquet").write_bytes(b"not parquet")
+    _check(stage, [first])
