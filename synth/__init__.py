@@ -14,14 +14,13 @@ Importing the package loads only the scene and configuration modules; the DSL, t
 search load on first use (`Program`, `parse_program`, `check` by name, the rest inside synthesize).
 """
 
-__version__ = "0.1.0"
-
 # synthesize shares its name with its module, which every import of that module would bind here (the import
 # system sets the attribute after loading a submodule): importing the module now binds the function for good.
 from synth.config import ConfigError, SynthConfig  # noqa: E402
 from synth.errors import ExitCode, InputError, R2sError  # noqa: E402
 from synth.scene import Entity, Scene, SceneError, scene_from_dict, scene_from_json  # noqa: E402
 from synth.synthesize import SynthResult, SynthStats, synthesize  # noqa: E402
+from synth.version import __version__  # noqa: E402, F401
 
 # Loaded on first access: the DSL needs the statement parts (numpy, the interval library), its syntax fractions.
 _LAZY = {

@@ -12,10 +12,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from synth import __version__
 from synth.config import SynthConfig, as_config
 from synth.errors import InternalError
 from synth.scene import Scene, SceneError, as_scene
+from synth.version import __version__
 
 if TYPE_CHECKING:
     from synth.dsl import Program
