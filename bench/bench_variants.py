@@ -233,7 +233,7 @@ def main(argv=None) -> int:
     if args.markdown_only:
         from common import RESULTS
 
-        from extractors.atomic import write_text_atomic
+        from storage.atomic import write_text_atomic
 
         write_text_atomic(RESULTS / "variants.md", markdown(json.loads((RESULTS / "variants.json").read_text())))
         return 0

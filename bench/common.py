@@ -29,7 +29,7 @@ def machine() -> dict:
 
 
 def write_results(name: str, payload: dict, markdown: str) -> None:
-    from extractors.atomic import write_text_atomic
+    from storage.atomic import write_text_atomic
 
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_text_atomic(RESULTS / f"{name}.json", json.dumps(payload, indent=1, default=float) + "\n")

@@ -139,7 +139,7 @@ def readme() -> str:
 
 
 def write_readme() -> None:
-    from extractors.atomic import write_text_atomic
+    from storage.atomic import write_text_atomic
 
     write_text_atomic(RESULTS / "README.md", readme())
     print(f"wrote {RESULTS / 'README.md'}")

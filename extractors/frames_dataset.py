@@ -9,100 +9,29 @@ frame id that occurs in two places is refused, never silently split into two fra
 once, dictionary-encoded, and refuses the whole dataset on the first bad row, with the same one-line messages
 as extractors.frames.validate_frames (ids are printed into generated programs, so a bad id refuses the input
 before any frame is synthesized). `runs` streams only the frame_id column and yields where each frame is.
-Workers read their own rows with `read_rows` (a file and a row range), so frame data need not pass through the
+Workers read their own rows with storage.parquet.read_rows (a file and a row range), so frame data need not pass through the
 process that plans the work.
 """
 
 from __future__ import annotations
 
 import os
-from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
-from extractors.frame_index import FrameIndex, frame_hashes
-from extractors.frames import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from storage.frame_index import FrameIndex, frame_hashes
+from storage.parquet import check_column_types, dataset_files, filesystem, footer, open_file
 from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
 
 # What the check reads: the columns validate_frames looks at. String columns are read dictionary-encoded:
 # a frame id or entity id repeats on many rows, so the work is per distinct value, not per row.
 CHECK_COLUMNS = ("frame_id", "entity_id", "type", "x", "y", "heading", "is_ego")
 DICTIONARY_COLUMNS = ("frame_id", "entity_id", "type")
-
-
-# ------------------------------------------------------------------------------------------- files and schemas
-
-def filesystem(path: str):
-    """(pyarrow filesystem, path inside it) for a local path or a URL (s3://, gs://, file://, or any fsspec
-    protocol), so that a cluster's workers can read a path they all see."""
-    from pyarrow import fs
-
-    if "://" not in str(path):
-        return fs.LocalFileSystem(), os.path.abspath(path)
-    try:
-        return fs.FileSystem.from_uri(path)
-    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, ValueError):
-        import fsspec
-
-        fsspec_fs, inner = fsspec.core.url_to_fs(path)
-        return fs.PyFileSystem(fs.FSSpecHandler(fsspec_fs)), inner
-
-
-def dataset_files(path: str, what: str, error: type[ValueError]) -> tuple[object, list[str]]:
-    """The Parquet files of a dataset: the file itself, or every *.parquet under a directory (sorted, hidden and
-    _-prefixed names skipped, as pyarrow.dataset, DuckDB globs and Spark skip them)."""
-    from pyarrow import fs
-
-    try:
-        pafs, inner = filesystem(str(path))
-        info = pafs.get_file_info(inner)
-    except (OSError, ValueError, ImportError) as exc:
-        raise error(f"{path}: cannot open ({str(exc)[:120]})") from None
-    if info.type == fs.FileType.NotFound:
-        raise error(f"{path} does not exist")
-    if info.type == fs.FileType.File:
-        return pafs, [inner]
-    selector = fs.FileSelector(inner, recursive=True)
-    files = sorted(
-        f.path for f in pafs.get_file_info(selector)
-        if f.type == fs.FileType.File and f.path.endswith(".parquet")
-        and not any(part.startswith((".", "_")) for part in os.path.relpath(f.path, inner).split(os.sep))
-    )
-    if not files:
-        raise error(f"{path} is a directory without {what} Parquet files (*.parquet)")
-    return pafs, files
-
-
-def _kind(t: pa.DataType) -> str:
-    if pa.types.is_dictionary(t):
-        t = t.value_type
-    if pa.types.is_string(t) or pa.types.is_large_string(t):
-        return "string"
-    if pa.types.is_integer(t):
-        return "integer"
-    if pa.types.is_floating(t):
-        return "float"
-    if pa.types.is_boolean(t):
-        return "bool"
-    return str(t)
-
-
-def check_column_types(schema: pa.Schema, expected: pa.Schema, where: str, error: type[ValueError]) -> None:
-    """Refuse a column of another kind than the schema's (text where a number belongs, ...); widths may differ
-    (pandas writes int64 where the schema says int32), a float column may hold integers."""
-    for field in expected:
-        if field.name not in schema.names:
-            continue
-        want, got = _kind(field.type), _kind(schema.field(field.name).type)
-        if got != want and not (want == "float" and got == "integer") and not pa.types.is_null(
-                schema.field(field.name).type):
-            raise error(f"{where}: column {field.name} is {schema.field(field.name).type}, not {field.type} "
-                        "(a column does not have the schema's type)")
 
 
 @dataclass(frozen=True)
@@ -128,7 +57,7 @@ class FramesDataset:
         parts = []
         for f in files:
             where = f if len(files) > 1 else str(path)
-            meta = _metadata(pafs, f, where, FramesError)
+            meta = footer(pafs, f, where, FramesError)
             schema = meta.schema.to_arrow_schema()
             missing = [c for c in FRAMES_COLUMNS if c not in schema.names]
             if missing:
@@ -152,7 +81,7 @@ class FramesDataset:
         return part.path if len(self.parts) > 1 else self.source
 
     def row_groups(self, part: FramesPart, columns: tuple[str, ...]) -> Iterator[pa.Table]:
-        pf = _open(self.url, part.path, tuple(c for c in DICTIONARY_COLUMNS if c in columns))
+        pf = open_file(self.url, part.path, tuple(c for c in DICTIONARY_COLUMNS if c in columns))
         for i in range(len(part.row_groups)):
             yield pf.read_row_group(i, columns=list(columns))
 
@@ -217,7 +146,7 @@ class FramesDataset:
         schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in optional])
         tables = []
         for part in self.parts:
-            table = _open(self.url, part.path).read(columns=list(part.columns))
+            table = open_file(self.url, part.path).read(columns=list(part.columns))
             for c in optional:
                 if c not in part.optional:
                     table = table.append_column(c, pa.nulls(table.num_rows, OPTIONAL_COLUMNS[c]))
@@ -243,14 +172,6 @@ class FrameRuns:
     starts: np.ndarray  # int64
     lengths: np.ndarray  # int64
     ids: np.ndarray  # object (str)
-
-
-def _metadata(pafs, path: str, where: str, error: type[ValueError]):
-    try:
-        with pafs.open_input_file(path) as f:
-            return pq.ParquetFile(f).metadata
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise error(f"{where} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
 
 
 # ------------------------------------------------------------------------------------------------ runs of frames
@@ -439,53 +360,3 @@ def check_table(table: pa.Table) -> None:
     if checker.ego_problem:
         raise FramesError(checker.ego_problem)
 
-
-# ------------------------------------------------------------------------------------------------ worker reads
-
-# Per process: open files and the row groups read last. Workers take neighbouring chunks one after another,
-# so a row group (64,000 rows) is decoded about once per worker, not once per chunk.
-_FILES: OrderedDict = OrderedDict()
-_GROUPS: OrderedDict = OrderedDict()
-_CACHED_FILES, _CACHED_GROUPS = 8, 4
-
-
-def _open(url: str, path: str, dictionary: tuple[str, ...] = ()) -> pq.ParquetFile:
-    return _open_with_bounds(url, path, dictionary)[0]
-
-
-def _open_with_bounds(url: str, path: str, dictionary: tuple[str, ...] = ()) -> tuple[pq.ParquetFile, np.ndarray]:
-    """An open file and the first row of each of its row groups (plus the row count at the end)."""
-    key = (url, path, dictionary)
-    hit = _FILES.get(key)
-    if hit is None:
-        pafs, _ = filesystem(url) if url else filesystem(path)
-        pf = pq.ParquetFile(pafs.open_input_file(path), read_dictionary=list(dictionary) or None)
-        sizes = [pf.metadata.row_group(i).num_rows for i in range(pf.metadata.num_row_groups)]
-        hit = _FILES[key] = (pf, np.concatenate(([0], np.cumsum(sizes, dtype=np.int64))))
-        while len(_FILES) > _CACHED_FILES:
-            _FILES.popitem(last=False)
-    else:
-        _FILES.move_to_end(key)
-    return hit
-
-
-def read_rows(url: str, path: str, start: int, stop: int, columns: tuple[str, ...]) -> pa.Table:
-    """Rows [start, stop) of one file, read through the row groups that hold them."""
-    pf, bounds = _open_with_bounds(url, path)
-    first = int(np.searchsorted(bounds, start, side="right") - 1)
-    tables = []
-    for g in range(first, len(bounds) - 1):
-        if bounds[g] >= stop:
-            break
-        key = (url, path, g, columns)
-        table = _GROUPS.get(key)
-        if table is None:
-            table = pf.read_row_group(g, columns=list(columns))
-            _GROUPS[key] = table
-            while len(_GROUPS) > _CACHED_GROUPS:
-                _GROUPS.popitem(last=False)
-        else:
-            _GROUPS.move_to_end(key)
-        lo, hi = max(start - bounds[g], 0), min(stop, bounds[g + 1]) - bounds[g]
-        tables.append(table.slice(lo, hi - lo))
-    return pa.concat_tables(tables) if len(tables) > 1 else tables[0]

@@ -10,8 +10,8 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
-from extractors.atomic import atomic_path
 from extractors.frames import EXTRACTED_SCHEMA, FramesError, to_table
+from storage.atomic import atomic_path
 
 ROW_GROUP_ROWS = 64_000
 

@@ -53,7 +53,7 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
 
 def check_programs_schema(schema: pa.Schema, where: str) -> None:
     """Refuse a file that lacks a programs column or has one of another kind (text where a number belongs)."""
-    from extractors.frames_dataset import check_column_types
+    from storage.parquet import check_column_types
 
     missing = [c for c in PROGRAMS_COLUMNS if c not in schema.names]
     if missing:
@@ -75,7 +75,7 @@ def check_programs_values(table: pa.Table, where: str) -> None:
 
 def programs_files(path: str | os.PathLike) -> list[str]:
     """The Parquet files of a programs file or dataset directory (ProgramsError if there are none)."""
-    from extractors.frames_dataset import dataset_files
+    from storage.parquet import dataset_files
 
     return dataset_files(str(path), "programs", ProgramsError)[1]
 

@@ -32,13 +32,13 @@ class UnitResult:
     rows: int
     scenes: tuple[str, ...]  # scene names, in order: a name met in an earlier piece is that piece's
     tally: ExtractTally
-    frame_hashes: tuple[Any, Any]  # (hi, lo) of its frame ids (extractors.frame_index): 16 bytes a frame
+    frame_hashes: tuple[Any, Any]  # (hi, lo) of its frame ids (storage.frame_index): 16 bytes a frame
 
 
 def extract_unit(source: str, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
     """One piece into `stage/part-<index>.parquet` (nothing when it has no frame)."""
-    from extractors.frame_index import frame_hashes
     from extractors.registry import source_module
+    from storage.frame_index import frame_hashes
 
     tally = ExtractTally()
     scenes: list[str] = []
@@ -149,8 +149,8 @@ def _check(stage: Path, kept: list[UnitResult]) -> None:
     """Frame ids unique across the parts. Each part was validated as it was written (extractors.writer), so only
     the workers' frame-id hashes are compared here; re-reading every part cost the coordinator ~3 s per 50,000
     frames, alone while the workers wait. A clash is then named by the full check of the staged dataset."""
-    from extractors.frame_index import FrameIndex
     from extractors.frames_dataset import FramesDataset
+    from storage.frame_index import FrameIndex
 
     hi, _ = FrameIndex.of(r.frame_hashes for r in kept).duplicated()
     if len(hi):
@@ -178,7 +178,7 @@ def _merge(stage: Path, target: Path) -> None:
     """The parts, in order, into one file, a row group at a time."""
     import pyarrow.parquet as pq
 
-    from extractors.atomic import atomic_path
+    from storage.atomic import atomic_path
 
     parts = sorted(stage.glob("part-*.parquet"))
     schema = pq.ParquetFile(parts[0]).schema_arrow

@@ -284,7 +284,7 @@ class DaskPool:
 
 
 def _can_read(url: str, path: str) -> str:
-    from extractors.frames_dataset import filesystem
+    from storage.parquet import filesystem
 
     try:
         pafs, _ = filesystem(url) if url else filesystem(path)

@@ -24,9 +24,9 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
-from extractors.frame_index import frame_hashes
 from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.errors import UserError
+from storage.frame_index import frame_hashes
 from synth.config import SynthConfig, as_config
 
 DEFAULT_CHUNK_SIZE = 32  # frames per task

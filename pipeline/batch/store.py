@@ -8,7 +8,7 @@ Two layouts, chosen by --out:
   into `<out>` by streaming row batches (bounded memory), after the rows of an earlier `<out>`.
 
 A kill at any moment leaves only whole files. On start, the rows already there are read two columns at a time
-(frame_id, config_hash: column projection), hashed (extractors.frame_index), and sorted out: the last row of a
+(frame_id, config_hash: column projection), hashed (storage.frame_index), and sorted out: the last row of a
 frame wins (output file, then parts in order), rows of frames not in the input or computed with another config
 are dropped (their files rewritten without them, atomically), and the frames left are done. So a resumed run
 computes each frame once, and the output holds every frame of the input exactly once when the run ends.
@@ -27,10 +27,10 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from extractors.atomic import atomic_path
-from extractors.frame_index import FrameIndex, frame_hashes
 from pipeline.errors import UserError
 from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, check_programs_schema, check_programs_values
+from storage.atomic import atomic_path
+from storage.frame_index import FrameIndex, frame_hashes
 
 PART_PREFIX, PART_SUFFIX = "part-", ".parquet"
 TMP_PREFIX = ".part-"

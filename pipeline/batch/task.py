@@ -1,6 +1,6 @@
 """The worker side of `r2s run`: a chunk of frames in (a file and a row range), one programs row per frame out.
 
-A chunk task reads its own rows (extractors.frames_dataset.read_rows), so frame data never passes through the
+A chunk task reads its own rows (storage.parquet.read_rows), so frame data never passes through the
 process that plans the run, on one machine or on a cluster. Each frame runs under its own time and memory
 limits (run_frame), and becomes a row whatever happens to it; only a dead worker loses rows. Before each frame
 the task writes the frame's index to its progress marker, so that when a worker dies the run knows which frame
@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 import pyarrow as pa
 
 from extractors.frames import FramesError, frame_to_scene
-from extractors.frames_dataset import read_rows
 from pipeline.programs import failure_row, programs_table, result_row
+from storage.parquet import read_rows
 from synth.config import SynthConfig
 from synth.errors import InternalError
 from synth.scene import Scene

@@ -24,11 +24,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from extractors.atomic import write_text_atomic
     from extractors.frames import read_frames
     from pipeline.errors import UserError
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
+    from storage.atomic import write_text_atomic
 
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number of metres, got {args.max_distance!r}")

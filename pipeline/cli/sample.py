@@ -42,10 +42,10 @@ def run(args: argparse.Namespace) -> int:
     import re
     from pathlib import Path
 
-    from extractors.atomic import write_text_atomic
     from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
     from pipeline.errors import UserError
     from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
+    from storage.atomic import write_text_atomic
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

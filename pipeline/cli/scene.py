@@ -18,10 +18,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from extractors.atomic import write_text_atomic
     from extractors.frames import frame_to_scene, validate_frames
     from extractors.frames_dataset import FramesDataset
     from pipeline.errors import UserError
+    from storage.atomic import write_text_atomic
 
     dataset = FramesDataset.open(args.frames)
     table = dataset.find(args.frame_id)

@@ -19,9 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from extractors.atomic import write_text_atomic
     from pipeline.cli.inputs import read_scene
     from pipeline.cli.options import synthesis_config
+    from storage.atomic import write_text_atomic
     from synth.synthesize import synthesize
 
     config = synthesis_config(args)

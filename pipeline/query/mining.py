@@ -149,7 +149,7 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
     """Write matches.parquet (atomically) for `pattern` over a frames file or dataset; bad input is a FramesError."""
     import duckdb
 
-    from extractors.atomic import atomic_path
+    from storage.atomic import atomic_path
 
     t0 = time.monotonic()
     config = config or SynthConfig()

@@ -235,7 +235,7 @@ def draw(view: View):
 
 def save(fig, path: str | Path) -> None:
     """Write the figure atomically; the format is the file's suffix (png, svg or pdf)."""
-    from extractors.atomic import atomic_path
+    from storage.atomic import atomic_path
 
     fmt = Path(path).suffix.lstrip(".").lower()
     with atomic_path(path) as tmp:

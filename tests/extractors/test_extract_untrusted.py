@@ -163,7 +163,7 @@ def test_unknown_frame_id_suggests_close_ones(tmp_path, capsys):
 def test_outputs_get_the_permissions_of_a_plain_file(tmp_path):
     import os
 
-    from extractors.atomic import write_text_atomic
+    from storage.atomic import write_text_atomic
 
     old = os.umask(0o022)
     try:

@@ -1,4 +1,4 @@
-"""Frames as a dataset (extractors.frames_dataset, extractors.frame_index, pipeline.batch.rules.chunks) against plain
+"""Frames as a dataset (extractors.frames_dataset, storage.frame_index, pipeline.batch.rules.chunks) against plain
 Python brute force: the streaming check, the frame runs and the worker's row reads must not depend on how the
 rows are cut into row groups and files."""
 
@@ -14,10 +14,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from extractors.frame_index import FrameIndex, frame_hashes
 from extractors.frames import FRAMES_SCHEMA, FramesError, scene_to_rows, to_table
-from extractors.frames_dataset import FramesDataset, read_rows
+from extractors.frames_dataset import FramesDataset
 from pipeline.batch.rules import chunk_sizes, chunks
+from storage.frame_index import FrameIndex, frame_hashes
+from storage.parquet import read_rows
 from synth.scene import ENTITY_TYPES, RESERVED_IDS
 from tests.support import shipped_frames
 

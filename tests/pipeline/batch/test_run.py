@@ -427,8 +427,8 @@ def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0)
 
 
 def test_resume_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames(tmp_path):
-    from extractors.frame_index import FrameIndex, frame_hashes
     from pipeline.batch.store import RunStore
+    from storage.frame_index import FrameIndex, frame_hashes
 
     store = RunStore(tmp_path / "programs")
     store.write_part(programs_table([_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0")]))

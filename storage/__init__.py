@@ -1,0 +1,3 @@
+"""Files and how they are written and read, below extractors and pipeline: atomic writes (`atomic`), Parquet
+datasets, their footers and rows read by range (`parquet`), and sets of frame ids at dataset scale
+(`frame_index`). It knows no schema and imports neither synth, extractors nor pipeline (docs/layout.md)."""
