@@ -1,4 +1,5 @@
-"""The one frames schema every extractor writes and the pipeline reads (docs/formats.md, "Frames Parquet").
+"""Frames as rows, tables and Scenes: the one frames schema (extractors.frames_schema, docs/formats.md, "Frames
+Parquet") that every extractor writes and the pipeline reads, a frame's rows to a Scene and back.
 
 One row per entity per frame, ego included, in the ego-centric frame (+x right, +y forward, heading degrees
 counter-clockwise from +y). Writing is atomic; reading validates, so a corrupt or foreign file is refused
@@ -16,39 +17,10 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from synth.errors import InputError
-from synth.scene import EGO_ID, Scene, SceneError, make_scene
-
-FRAMES_SCHEMA = pa.schema(
-    [
-        ("frame_id", pa.string()),
-        ("source", pa.string()),
-        ("scene", pa.string()),
-        ("frame_index", pa.int32()),
-        ("timestamp_us", pa.int64()),
-        ("entity_id", pa.string()),
-        ("track_id", pa.string()),
-        ("type", pa.string()),
-        ("category", pa.string()),
-        ("x", pa.float64()),
-        ("y", pa.float64()),
-        ("heading", pa.float64()),
-        ("length", pa.float32()),
-        ("width", pa.float32()),
-        ("is_ego", pa.bool_()),
-    ]
-)
-FRAMES_COLUMNS = tuple(FRAMES_SCHEMA.names)
-# Optional per-entity columns, null where unknown: speed (m/s, the magnitude of the ground velocity; motion needs
-# it) and measurement uncertainty (robust synthesis). Readers accept files without them.
-OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_sigma": pa.float64(),
-                    "speed_sigma": pa.float64()}
-# What extractors write: every column of the schema and each entity's speed (null where the source cannot say).
-EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])])
-
-
-class FramesError(InputError, ValueError):
-    """A frames file or table that is not what the schema says. One line, fit for a user."""
+from extractors.frames_dataset import FramesDataset, check_table
+from extractors.frames_schema import EXTRACTED_SCHEMA, FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from storage.atomic import atomic_path
+from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
 
 
 def entity_ids(types: Iterable[str], distances: Iterable[float]) -> list[str]:
@@ -116,8 +88,6 @@ def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
 
 def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str | os.PathLike) -> int:
     """Write frames.parquet atomically (temp file, then rename). Returns the number of rows."""
-    from extractors.atomic import atomic_path
-
     table = rows if isinstance(rows, pa.Table) else to_table(rows)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
@@ -127,8 +97,6 @@ def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str
 def read_frames(path: str | os.PathLike) -> pd.DataFrame:
     """Read and validate a frames file or dataset directory, whole (small data: `r2s run` streams instead); any
     problem is a FramesError naming the file."""
-    from extractors.frames_dataset import FramesDataset
-
     return FramesDataset.open(path).read_all().to_pandas()
 
 
@@ -136,8 +104,6 @@ def validate_frames(df: pd.DataFrame) -> None:
     """The rules every frames table obeys (finite positions, known types, one ego per frame, ids fit to print
     into programs, unique per frame, frames contiguous); the same check streams over datasets
     (extractors.frames_dataset.FramesCheck), so both refuse with the same words."""
-    from extractors.frames_dataset import check_table
-
     missing = [c for c in FRAMES_COLUMNS if c not in df.columns]
     if missing:
         raise FramesError(f"lacks column(s) {', '.join(missing)}")
@@ -171,8 +137,6 @@ def _given(v: Any) -> float | None:
 
 def frame_to_scene(rows: pd.DataFrame) -> Scene:
     """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone)."""
-    from synth.scene import scene_from_dict
-
     fid = str(rows["frame_id"].iloc[0])
     entities = []
     for r in rows.itertuples(index=False):
