@@ -27,16 +27,15 @@ sys.path.insert(0, str(ROOT))  # tests.support
 from common import machine, write_results  # noqa: E402
 from realdata import SHARED  # noqa: E402
 
-from extractors.base import ExtractOptions  # noqa: E402
 from extractors.categories import ALL  # noqa: E402
-from extractors.registry import source_module  # noqa: E402
+from extractors.registry import source as source_of  # noqa: E402
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt"
 
 
 def measure(source: str, path: Path, repeat: int, **opts) -> dict:
-    extract = source_module(source).extract
-    options = ExtractOptions(categories=ALL, **opts)
+    extract = source_of(source).extract
+    options = source_of(source).options(categories=ALL, **opts)
     best, frames, rows = float("inf"), 0, 0
     for _ in range(repeat):
         t = time.perf_counter()

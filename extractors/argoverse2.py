@@ -25,19 +25,55 @@ from extractors.base import (
     ExtractTally,
     FrameBuilder,
     RecordedObject,
+    Source,
     quaternion_yaw,
     require_path,
     vehicle_to_ego,
 )
+from extractors.categories import Taxonomy
+from extractors.sniff import Look
 from extractors.speed import speeds_by_track, track_speeds
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
-TAXONOMY = "argoverse2"
+# Argoverse 2 sensor-dataset annotation categories (30 classes).
+TAXONOMY = Taxonomy("argoverse2", {
+    "ANIMAL": "Animal",
+    "ARTICULATED_BUS": "Bus",
+    "BICYCLE": "Bicycle",
+    "BICYCLIST": "Bicycle",
+    "BOLLARD": "Barrier",
+    "BOX_TRUCK": "Truck",
+    "BUS": "Bus",
+    "CONSTRUCTION_BARREL": "Barrier",
+    "CONSTRUCTION_CONE": "TrafficCone",
+    "DOG": "Animal",
+    "EGO_VEHICLE": "Car",
+    "LARGE_VEHICLE": "Truck",
+    "MESSAGE_BOARD_TRAILER": "Trailer",
+    "MOBILE_PEDESTRIAN_CROSSING_SIGN": "Object",
+    "MOTORCYCLE": "Motorcycle",
+    "MOTORCYCLIST": "Motorcycle",
+    "OFFICIAL_SIGNALER": "Pedestrian",
+    "PEDESTRIAN": "Pedestrian",
+    "RAILED_VEHICLE": "Bus",
+    "REGULAR_VEHICLE": "Car",
+    "SCHOOL_BUS": "Bus",
+    "SIGN": "Object",
+    "STOP_SIGN": "Object",
+    "STROLLER": "Pedestrian",
+    "TRUCK": "Truck",
+    "TRUCK_CAB": "Truck",
+    "VEHICULAR_TRAILER": "Trailer",
+    "WHEELCHAIR": "Pedestrian",
+    "WHEELED_DEVICE": "PushableObject",
+    "WHEELED_RIDER": "Bicycle",
+})
 NAMES = ("annotations.feather", "annotations_with_ego.feather")
 COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "qw", "qx", "qy", "qz", "tx_m", "ty_m")
 EGO_CATEGORY = "EGO_VEHICLE"
 POSES = "city_SE3_egovehicle.feather"
 POSE_COLUMNS = ("timestamp_ns", "qw", "qx", "qy", "qz", "tx_m", "ty_m")
+ARROW_MAGIC = b"ARROW1"  # Feather v2 is the Arrow IPC file format
 
 
 def annotation_files(path: Path) -> list[Path]:
@@ -139,3 +175,27 @@ def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder,
             boxes.append(RecordedObject(str(cols["track_uuid"][i]), cat, float(x[i]), float(y[i]), float(heading[i]),
                                         cols["length_m"][i], cols["width_m"][i], speed=speed[i]))
         yield builder.frame(log_id, index, int(stamp) // 1000, ego, boxes)
+
+
+class Argoverse2(Source):
+    name = "argoverse2"
+    description = DESCRIPTION
+    input_help = "log dir"
+    taxonomy = TAXONOMY
+    extract = staticmethod(extract)
+
+    def unit_paths(self, path: Path) -> list[Path]:
+        return annotation_files(path)
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        if path.name in NAMES and head.startswith(ARROW_MAGIC):
+            return Look(self.name, f"Argoverse 2 annotations ({path.name})", str(path.parent))
+        return None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        if not is_dir and path.name in NAMES:
+            return Look(self.name, f"Argoverse 2 logs ({path.name})", top)
+        return None
+
+
+SOURCE = Argoverse2()

@@ -1,30 +1,38 @@
-"""The one small interface every source module implements, and what they share.
+"""The one small interface every source implements (Source), its options (ExtractOptions), and what sources share.
 
-A source module (nuscenes, scenarionet, argoverse2, mcap, rosbag) has `DESCRIPTION`, `TAXONOMY` (the
-extractors.categories taxonomy its raw categories belong to) and
-`extract(input_path, options, tally=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built
-with `FrameBuilder.frame(...)` so that the ego-frame transform, category selection, radius and entity cap are
-the same for all sources. What a run leaves out (a duplicate scenario, an object of a type no map knows) is
-counted in the ExtractTally, whose summary is the last line of `r2s extract`. Problems with the input raise
-ExtractError (a FramesError: one line, exit 2).
+A source is one module (nuscenes, scenarionet, argoverse2, mcap, rosbag; registry.py names them), in the manner
+of trajdata's dataset adapters: a Source subclass and `SOURCE`, its instance, that owns everything about its
+dataset: its name, the Taxonomy of its raw categories, its options (an ExtractOptions subclass that adds its
+own `r2s extract` options), how it cuts an input into pieces for `--jobs` (`units`), how it recognises its input
+(`look_at_file`, `look_at_entry`: extractors.sniff asks every source), and `extract(input_path, options,
+tally=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built with `FrameBuilder.frame(...)`
+so that the ego-frame transform, category selection, radius and entity cap are the same for all sources. What a
+run leaves out (a duplicate scenario, an object of a type no map knows) is counted in the ExtractTally, whose
+summary is the last line of `r2s extract`. Problems with the input raise ExtractError (a FramesError: one line,
+exit 2). docs/layout.md has the recipe for a new source.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import sys
+from abc import ABC, abstractmethod
 from collections import Counter
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, scenic_class
+from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Taxonomy
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from synth.scene import DEFAULT_MAX_ENTITIES
+
+if TYPE_CHECKING:
+    from extractors.sniff import Look
 
 
 class ExtractError(FramesError):
@@ -33,21 +41,13 @@ class ExtractError(FramesError):
 
 @dataclass(frozen=True)
 class ExtractOptions:
+    """The options every source takes. A source with options of its own subclasses this (more fields, all with
+    defaults) and adds them to `r2s extract` in add_options; sources that share options share the subclass."""
+
     radius: float = 50.0
     categories: CategorySelection = VEHICLES
     every: int = 1
     max_entities: int = DEFAULT_MAX_ENTITIES
-    # nuscenes
-    version: str = "v1.0-mini"
-    scenes: tuple[str, ...] = ()
-    min_visibility: int = 0
-    min_lidar_pts: int = 0
-    # mcap / rosbag
-    topics: tuple[str, ...] = ()
-    pose_topic: str | None = None
-    fixed_frame: str = "map"
-    ego_frame: str = "base_link"
-    max_chunk_bytes: int = 256 * 2**20
 
     def __post_init__(self) -> None:
         if not (self.radius > 0):
@@ -56,6 +56,54 @@ class ExtractOptions:
             raise ValueError("--every must be at least 1")
         if self.max_entities < 1:
             raise ValueError("--max-entities must be at least 1")
+
+    @classmethod
+    def add_options(cls, group: argparse._ArgumentGroup) -> None:
+        """Add the fields of this class beyond ExtractOptions' as options of `r2s extract` (in their own group)."""
+
+    @classmethod
+    def options_from(cls, args: argparse.Namespace, **common: Any) -> ExtractOptions:
+        """The options of a parsed `r2s extract` command line; `common` holds ExtractOptions' own fields."""
+        return cls(**common)
+
+
+def comma_list(text: str) -> tuple[str, ...]:
+    """The items of a comma-separated option value (--scenes, --topics)."""
+    return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+class Source(ABC):
+    """One dataset, everything about it. Subclasses set the class attributes and implement extract; the rest
+    has defaults that fit a source whose input is one thing that cannot be split and that no file betrays."""
+
+    name: ClassVar[str]  # the SOURCE of `r2s extract SOURCE INPUT`, its key in registry.SOURCES
+    description: ClassVar[str]  # one line: what it reads
+    input_help: ClassVar[str]  # what INPUT is, a few words for `r2s extract --help`
+    taxonomy: ClassVar[Taxonomy]  # its raw categories -> Scenic classes
+    options: ClassVar[type[ExtractOptions]] = ExtractOptions
+
+    @abstractmethod
+    def extract(self, input_path: str, options: ExtractOptions,
+                tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+        """The frames of INPUT, one list of rows (FrameBuilder.frame) per frame, streamed."""
+
+    def units(self, input_path: str) -> list[str]:
+        """The independent pieces of INPUT, for `r2s extract --jobs`, in the order extract reads them. Each piece
+        is a valid input on its own, so a worker extracts it with extract, exactly as the whole input would be."""
+        path = require_path(input_path, f"{self.name} input")
+        return [str(p) for p in self.unit_paths(path)]
+
+    def unit_paths(self, path: Path) -> list[Path]:
+        """The pieces of an existing INPUT (one file, log or bag each); by default the input is one piece."""
+        return [path]
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        """What INPUT looks like when it is this file (head: its first bytes), if it is this source's."""
+        return None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        """What the INPUT folder `top` looks like, from one entry `depth` levels below it, if this source's."""
+        return None
 
 
 @dataclass(frozen=True)
@@ -169,7 +217,7 @@ class FrameBuilder:
     """Turns one frame's boxes into frames rows: category selection, radius, cap, deterministic ids."""
 
     source: str
-    taxonomy: str
+    taxonomy: Taxonomy
     options: ExtractOptions
     tally: ExtractTally | None = field(default=None, compare=False)
 
@@ -181,9 +229,9 @@ class FrameBuilder:
         """The Scenic class of a box under --categories, or None to leave it out; a category no map knows is
         classified by the box's fallback if that is known, else as UNKNOWN_CLASS, and counted either way."""
         select = self.options.categories.select
-        if scenic_class(self.taxonomy, b.category) is not None:
+        if self.taxonomy.scenic_class(b.category) is not None:
             return select(self.taxonomy, b.category)
-        if b.fallback is not None and scenic_class(self.taxonomy, b.fallback) is not None:
+        if b.fallback is not None and self.taxonomy.scenic_class(b.fallback) is not None:
             ExtractTally.count(self.tally.by_fallback, f"{b.category} as {b.fallback}")
             return select(self.taxonomy, b.fallback)
         cls = select(self.taxonomy, b.category)

@@ -16,11 +16,20 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractOptions, ExtractTally, files_with_suffix, require_path
-from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples
+from extractors.base import ExtractError, ExtractTally, Source, files_with_suffix, require_path
+from extractors.messages import (
+    LogOptions,
+    PoseTrack,
+    choose_annotation_topics,
+    choose_pose_topics,
+    message_frames,
+    pose_samples,
+)
+from extractors.sniff import Look, head
 
 DESCRIPTION = "MCAP files with foxglove.SceneUpdate (protobuf / JSON) or ROS 2 Detection3DArray / MarkerArray"
 TAXONOMY = messages.TAXONOMY
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def _bounded_decompress(compression: str, data: bytes, limit: int) -> int:
@@ -108,7 +117,7 @@ def _messages(path: Path, topics: list[str], schema_of: dict[str, str]) -> Itera
         raise ExtractError(f"{path}: cannot decode its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     for f in files_with_suffix(require_path(input_path, "MCAP input"), [".mcap"], "MCAP files"):
         topics = check_mcap(f, options.max_chunk_bytes)
         wanted = choose_annotation_topics(topics, options, str(f))
@@ -116,3 +125,26 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
         poses = PoseTrack(p for schema, t, msg in _messages(f, pose_topics, topics)
                           for p in pose_samples(msg, schema, options, t))
         yield from message_frames("mcap", f.stem, _messages(f, wanted, topics), poses, options, str(f), tally)
+
+
+class Mcap(Source):
+    name = "mcap"
+    description = DESCRIPTION
+    input_help = ".mcap file or dir"
+    taxonomy = TAXONOMY
+    options = LogOptions
+    extract = staticmethod(extract)
+
+    def unit_paths(self, path: Path) -> list[Path]:
+        return files_with_suffix(path, [".mcap"], "MCAP files")
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        return Look(self.name, "an MCAP file", str(path)) if head.startswith(MCAP_MAGIC) else None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        if not is_dir and path.name.endswith(".mcap") and head(path).startswith(MCAP_MAGIC):
+            return Look(self.name, "a folder of MCAP files", top)
+        return None
+
+
+SOURCE = Mcap()

@@ -21,6 +21,7 @@ speed         an object's from its message where the message carries one (a `vel
 
 from __future__ import annotations
 
+import argparse
 import bisect
 import math
 from collections.abc import Iterable, Iterator
@@ -29,19 +30,26 @@ from typing import Any
 
 import numpy as np
 
+from extractors import argoverse2, nuscenes, scenarionet
 from extractors.base import (
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
     RecordedObject,
+    comma_list,
     global_to_ego,
     quaternion_yaw,
     vehicle_to_ego,
 )
+from extractors.categories import Taxonomy
 from extractors.speed import MAX_GAP_S, track_speeds
+from synth.scene import ENTITY_TYPES
 
-TAXONOMY = "logs"
+# Robotics logs (MCAP, ROS bags) carry whatever category strings their writer chose: nuScenes names (the
+# nuScenes-to-MCAP converters), Argoverse / ScenarioNet names, or the Scenic class itself.
+TAXONOMY = Taxonomy("logs", {**scenarionet.TAXONOMY.classes, **argoverse2.TAXONOMY.classes, **nuscenes.TAXONOMY.classes,
+                             **{c: c for c in ENTITY_TYPES}})
 SCENE_UPDATE = ("foxglove.SceneUpdate", "foxglove_msgs/msg/SceneUpdate", "foxglove_msgs/SceneUpdate")
 DETECTIONS = ("vision_msgs/msg/Detection3DArray", "vision_msgs/Detection3DArray")
 MARKERS = ("visualization_msgs/msg/MarkerArray", "visualization_msgs/MarkerArray")
@@ -54,6 +62,33 @@ POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/PoseStamped",
 DEFAULT_ANNOTATION_TOPIC = "/markers/annotations"
 POSE_TOLERANCE_NS = 100_000_000  # an ego pose further than 0.1 s from the annotations does not place them
 MARKER_CUBE, MARKER_ADD = 1, 0
+
+
+@dataclass(frozen=True)
+class LogOptions(ExtractOptions):
+    """The options of the sources that read robotics logs (mcap, rosbag)."""
+
+    topics: tuple[str, ...] = ()
+    pose_topic: str | None = None
+    fixed_frame: str = "map"
+    ego_frame: str = "base_link"
+    max_chunk_bytes: int = 256 * 2**20
+
+    @classmethod
+    def add_options(cls, g: argparse._ArgumentGroup) -> None:
+        g.add_argument("--topics", type=comma_list, default=(), metavar="T,...",
+                       help="annotation topics (default: every SceneUpdate / Detection3DArray / MarkerArray topic)")
+        g.add_argument("--pose-topic", metavar="T",
+                       help="ego pose topic (PoseStamped, Odometry, PoseInFrame); default /tf")
+        g.add_argument("--fixed-frame", default="map", metavar="F", help="global frame of the ego pose")
+        g.add_argument("--ego-frame", default="base_link", metavar="F", help="the vehicle's frame")
+        g.add_argument("--max-chunk-mb", type=float, default=256, metavar="MB",
+                       help="refuse compressed chunks that claim to decompress to more than this")
+
+    @classmethod
+    def options_from(cls, args: argparse.Namespace, **common: Any) -> LogOptions:
+        return cls(topics=args.topics, pose_topic=args.pose_topic, fixed_frame=args.fixed_frame,
+                   ego_frame=args.ego_frame, max_chunk_bytes=int(args.max_chunk_mb * 2**20), **common)
 
 
 def first_field(obj: Any, *names: str, default: Any = None) -> Any:
@@ -172,7 +207,7 @@ def annotation_boxes(msg: Any, schema: str) -> tuple[int | None, list[RawBox]]:
     return stamp, boxes
 
 
-def pose_samples(msg: Any, schema: str, options: ExtractOptions,
+def pose_samples(msg: Any, schema: str, options: LogOptions,
                  log_ns: int) -> list[tuple[int, float, float, float, float]]:
     """(t ns, x, y, yaw, speed) ego poses in the fixed frame carried by one tf or pose message; speed (m/s) is the
     odometry's twist where the message is Odometry, else NaN."""
@@ -230,7 +265,7 @@ class PoseTrack:
         return None if best is None or not math.isfinite(self.speeds[best]) else float(self.speeds[best])
 
 
-def ground_positions(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions) -> dict[str, tuple]:
+def ground_positions(raw: list[RawBox], t: int, poses: PoseTrack, options: LogOptions) -> dict[str, tuple]:
     """track id -> (x, y) in the fixed frame, for the boxes that can be placed there (ego-frame boxes need the
     ego pose at t): what track differencing takes."""
     out = {b.track_id: (b.x, b.y) for b in raw if b.frame == options.fixed_frame}
@@ -264,7 +299,7 @@ def _differenced(track: str, cur: _Message, prev: _Message | None, nxt: _Message
     return math.hypot(x1 - x0, y1 - y0) / ((b.t - a.t) * 1e-9)
 
 
-def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOptions,
+def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: LogOptions,
                  where: str) -> list[RecordedObject]:
     """Boxes in the ego frame: from the vehicle frame directly, from the fixed frame through the ego pose."""
     out: list[RecordedObject] = []
@@ -293,7 +328,7 @@ def to_ego_boxes(raw: list[RawBox], t: int, poses: PoseTrack, options: ExtractOp
     return out
 
 
-def choose_annotation_topics(available: dict[str, str], options: ExtractOptions, where: str) -> list[str]:
+def choose_annotation_topics(available: dict[str, str], options: LogOptions, where: str) -> list[str]:
     """The annotation topics to read: --topics (checked), else the one annotation topic, else the converter's."""
     if options.topics:
         for t in options.topics:
@@ -313,7 +348,7 @@ def choose_annotation_topics(available: dict[str, str], options: ExtractOptions,
     raise ExtractError(f"{where} has several annotation topics ({', '.join(found)}): choose with --topics")
 
 
-def choose_pose_topics(available: dict[str, str], options: ExtractOptions, where: str) -> list[str]:
+def choose_pose_topics(available: dict[str, str], options: LogOptions, where: str) -> list[str]:
     if options.pose_topic:
         t = options.pose_topic
         if t not in available:
@@ -325,7 +360,7 @@ def choose_pose_topics(available: dict[str, str], options: ExtractOptions, where
 
 
 def message_frames(
-    source: str, scene: str, messages: Iterable[tuple[str, int, Any]], poses: PoseTrack, options: ExtractOptions,
+    source: str, scene: str, messages: Iterable[tuple[str, int, Any]], poses: PoseTrack, options: LogOptions,
     where: str, tally: ExtractTally | None = None,
 ) -> Iterator[list[dict[str, Any]]]:
     """One frame per annotation message (schema, log time ns, decoded message), frame_id `<scene>/<index>`.

@@ -10,10 +10,12 @@ Only the JSON tables are read: no sensor files, and map masks named in map.json 
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import math
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,14 +27,67 @@ from extractors.base import (
     ExtractTally,
     FrameBuilder,
     RecordedObject,
+    Source,
+    comma_list,
     global_to_ego,
     quaternion_yaw,
     require_path,
 )
+from extractors.categories import Taxonomy
+from extractors.sniff import Look
 
 DESCRIPTION = "nuScenes dataroot (JSON tables of --version) through nuscenes-devkit"
-TAXONOMY = "nuscenes"
+# nuScenes v1.0 category names (23 classes), and the name of the ego vehicle.
+TAXONOMY = Taxonomy("nuscenes", {
+    "animal": "Animal",
+    "human.pedestrian.adult": "Pedestrian",
+    "human.pedestrian.child": "Pedestrian",
+    "human.pedestrian.construction_worker": "Pedestrian",
+    "human.pedestrian.personal_mobility": "Pedestrian",
+    "human.pedestrian.police_officer": "Pedestrian",
+    "human.pedestrian.stroller": "Pedestrian",
+    "human.pedestrian.wheelchair": "Pedestrian",
+    "movable_object.barrier": "Barrier",
+    "movable_object.debris": "Debris",
+    "movable_object.pushable_pullable": "PushableObject",
+    "movable_object.trafficcone": "TrafficCone",
+    "static_object.bicycle_rack": "BicycleRack",
+    "vehicle.bicycle": "Bicycle",
+    "vehicle.bus.bendy": "Bus",
+    "vehicle.bus.rigid": "Bus",
+    "vehicle.car": "Car",
+    "vehicle.construction": "ConstructionVehicle",
+    "vehicle.emergency.ambulance": "EmergencyVehicle",
+    "vehicle.emergency.police": "EmergencyVehicle",
+    "vehicle.motorcycle": "Motorcycle",
+    "vehicle.trailer": "Trailer",
+    "vehicle.truck": "Truck",
+    "vehicle.ego": "Car",
+})
 EGO_CATEGORY = "vehicle.ego"
+
+
+@dataclass(frozen=True)
+class NuScenesOptions(ExtractOptions):
+    version: str = "v1.0-mini"
+    scenes: tuple[str, ...] = ()
+    min_visibility: int = 0
+    min_lidar_pts: int = 0
+
+    @classmethod
+    def add_options(cls, g: argparse._ArgumentGroup) -> None:
+        g.add_argument("--version", default="v1.0-mini", help="nuScenes version folder (v1.0-mini, v1.0-trainval, ...)")
+        g.add_argument("--scenes", type=comma_list, default=(), metavar="S,...",
+                       help="only these scene names (default: all)")
+        g.add_argument("--min-visibility", type=int, default=0, metavar="V",
+                       help="keep annotations with visibility level >= V (1-4; 0 keeps all)")
+        g.add_argument("--min-lidar-pts", type=int, default=0, metavar="N",
+                       help="keep annotations with >= N lidar points")
+
+    @classmethod
+    def options_from(cls, args: argparse.Namespace, **common: Any) -> NuScenesOptions:
+        return cls(version=args.version, scenes=args.scenes, min_visibility=args.min_visibility,
+                   min_lidar_pts=args.min_lidar_pts, **common)
 
 
 class _AbsentMapMask:
@@ -70,7 +125,7 @@ def load(dataroot: Path, version: str) -> Any:
         devkit.MapMask = original
 
 
-def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: NuScenesOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     nusc = load(require_path(input_path, "nuScenes dataroot"), options.version)
     scenes = list(nusc.scene)
     if options.scenes:
@@ -91,7 +146,7 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
                                f"({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def _scene_frames(nusc: Any, scene: dict, builder: FrameBuilder, options: ExtractOptions) -> Iterator[list[dict]]:
+def _scene_frames(nusc: Any, scene: dict, builder: FrameBuilder, options: NuScenesOptions) -> Iterator[list[dict]]:
     token, index, seen = scene["first_sample_token"], 0, set()
     while token and token not in seen:
         seen.add(token)
@@ -102,7 +157,7 @@ def _scene_frames(nusc: Any, scene: dict, builder: FrameBuilder, options: Extrac
 
 
 def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: FrameBuilder,
-                  options: ExtractOptions) -> list[dict]:
+                  options: NuScenesOptions) -> list[dict]:
     pose = _ego_pose(nusc, sample, f"sample {index} of {scene}")
     ego_yaw = float(quaternion_yaw(*pose["rotation"]))
     anns = [nusc.get("sample_annotation", t) for t in sample["anns"]]
@@ -152,3 +207,26 @@ def ego_velocity(nusc: Any, sample: dict, max_time_diff: float = 1.5) -> np.ndar
     if not 0 < dt <= max_time_diff:
         return np.full(3, np.nan)
     return (p1 - p0) / dt
+
+
+class NuScenes(Source):
+    name = "nuscenes"
+    description = DESCRIPTION
+    input_help = "dataroot"
+    taxonomy = TAXONOMY
+    options = NuScenesOptions
+    extract = staticmethod(extract)
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        if path.suffix == ".json" and path.parent.name.startswith("v1.0-") and (path.parent / "sample.json").is_file():
+            return Look(self.name, f"a nuScenes table ({path.parent.name}/{path.name})", str(path.parent.parent))
+        return None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        if is_dir and path.name.startswith("v1.0-") and (path / "sample.json").is_file():
+            where = top if depth == 0 else str(path.parent)
+            return Look(self.name, f"a nuScenes dataroot ({path.name}/ with JSON tables)", where)
+        return None
+
+
+SOURCE = NuScenes()

@@ -1,10 +1,14 @@
-"""Source name -> extractor module. Modules are imported only when their source is asked for, so the heavy
-optional readers (nuscenes-devkit, mcap, rosbags) cost nothing to the other sources."""
+"""Source name -> the module that holds it (its Source subclass and SOURCE, its instance). Modules are imported
+only when a source is asked for, so the heavy optional readers (nuscenes-devkit, mcap, rosbags) cost nothing
+until then. A new source is a module plus its line here (docs/layout.md, "Add a source")."""
 
 from __future__ import annotations
 
 import importlib
-from types import ModuleType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from extractors.base import Source
 
 SOURCES: dict[str, str] = {
     "nuscenes": "extractors.nuscenes",
@@ -15,8 +19,16 @@ SOURCES: dict[str, str] = {
 }
 
 
-def source_module(name: str) -> ModuleType:
-    """The module of a source; it has DESCRIPTION and extract(input_path, options) -> Iterator[rows]."""
+def source(name: str) -> Source:
+    """The source of this name (KeyError naming the known ones if there is none)."""
     if name not in SOURCES:
         raise KeyError(f"unknown source {name!r} (sources: {', '.join(SOURCES)})")
-    return importlib.import_module(SOURCES[name])
+    found = importlib.import_module(SOURCES[name]).SOURCE
+    if found.name != name:
+        raise KeyError(f"{SOURCES[name]}.SOURCE is named {found.name!r}, not {name!r} as registry.SOURCES says")
+    return found
+
+
+def sources() -> list[Source]:
+    """Every source, in the order of SOURCES."""
+    return [source(name) for name in SOURCES]

@@ -15,11 +15,21 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractOptions, ExtractTally, require_path
-from extractors.messages import PoseTrack, choose_annotation_topics, choose_pose_topics, message_frames, pose_samples
+from extractors.base import ExtractError, ExtractTally, Source, require_path
+from extractors.messages import (
+    LogOptions,
+    PoseTrack,
+    choose_annotation_topics,
+    choose_pose_topics,
+    message_frames,
+    pose_samples,
+)
+from extractors.sniff import Look, head
 
 DESCRIPTION = "ROS 1 .bag or ROS 2 bag directory (sqlite3 / mcap storage) through rosbags"
 TAXONOMY = messages.TAXONOMY
+ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+ROSBAG2_METADATA = b"rosbag2_bagfile_information"  # the top key of a ROS 2 bag's metadata.yaml
 
 # vision_msgs (ROS 2 Humble), which the rosbags typestores do not carry.
 VISION_MSGS = {
@@ -90,7 +100,7 @@ def _cap_ros1_chunks(reader: Any, limit: int, where: Path) -> None:
                 chunks[pos] = chunk._replace(decompressor=_bounded(chunk.decompressor, limit, where))
 
 
-def _open(bag: Path, ros1: bool, options: ExtractOptions) -> Any:
+def _open(bag: Path, ros1: bool, options: LogOptions) -> Any:
     from rosbags.highlevel import AnyReader
 
     if not ros1:
@@ -118,7 +128,7 @@ def _messages(reader: Any, bag: Path, topics: list[str]) -> Iterator[tuple[str, 
         raise ExtractError(f"{bag}: cannot read its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
     for bag, ros1 in bag_paths(require_path(input_path, "bag")):
         try:
             reader = _open(bag, ros1, options)
@@ -136,3 +146,38 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
                                       tally)
         finally:
             reader.close()
+
+
+class Rosbag(Source):
+    name = "rosbag"
+    description = DESCRIPTION
+    input_help = ".bag file or ROS 2 bag dir"
+    taxonomy = TAXONOMY
+    options = LogOptions
+    extract = staticmethod(extract)
+
+    def unit_paths(self, path: Path) -> list[Path]:
+        return [bag for bag, _ in bag_paths(path)]
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        if head.startswith(ROSBAG1_MAGIC):
+            return Look(self.name, "a ROS 1 bag", str(path))
+        if path.name == "metadata.yaml" and _is_ros2_metadata(path):
+            return Look(self.name, "the metadata.yaml of a ROS 2 bag", str(path.parent))
+        return None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        if is_dir:
+            return None
+        if path.name == "metadata.yaml" and _is_ros2_metadata(path):
+            return Look(self.name, "a ROS 2 bag (metadata.yaml)", top if depth == 0 else str(path.parent))
+        if path.name.endswith(".bag") and head(path).startswith(ROSBAG1_MAGIC):
+            return Look(self.name, "a folder of ROS 1 bags (.bag)", top)
+        return None
+
+
+def _is_ros2_metadata(path: Path) -> bool:
+    return ROSBAG2_METADATA in head(path, 256)
+
+
+SOURCE = Rosbag()

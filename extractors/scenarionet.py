@@ -20,19 +20,59 @@ from typing import Any
 
 import numpy as np
 
+from extractors import nuscenes
 from extractors.base import (
     ExtractError,
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
     RecordedObject,
+    Source,
     global_to_ego,
     require_path,
 )
+from extractors.categories import Taxonomy
 from extractors.safe_pickle import load_pickle
+from extractors.sniff import Look
 
 DESCRIPTION = "ScenarioNet database directory or .pkl scenario files (nuScenes, Waymo, nuPlan, Lyft, Argoverse)"
-TAXONOMY = "scenarionet"
+# What ScenarioNet's converters (metadriverse/scenarionet, converter/*/utils.py and type.py) write: MetaDrive
+# object types in every track's `type` (Waymo's VEHICLE / PEDESTRIAN / CYCLIST / OTHER, nuPlan's and Argoverse 2's
+# mapped to those, TRAFFIC_CONE / TRAFFIC_BARRIER / TRAFFIC_OBJECT), and the dataset's own type in `metadata.type`
+# where the converter keeps one: the nuScenes names (nuScenes converter), the Lyft names, and the raw nuPlan names
+# of older conversions.
+TAXONOMY = Taxonomy("scenarionet", {
+    # MetaDrive object types (metadrive/type.py MetaDriveType) that converters give tracks. GROUND, BUILDING,
+    # INVISIBLE_WALL and TRAFFIC_LIGHT are scenery, not road users: left unmapped, so they are counted as unknown.
+    "VEHICLE": "Car",
+    "PEDESTRIAN": "Pedestrian",
+    "CYCLIST": "Bicycle",
+    "MOTORCYCLIST": "Motorcycle",
+    "TRAFFIC_CONE": "TrafficCone",
+    "TRAFFIC_BARRIER": "Barrier",
+    "TRAFFIC_OBJECT": "Object",
+    "GROUND_ANIMAL": "Animal",
+    "OTHER": "Object",
+    "UNSET": "Object",
+    # nuPlan tracked object types as kept in metadata.type
+    "vehicle": "Car",
+    "pedestrian": "Pedestrian",
+    "bicycle": "Bicycle",
+    "traffic_cone": "TrafficCone",
+    "barrier": "Barrier",
+    "czone_sign": "Object",
+    "generic_object": "Object",
+    # Lyft Level 5 classes as kept in metadata.type
+    "car": "Car",
+    "truck": "Truck",
+    "bus": "Bus",
+    "other_vehicle": "Car",
+    "emergency_vehicle": "EmergencyVehicle",
+    "motorcycle": "Motorcycle",
+    "animal": "Animal",
+    # nuScenes names, as the nuScenes converter keeps them in metadata.type
+    **nuscenes.TAXONOMY.classes,
+})
 SUMMARY, MAPPING = "dataset_summary.pkl", "dataset_mapping.pkl"
 NUSCENES_KEYFRAME_STEP = 5
 
@@ -209,3 +249,31 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
     except (TypeError, ValueError, IndexError, KeyError):
         return None
     return round(t * 1e6) if np.isfinite(t) else None
+
+
+class ScenarioNet(Source):
+    name = "scenarionet"
+    description = DESCRIPTION
+    input_help = "database dir or .pkl"
+    taxonomy = TAXONOMY
+    extract = staticmethod(extract)
+
+    def unit_paths(self, path: Path) -> list[Path]:
+        return scenario_files(path)
+
+    def look_at_file(self, path: Path, head: bytes) -> Look | None:
+        if path.suffix == ".pkl" and head.startswith(b"\x80"):  # a pickle's PROTO opcode
+            return Look(self.name, "a ScenarioNet scenario (.pkl)", str(path))
+        return None
+
+    def look_at_entry(self, top: str, path: Path, is_dir: bool, depth: int) -> Look | None:
+        if is_dir:
+            return None
+        if path.name == SUMMARY:
+            return Look(self.name, f"a ScenarioNet database ({SUMMARY})", top)
+        if path.name.endswith(".pkl") and path.name != MAPPING:
+            return Look(self.name, "a folder of ScenarioNet scenarios (.pkl)", top)
+        return None
+
+
+SOURCE = ScenarioNet()

@@ -1,7 +1,8 @@
 """What an extractor input looks like, so that a wrong `r2s extract SOURCE` gets a line naming the right one.
 
-Only consulted when the asked-for source found nothing it could read (it never overrides a source that works).
-Cheap on any input: a file is told by its first bytes; a folder by the names of at most MAX_ENTRIES entries,
+Every source says what its input looks like (Source.look_at_file, look_at_entry); this asks them all. Only
+consulted when the asked-for source found nothing it could read (it never overrides a source that works). Cheap
+on any input: a file is told by its first bytes; a folder by the names of at most MAX_ENTRIES entries,
 up to MAX_DEPTH levels down (a ScenarioNet database or an Argoverse 2 split can hold 10^5 files).
 """
 
@@ -12,13 +13,10 @@ from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
 
+from extractors.registry import sources
+
 MAX_ENTRIES = 2000
 MAX_DEPTH = 4
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-ROSBAG1_MAGIC = b"#ROSBAG V2.0"
-ARROW_MAGIC = b"ARROW1"
-ROSBAG2_METADATA = b"rosbag2_bagfile_information"
-AV2_NAMES = ("annotations.feather", "annotations_with_ego.feather")
 
 
 @dataclass(frozen=True)
@@ -28,7 +26,8 @@ class Look:
     path: str  # the INPUT to give that source
 
 
-def _head(path: Path, n: int = 32) -> bytes:
+def head(path: Path, n: int = 32) -> bytes:
+    """The first n bytes of a file (b"" if it cannot be read)."""
     try:
         with open(path, "rb") as fh:
             return fh.read(n)
@@ -37,41 +36,18 @@ def _head(path: Path, n: int = 32) -> bytes:
 
 
 def _file_look(path: Path) -> Look | None:
-    head = _head(path)
-    if head.startswith(MCAP_MAGIC):
-        return Look("mcap", "an MCAP file", str(path))
-    if head.startswith(ROSBAG1_MAGIC):
-        return Look("rosbag", "a ROS 1 bag", str(path))
-    if path.name in AV2_NAMES and head.startswith(ARROW_MAGIC):
-        return Look("argoverse2", f"Argoverse 2 annotations ({path.name})", str(path.parent))
-    if path.name == "metadata.yaml" and ROSBAG2_METADATA in _head(path, 256):
-        return Look("rosbag", "the metadata.yaml of a ROS 2 bag", str(path.parent))
-    if path.suffix == ".pkl" and head.startswith(b"\x80"):
-        return Look("scenarionet", "a ScenarioNet scenario (.pkl)", str(path))
-    if path.suffix == ".json" and path.parent.name.startswith("v1.0-") and (path.parent / "sample.json").is_file():
-        return Look("nuscenes", f"a nuScenes table ({path.parent.name}/{path.name})", str(path.parent.parent))
+    first = head(path)
+    for source in sources():
+        if look := source.look_at_file(path, first):
+            return look
     return None
 
 
 def _dir_look(top: str, entry: os.DirEntry, depth: int) -> Look | None:
-    name, path = entry.name, Path(entry.path)
-    if entry.is_dir(follow_symlinks=False):
-        if name.startswith("v1.0-") and (path / "sample.json").is_file():
-            where = top if depth == 0 else str(path.parent)
-            return Look("nuscenes", f"a nuScenes dataroot ({name}/ with JSON tables)", where)
-        return None
-    if name == "dataset_summary.pkl":
-        return Look("scenarionet", "a ScenarioNet database (dataset_summary.pkl)", top)
-    if name.endswith(".pkl") and name != "dataset_mapping.pkl":
-        return Look("scenarionet", "a folder of ScenarioNet scenarios (.pkl)", top)
-    if name in AV2_NAMES:
-        return Look("argoverse2", f"Argoverse 2 logs ({name})", top)
-    if name == "metadata.yaml" and ROSBAG2_METADATA in _head(path, 256):
-        return Look("rosbag", "a ROS 2 bag (metadata.yaml)", top if depth == 0 else str(path.parent))
-    if name.endswith(".bag") and _head(path).startswith(ROSBAG1_MAGIC):
-        return Look("rosbag", "a folder of ROS 1 bags (.bag)", top)
-    if name.endswith(".mcap") and _head(path).startswith(MCAP_MAGIC):
-        return Look("mcap", "a folder of MCAP files", top)
+    is_dir = entry.is_dir(follow_symlinks=False)
+    for source in sources():
+        if look := source.look_at_entry(top, Path(entry.path), is_dir, depth):
+            return look
     return None
 
 

@@ -1,4 +1,4 @@
-"""`r2s extract --jobs N` and dataset outputs: the input's pieces (extractors.units) extracted in parallel worker
+"""`r2s extract --jobs N` and dataset outputs: the input's pieces (Source.units) extracted in parallel worker
 processes, each into its own part file, written atomically.
 
 The parts are staged in a hidden directory beside the output and take its place only when every piece is done
@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from extractors.base import ExtractOptions, ExtractTally
+from extractors.base import ExtractOptions, ExtractTally, Source
 from extractors.writer import frames_writer
 from pipeline.errors import UserError
 
@@ -35,16 +35,16 @@ class UnitResult:
     frame_hashes: tuple[Any, Any]  # (hi, lo) of its frame ids (storage.frame_index): 16 bytes a frame
 
 
-def extract_unit(source: str, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
-    """One piece into `stage/part-<index>.parquet` (nothing when it has no frame)."""
-    from extractors.registry import source_module
+def extract_unit(source: Source, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
+    """One piece into `stage/part-<index>.parquet` (nothing when it has no frame). The source itself goes to the
+    worker (pickled by its class's name), so a source need only be importable there, not registered."""
     from storage.frame_index import frame_hashes
 
     tally = ExtractTally()
     scenes: list[str] = []
     path = Path(stage) / PART.format(index)
     with frames_writer(path) as out:
-        for rows in source_module(source).extract(unit, options, tally):
+        for rows in source.extract(unit, options, tally):
             if not scenes or scenes[-1] != rows[0]["scene"]:
                 scenes.append(rows[0]["scene"])
             out.write_frame(rows)
@@ -65,25 +65,23 @@ def is_dataset(out: str) -> bool:
     return p.is_dir() or p.suffix != ".parquet"
 
 
-def extract_parallel(source: str, input_path: str, out: str, options: ExtractOptions, jobs: int,
+def extract_parallel(source: Source, input_path: str, out: str, options: ExtractOptions, jobs: int,
                      tally: ExtractTally) -> tuple[int, int]:
     """Extract every piece of the input (in `jobs` worker processes when jobs > 1) into `out`: a dataset
     directory of parts, or one file merged from them. Returns (frames, rows)."""
     from tqdm import tqdm
 
-    from extractors.units import input_units
-
     target = Path(out)
     if is_dataset(out) and target.exists():
         _check_replaceable(target)
-    units = input_units(source, input_path)
+    units = source.units(input_path)
     stage = target.parent / f".{target.name}.{os.getpid()}.parts.tmp"
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir()
     try:
         results = []
-        bar = tqdm(total=len(units), desc=f"extract {source}", unit=" inputs", file=sys.stderr, disable=None,
+        bar = tqdm(total=len(units), desc=f"extract {source.name}", unit=" inputs", file=sys.stderr, disable=None,
                    leave=False)
         for result in _map(source, units, options, str(stage), jobs):
             results.append(result)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from extractors.categories import TAXONOMIES
 from extractors.frames import read_frames
-from extractors.registry import SOURCES, source_module
+from extractors.registry import SOURCES
+from extractors.registry import source as source_of
 from extractors.sniff import looks_like
 from synth.scene import ENTITY_TYPES
 from tests.support import logs as fx
@@ -38,8 +38,10 @@ def inputs(tmp_path_factory):
 
 
 def test_every_source_declares_the_taxonomy_its_categories_are_checked_against():
-    for source in SOURCES:
-        assert source_module(source).TAXONOMY in TAXONOMIES
+    for name in SOURCES:
+        taxonomy = source_of(name).taxonomy
+        assert source_of(name).name == name
+        assert taxonomy.classes and set(taxonomy.classes.values()) <= set(ENTITY_TYPES)
 
 
 @pytest.mark.parametrize("source", list(SOURCES))
@@ -53,10 +55,10 @@ def test_unknown_categories_value_exits_2_with_known_names_and_closest(tmp_path,
     assert_refused(res, out, f"unknown category {bad!r} in --categories")
     line = res.stderr
     # the known names: every class and every raw category of the source's taxonomy
-    taxonomy = source_module(source).TAXONOMY
-    assert all(c in line for c in ENTITY_TYPES) and all(r in line for r in TAXONOMIES[taxonomy])
+    raw = source_of(source).taxonomy.classes
+    assert all(c in line for c in ENTITY_TYPES) and all(r in line for r in raw)
     assert "closest: '" in line
-    if closest in set(ENTITY_TYPES) | set(TAXONOMIES[taxonomy]):
+    if closest in set(ENTITY_TYPES) | set(raw):
         assert f"closest: {closest!r}" in line
 
 

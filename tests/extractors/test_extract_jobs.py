@@ -77,13 +77,14 @@ def test_frame_ids_are_compared_across_parts_by_the_workers_hashes(tmp_path):
     from extractors.base import ExtractOptions
     from extractors.categories import ALL
     from extractors.frames import FramesError
+    from extractors.registry import source
     from pipeline.batch.extract import _check, extract_unit
 
     stage = tmp_path / "stage"
     stage.mkdir()
     scenario = str(sorted(EXCERPT.glob("sd_*.pkl"))[0])
-    first = extract_unit("scenarionet", scenario, 0, ExtractOptions(categories=ALL), str(stage))
-    again = extract_unit("scenarionet", scenario, 1, ExtractOptions(categories=ALL), str(stage))
+    first = extract_unit(source("scenarionet"), scenario, 0, ExtractOptions(categories=ALL), str(stage))
+    again = extract_unit(source("scenarionet"), scenario, 1, ExtractOptions(categories=ALL), str(stage))
     assert first.frames > 0 and len(first.frame_hashes[0]) == first.frames
     with pytest.raises(FramesError, match="two places"):
         _check(stage, [first, again])

@@ -10,9 +10,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from extractors.base import ExtractError, ExtractOptions
+from extractors.base import ExtractError
 from extractors.categories import ALL
 from extractors.mcap import extract as extract_mcap
+from extractors.messages import LogOptions
 from extractors.rosbag import extract as extract_rosbag
 from extractors.scenarionet import extract as extract_scenarionet
 from tests.support import logs as fx
@@ -167,4 +168,4 @@ def test_several_annotation_topics_need_a_choice(tmp_path, samples):
     path = tmp_path / "x.mcap"
     fx.write_ros2_mcap(path, samples)
     with pytest.raises(ExtractError, match="several annotation topics"):
-        list(extract_mcap(str(path), ExtractOptions()))
+        list(extract_mcap(str(path), LogOptions()))

@@ -3,12 +3,12 @@ once per session instead of once per subprocess), with the same one-line-error c
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
-from extractors.base import ExtractOptions
 from pipeline.cli import main
 
 EXCERPT = Path(__file__).resolve().parents[2] / "data" / "nuscenes-mini-excerpt"
@@ -29,8 +29,9 @@ def r2s(capsys, *args: str) -> Result:
 
 
 def frames_of(extract, path, **options) -> pd.DataFrame:
-    """All rows an extractor yields, as one table."""
-    return pd.DataFrame([r for frame in extract(str(path), ExtractOptions(**options)) for r in frame])
+    """All rows a source module's extract yields, as one table; options are that source's (Source.options)."""
+    options = importlib.import_module(extract.__module__).SOURCE.options(**options)
+    return pd.DataFrame([r for frame in extract(str(path), options) for r in frame])
 
 
 def assert_refused(result: Result, out: Path, contains: str) -> None:
