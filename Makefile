@@ -18,7 +18,7 @@ RUN_ARGS   ?=
 
 DEMO := demo-out
 
-.PHONY: setup demo test bench corpus clean lint
+.PHONY: setup demo test bench corpus clean lint dreal
 
 setup: $(STAMP)
 
@@ -58,6 +58,14 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest
+
+# dReal, the paper's solver (--solver dreal): builds IBEX 2.7.4 from IBEX_SRC into a cache directory that survives
+# `make clean` (~10 min once per machine), installs requirements-dreal.lock into the venv and tells it where
+# libibex is (tools/dreal.sh says how; it also names the Debian packages needed). Seconds when done already.
+IBEX_SRC ?= $(wildcard ../shared/third_party/ibex-lib-2.7.4_11.tar.gz)
+
+dreal: setup
+	IBEX_SRC="$(IBEX_SRC)" VENV="$(VENV)" PYTHON="$(PYTHON)" JOBS="$(JOBS)" bash tools/dreal.sh
 
 # Benchmarks (not tests): results in bench/results/*.json and *.md; about an hour in full, BENCH_ARGS=--quick for a
 # short pass. Needs ../shared/data for the real-data parts (each script says what it skips without it).

@@ -1,12 +1,23 @@
 """dReal 4 (delta-complete, the paper's solver): the same encoding over doubles. Optional: imported only when
-chosen (`--solver dreal`); its PyPI wheel needs the system library libibex."""
+chosen (`--solver dreal`); its PyPI wheel needs the system library libibex.
+
+Where libibex comes from: dReal's own installer puts it in /opt/libibex/2.7.4/lib, which the wheel's RUNPATH
+names, so `import dreal` just works there. `make dreal` builds it into a cache directory instead and writes that
+library's absolute path into the venv (LIBIBEX_MARKER); load_dreal loads it from there (RTLD_GLOBAL) before
+importing dreal, and the dynamic linker then takes the loaded library for the wheel's `libibex.so` (its SONAME),
+so nobody sets LD_LIBRARY_PATH.
+"""
 
 from __future__ import annotations
 
+import ctypes
+import importlib
+import sys
 import time
 from dataclasses import dataclass
 from fractions import Fraction
 from functools import cached_property
+from pathlib import Path
 from typing import Any
 
 from synth.geometry import exact_cos_squared, exact_heading_vector
@@ -15,19 +26,37 @@ from synth.scene import Entity
 from synth.smt.backend import ExactBackend, Formula, Measurements, SolverBackend, SolverUnavailable
 from synth.smt.z3_backend import Z3Backend
 
+# The file in the venv (sys.prefix) naming libibex.so by absolute path; tools/dreal.sh writes it.
+LIBIBEX_MARKER = "r2sgen-libibex"
+
+
+def load_dreal() -> Any:
+    """The dreal module, with the libibex of `make dreal` loaded first where there is one.
+
+    Raises SolverUnavailable (one line, fit for a user) where dReal cannot be loaded."""
+    if "dreal" in sys.modules:  # loaded already: its libibex too
+        return sys.modules["dreal"]
+    marker = Path(sys.prefix) / LIBIBEX_MARKER
+    try:
+        libibex = marker.read_text().strip()
+    except OSError:  # no `make dreal` here: a system install (dReal's own installer) may still serve
+        libibex = None
+    try:
+        if libibex:
+            ctypes.CDLL(libibex, mode=ctypes.RTLD_GLOBAL)
+        return importlib.import_module("dreal")
+    except (ImportError, OSError) as exc:
+        raise SolverUnavailable(
+            f"dReal cannot be loaded here ({exc}); it needs the system library libibex: run `make dreal`, "
+            "or use --solver z3") from None
+
 
 @dataclass
 class DrealBackend(SolverBackend):
     """dReal as a backend: where its wheel cannot load, making one raises SolverUnavailable."""
 
     def __post_init__(self) -> None:
-        try:
-            import dreal
-        except ImportError as exc:
-            raise SolverUnavailable(
-                f"dReal cannot be imported here ({exc}); it needs the system library libibex. Use --solver z3"
-            ) from None
-        self.dreal = dreal
+        dreal = self.dreal = load_dreal()
         self.And, self.Or, self.Not = dreal.And, dreal.Or, dreal.Not
         self._fresh = 0
 
