@@ -2,7 +2,9 @@
 
 SPEC is ACTION[=ARG]@FRAME_ID (FRAME_ID "*": every frame). Actions: kill (the worker sends itself SIGKILL, as the
 kernel's OOM killer would), exit (os._exit(3)), alloc=MB (touch MB of memory, under the frame's hard cap), raise,
-sleep=S, hang; then the frame is synthesized as usual. The fault is given to run_frames (or to a ChunkTask) as
+sleep=S, hang; then the frame is synthesized as usual. dreal-crash and dreal-hang break the real dReal instead
+(`make dreal`): its first call in the frame dies of SIGSEGV, as a native library does, or never returns, as a
+native call that no time limit interrupts; they are what the real solver cannot be made to do on demand. The fault is given to run_frames (or to a ChunkTask) as
 its `synthesizer`; the task carries it to the worker process by reference to this module (tests.support.faults),
 which the workers import: loky and dask start them with the parent's sys.path, where the repository's root is.
 
@@ -37,11 +39,28 @@ def faulty_synthesize(spec: str, scene, config):
         elif name == "sleep":
             time.sleep(float(arg))
         elif name == "hang":
-            while True:
-                time.sleep(1)
+            _hang()
+        elif name in ("dreal-crash", "dreal-hang"):
+            _break_dreal(name)
         else:
             raise ValueError(f"unknown fault {spec!r}")
     return synthesize(scene, config)
+
+
+def _hang():
+    while True:
+        time.sleep(1)
+
+
+def _break_dreal(how: str) -> None:
+    from synth.smt.dreal_backend import load_dreal
+
+    def broken(formula, delta):
+        if how == "dreal-crash":
+            os.kill(os.getpid(), signal.SIGSEGV)
+        _hang()
+
+    load_dreal().CheckSatisfiability = broken  # the worker dies or is killed: nothing to put back
 
 
 def fault(spec: str):
