@@ -2,11 +2,11 @@
 # `make dreal`: the paper's solver for real. dReal's wheel on PyPI (dreal==4.21.6.2) links against libibex, which
 # no package index has; this builds IBEX 2.7.4 (dReal's fork) from a source tarball into a cache directory that
 # survives `make clean`, installs the pinned wheel into the venv, and writes the file synth/smt/dreal_backend.py
-# reads to load libibex by absolute path (so nobody sets LD_LIBRARY_PATH). A second run takes about a second.
+# reads to load libibex by absolute path (so nobody sets LD_LIBRARY_PATH). A second run takes a second or two.
 #
-# Environment: IBEX_SRC (the tarball, required), VENV (default .venv), PYTHON (builds with it; default python3.11),
-# IBEX_SHA256 (the tarball's expected sha256; default: that of ibex-lib-2.7.4_11.tar.gz), DREAL_CACHE (default
-# ${XDG_CACHE_HOME:-~/.cache}/r2sgen).
+# Environment: IBEX_SRC (the tarball; needed unless its build is in the cache already), VENV (default .venv),
+# PYTHON (builds with it; default python3.11), IBEX_SHA256 (the tarball's expected sha256; default: that of
+# ibex-lib-2.7.4_11.tar.gz), DREAL_CACHE (default ${XDG_CACHE_HOME:-~/.cache}/r2sgen), JOBS (default 2).
 set -euo pipefail
 
 # The Debian packages dReal needs, named once: bison, flex, g++, pkg-config and coinor-libclp-dev build IBEX;
@@ -17,22 +17,27 @@ RECIPE=2   # how IBEX is configured here: a prefix built by another recipe is re
 DEFAULT_SHA256=938d6090ee2265bdd55e99d35a033f90c6e9b0723d6c53050fbe3e6079cfeb9b
 VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3.11}
-MARKER_NAME=r2sgen-libibex   # the file in the venv naming libibex.so; the same name is in dreal_backend.py
 
 die() { echo "make dreal: $*" >&2; exit 2; }
 
 test -x "$VENV/bin/python" || die "no venv at $VENV (run make setup first)"
-test -n "${IBEX_SRC:-}" || die "no IBEX source: set IBEX_SRC=PATH/ibex-lib-$IBEX_VERSION.tar.gz (dreal-deps/ibex-lib, tag ibex-$IBEX_VERSION)"
-test -f "$IBEX_SRC" || die "IBEX_SRC=$IBEX_SRC is not a file"
-IBEX_SRC=$(realpath "$IBEX_SRC")
-
-sha=$(sha256sum "$IBEX_SRC" | cut -d' ' -f1)
-test "$sha" = "${IBEX_SHA256:-$DEFAULT_SHA256}" \
-    || die "$IBEX_SRC has sha256 $sha, expected ${IBEX_SHA256:-$DEFAULT_SHA256} (set IBEX_SHA256 to accept another build of ibex-$IBEX_VERSION)"
+expected=${IBEX_SHA256:-$DEFAULT_SHA256}
+if [ -n "${IBEX_SRC:-}" ]; then
+    test -f "$IBEX_SRC" || die "IBEX_SRC=$IBEX_SRC is not a file"
+    IBEX_SRC=$(realpath "$IBEX_SRC")
+    sha=$(sha256sum "$IBEX_SRC" | cut -d' ' -f1)
+    test "$sha" = "$expected" \
+        || die "$IBEX_SRC has sha256 $sha, expected $expected (set IBEX_SHA256 to accept another build of ibex-$IBEX_VERSION)"
+else
+    sha=$expected   # no source at hand: a prefix built from it before still serves
+fi
 
 cache=${DREAL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/r2sgen}
 prefix=$cache/ibex-$IBEX_VERSION-${sha:0:16}   # keyed by the source: another tarball, another prefix
 lib=$prefix/lib/libibex.so
+built() { test -f "$lib" -a "$(cat "$prefix/.complete" 2>/dev/null)" = "$RECIPE"; }
+built || test -n "${IBEX_SRC:-}" \
+    || die "no IBEX source: set IBEX_SRC=PATH/ibex-lib-$IBEX_VERSION.tar.gz (dreal-deps/ibex-lib, tag ibex-$IBEX_VERSION)"
 
 missing_packages() {
     local p out=""
@@ -87,12 +92,13 @@ install_packages
 # last, so an interrupted build is redone rather than trusted.
 exec 9>"$prefix.lock"
 flock 9
-test -f "$lib" -a "$(cat "$prefix/.complete" 2>/dev/null)" = "$RECIPE" || build_ibex
+built || build_ibex
 flock -u 9
 
 here=$(cd "$(dirname "$0")/.." && pwd)
 "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps -r "$here/requirements-dreal.lock"
-printf '%s\n' "$lib" >"$VENV/$MARKER_NAME"
+marker=$("$VENV/bin/python" -c "from synth.smt.dreal_backend import LIBIBEX_MARKER; print(LIBIBEX_MARKER)")
+printf '%s\n' "$lib" >"$VENV/$marker"
 # The proof: dReal answers, loaded the way r2s loads it (no LD_LIBRARY_PATH).
 env -u LD_LIBRARY_PATH "$VENV/bin/python" - "$lib" <<'PY' || die "dReal does not load (see above)"
 import sys

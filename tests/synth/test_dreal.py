@@ -27,7 +27,7 @@ from tests.support.faults import fault
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 MAX_ENTITIES = 16
 # The test sweeps a deterministic sample: the first two keyframes (file order) of each entity count up to 16,
-# 22 of the 79 such frames; bench/bench_dreal.py sweeps all 79 (bench/results/dreal.md).
+# 21 of the 79 such frames; bench/bench_dreal.py sweeps all 79 (bench/results/dreal.md).
 PER_COUNT = 2
 
 
@@ -73,7 +73,7 @@ def sample(scenes: list[Scene], per_count: int) -> list[Scene]:
 
 def test_pure_smt_with_dreal_gives_z3s_optimum_on_the_shipped_keyframes(dreal_calls):
     scenes = sample(keyframes_up_to(MAX_ENTITIES), PER_COUNT)
-    assert len(scenes) >= 20 and max(len(s.others) for s in scenes) == MAX_ENTITIES
+    assert len(scenes) == 21 and max(len(s.others) for s in scenes) == MAX_ENTITIES
     for scene in scenes:
         before = dreal_calls["dreal"]
         got = synthesize(scene, SynthConfig(oracle="smt", solver="dreal"))
@@ -169,6 +169,19 @@ def test_an_unloadable_libibex_is_one_clear_line(monkeypatch, tmp_path):
     with pytest.raises(SolverUnavailable, match="make dreal") as info:
         load_dreal()
     assert "libibex" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_r2s_with_a_vanished_libibex_says_so_in_one_line(tmp_path):
+    from tests.support import assert_one_line_error
+
+    # r2s in a venv whose marker names a library since removed (sys.prefix is where load_dreal looks).
+    (tmp_path / LIBIBEX_MARKER).write_text(str(tmp_path / "gone" / "libibex.so") + "\n")
+    scene_json = tmp_path / "scene.json"
+    scene_json.write_text(keyframes_up_to(4)[0].to_json())
+    code = (f"import sys; sys.prefix = {str(tmp_path)!r}; from pipeline.cli import main; "
+            f"sys.exit(main(['synth', {str(scene_json)!r}, '--solver', 'dreal']))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert_one_line_error(proc, 2, "make dreal")
 
 
 # ---------------------------------------------------------------------------------------------- faults in a worker
