@@ -4,9 +4,10 @@ SPEC is ACTION[=ARG]@FRAME_ID (FRAME_ID "*": every frame). Actions: kill (the wo
 kernel's OOM killer would), exit (os._exit(3)), alloc=MB (touch MB of memory, under the frame's hard cap), raise,
 sleep=S, hang; then the frame is synthesized as usual. dreal-crash and dreal-hang break the real dReal instead
 (`make dreal`): its first call in the frame dies of SIGSEGV, as a native library does, or never returns, as a
-native call that no time limit interrupts; they are what the real solver cannot be made to do on demand. The fault is given to run_frames (or to a ChunkTask) as
-its `synthesizer`; the task carries it to the worker process by reference to this module (tests.support.faults),
-which the workers import: loky and dask start them with the parent's sys.path, where the repository's root is.
+native call that no time limit interrupts; they are what the real solver cannot be made to do on demand. The
+fault is given to run_frames (or to a ChunkTask) as its `synthesizer`; the task carries it to the worker process
+by reference to this module (tests.support.faults), which the workers import: loky and dask start them with the
+parent's sys.path, where the repository's root is.
 
 `python -m tests.support.faults SPEC VERB ARGS...` (from the repository's root) is the `r2s` command itself, with
 the fault in every frame that run_frames gives its workers (real processes, real signals, real exit codes).
