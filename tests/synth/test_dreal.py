@@ -38,7 +38,7 @@ def dreal():
     except SolverUnavailable as exc:
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(f"CI runs `make dreal` before the tests, yet: {exc}")
-        pytest.skip(f"dReal is not installed here (run `make dreal`): {exc}")
+        pytest.skip(f"dReal is not installed here: {exc}")
 
 
 @pytest.fixture
