@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.dataset as ds
 
 from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
 from storage.frame_index import FrameIndex, frame_hashes
@@ -155,8 +156,6 @@ class FramesDataset:
 
     def find(self, frame_id: str) -> pa.Table | None:
         """The rows of one frame (row-group statistics skip most of a large dataset), or None."""
-        import pyarrow.dataset as ds
-
         pafs, _ = filesystem(self.source)
         dataset = ds.dataset([p.path for p in self.parts], format="parquet", filesystem=pafs)
         columns = list(FRAMES_COLUMNS) + [c for c in OPTIONAL_COLUMNS if c in dataset.schema.names]

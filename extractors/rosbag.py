@@ -10,12 +10,14 @@ decompressed with a cap of --max-chunk-mb.
 
 from __future__ import annotations
 
+import bz2
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from extractors import messages
 from extractors.base import ExtractError, ExtractTally, Source, require_path
+from extractors.mcap import check_mcap
 from extractors.messages import (
     LogOptions,
     PoseTrack,
@@ -71,8 +73,6 @@ def bag_paths(path: Path) -> list[tuple[Path, bool]]:
 
 
 def _bounded(decompress: Callable[[bytes], bytes], limit: int, where: Path) -> Callable[[bytes], bytes]:
-    import bz2
-
     import lz4.frame
 
     def run(data: bytes) -> bytes:
@@ -104,8 +104,6 @@ def _open(bag: Path, ros1: bool, options: LogOptions) -> Any:
     from rosbags.highlevel import AnyReader
 
     if not ros1:
-        from extractors.mcap import check_mcap
-
         for f in sorted(bag.glob("*.mcap")):
             check_mcap(f, options.max_chunk_bytes)
     reader = AnyReader([bag], default_typestore=typestore(ros1))

@@ -7,9 +7,14 @@ import os
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
 
+from storage.parquet import check_column_types, dataset_files
 from synth.errors import InputError
 from synth.synthesize import RESULT_FIELDS
+from synth.version import __version__
 
 _ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(), "float64": pa.float64(),
                 "bool": pa.bool_()}
@@ -42,8 +47,6 @@ def failure_row(frame_id: str, status: str, message: str, n_entities: int, confi
 
 def _run_fields(error: str | None, config_hash: str) -> dict[str, Any]:
     """The batch stage's own fields of a row (RESULT_FIELDS' "run" source)."""
-    from synth import __version__
-
     return {"error": error, "config_hash": config_hash, "version": __version__}
 
 
@@ -53,8 +56,6 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
 
 def check_programs_schema(schema: pa.Schema, where: str) -> None:
     """Refuse a file that lacks a programs column or has one of another kind (text where a number belongs)."""
-    from storage.parquet import check_column_types
-
     missing = [c for c in PROGRAMS_COLUMNS if c not in schema.names]
     if missing:
         raise ProgramsError(f"{where} is not a programs file: it lacks column(s) {', '.join(missing)}")
@@ -66,8 +67,6 @@ def check_programs_values(table: pa.Table, where: str) -> None:
         if column in table.column_names and table.column(column).null_count:
             raise ProgramsError(f"{where}: column {column} has a missing value")
     if "status" in table.column_names:
-        import pyarrow.compute as pc
-
         bad = sorted(set(pc.unique(table.column("status")).to_pylist()) - set(STATUSES))
         if bad:
             raise ProgramsError(f"{where}: unknown status value(s) {', '.join(map(repr, bad[:5]))}")
@@ -75,8 +74,6 @@ def check_programs_values(table: pa.Table, where: str) -> None:
 
 def programs_files(path: str | os.PathLike) -> list[str]:
     """The Parquet files of a programs file or dataset directory (ProgramsError if there are none)."""
-    from storage.parquet import dataset_files
-
     return dataset_files(str(path), "programs", ProgramsError)[1]
 
 
@@ -84,8 +81,6 @@ def read_programs_table(path: str | os.PathLike) -> pa.Table:
     """Read and validate a programs file or dataset directory, whole, as a table of exactly PROGRAMS_SCHEMA; any
     problem (a column of another type, a missing frame id or status, an unknown status) is a ProgramsError naming
     the file. For small data and tests: the report and the runner stream instead."""
-    import pyarrow.parquet as pq
-
     files = programs_files(path)
     tables = []
     for f in files:
@@ -106,8 +101,6 @@ def read_programs_table(path: str | os.PathLike) -> pa.Table:
 def program_of_frame(path: str | os.PathLike, frame_id: str) -> str | None:
     """The DSL program of one frame in a programs file or dataset (its cheapest, when several configs ran it),
     read with a filter on frame_id (row-group statistics skip the rest); None if it has none."""
-    import pyarrow.dataset as ds
-
     files = programs_files(path)
     try:
         table = ds.dataset(files, format="parquet").to_table(

@@ -13,13 +13,12 @@ from collections import OrderedDict
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+from pyarrow import fs
 
 
 def filesystem(path: str):
     """(pyarrow filesystem, path inside it) for a local path or a URL (s3://, gs://, file://, or any fsspec
     protocol), so that a cluster's workers can read a path they all see."""
-    from pyarrow import fs
-
     if "://" not in str(path):
         return fs.LocalFileSystem(), os.path.abspath(path)
     try:
@@ -34,8 +33,6 @@ def filesystem(path: str):
 def dataset_files(path: str, what: str, error: type[ValueError]) -> tuple[object, list[str]]:
     """The Parquet files of a dataset: the file itself, or every *.parquet under a directory (sorted, hidden and
     _-prefixed names skipped, as pyarrow.dataset, DuckDB globs and Spark skip them)."""
-    from pyarrow import fs
-
     try:
         pafs, inner = filesystem(str(path))
         info = pafs.get_file_info(inner)

@@ -14,13 +14,21 @@ import os
 import shutil
 import sys
 from collections import Counter
+from concurrent.futures import as_completed
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+import pyarrow.parquet as pq
+from joblib.externals.loky import get_reusable_executor
+from tqdm import tqdm
+
 from extractors.base import ExtractOptions, ExtractTally, Source
+from extractors.frames_dataset import FramesDataset
 from extractors.writer import frames_writer
 from pipeline.errors import UserError
+from storage.atomic import atomic_path
+from storage.frame_index import FrameIndex, frame_hashes
 
 PART = "part-{:06d}.parquet"
 
@@ -38,8 +46,6 @@ class UnitResult:
 def extract_unit(source: Source, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
     """One piece into `stage/part-<index>.parquet` (nothing when it has no frame). The source itself goes to the
     worker (pickled by its class's name), so a source need only be importable there, not registered."""
-    from storage.frame_index import frame_hashes
-
     tally = ExtractTally()
     scenes: list[str] = []
     path = Path(stage) / PART.format(index)
@@ -69,8 +75,6 @@ def extract_parallel(source: Source, input_path: str, out: str, options: Extract
                      tally: ExtractTally) -> tuple[int, int]:
     """Extract every piece of the input (in `jobs` worker processes when jobs > 1) into `out`: a dataset
     directory of parts, or one file merged from them. Returns (frames, rows)."""
-    from tqdm import tqdm
-
     target = Path(out)
     if is_dataset(out) and target.exists():
         _check_replaceable(target)
@@ -106,10 +110,6 @@ def _map(source, units, options, stage, jobs):
         for i, unit in enumerate(units):
             yield extract_unit(source, unit, i, options, stage)
         return
-    from concurrent.futures import as_completed
-
-    from joblib.externals.loky import get_reusable_executor
-
     executor = get_reusable_executor(max_workers=min(jobs, len(units)))
     futures = [executor.submit(extract_unit, source, unit, i, options, stage) for i, unit in enumerate(units)]
     try:
@@ -147,9 +147,6 @@ def _check(stage: Path, kept: list[UnitResult]) -> None:
     """Frame ids unique across the parts. Each part was validated as it was written (extractors.writer), so only
     the workers' frame-id hashes are compared here; re-reading every part cost the coordinator ~3 s per 50,000
     frames, alone while the workers wait. A clash is then named by the full check of the staged dataset."""
-    from extractors.frames_dataset import FramesDataset
-    from storage.frame_index import FrameIndex
-
     hi, _ = FrameIndex.of(r.frame_hashes for r in kept).duplicated()
     if len(hi):
         FramesDataset.open(stage).check()
@@ -174,10 +171,6 @@ def _replace(stage: Path, target: Path) -> None:
 
 def _merge(stage: Path, target: Path) -> None:
     """The parts, in order, into one file, a row group at a time."""
-    import pyarrow.parquet as pq
-
-    from storage.atomic import atomic_path
-
     parts = sorted(stage.glob("part-*.parquet"))
     schema = pq.ParquetFile(parts[0]).schema_arrow
     with atomic_path(target) as tmp, pq.ParquetWriter(tmp, schema, compression="zstd") as writer:

@@ -8,6 +8,8 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
+from tqdm import tqdm
+
 from pipeline.batch.rules import status_line
 
 
@@ -25,8 +27,6 @@ def duration(seconds: float) -> str:
 class Progress:
     def __init__(self, total: int, emit: Callable[[str], None], every_s: float = 30.0,
                  terminal: bool | None = None, started: float | None = None) -> None:
-        from tqdm import tqdm
-
         self.total, self.every_s, self._emit = total, every_s, emit
         self.done = 0
         self.counts: Counter = Counter()

@@ -5,6 +5,7 @@ are tested on plain values.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
@@ -65,8 +66,6 @@ def chunks(runs: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndar
     """Group the frames to compute into chunks of one file, of the sizes `sizes` gives one after another (or all
     of one size), spanning at most `max_span_rows` rows (a worker reads the row groups under the span). `runs`
     yields (part, starts, lengths, ids, todo mask) in file order."""
-    import itertools
-
     sizes = itertools.repeat(sizes) if isinstance(sizes, int) else iter(sizes)
     size = next(sizes)
     part, chunk = None, []

@@ -24,13 +24,12 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
+from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
 from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.errors import UserError
 from storage.frame_index import frame_hashes
 from synth.config import SynthConfig, as_config
 
-DEFAULT_CHUNK_SIZE = 32  # frames per task
-DEFAULT_PART_ROWS = 2048  # rows per part file (~20 MB of program text at most)
 PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
 MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
 BACKENDS = ("loky", "dask")

@@ -17,6 +17,7 @@ import os
 import sys
 
 from synth.errors import ExitCode, exit_code
+from synth.version import __version__
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -82,7 +83,7 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 def _epilog(verb: str) -> str:
-    import textwrap
+    import textwrap  # not at the top: `r2s --help` does not need it
 
     codes = f"exit codes: {EXIT_CODES}" + (f"; {MORE_EXIT_CODES[verb]}" if verb in MORE_EXIT_CODES else "")
     lines = ["example (from the repository's root):", *(f"  {line}" for line in EXAMPLES[verb]), "",
@@ -121,8 +122,6 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.write(_top_help())
         return ExitCode.OK if argv else ExitCode.BAD_INPUT
     if argv[0] == "--version":
-        from synth import __version__
-
         print(f"r2sgen {__version__}")
         return ExitCode.OK
     verb = argv[0]

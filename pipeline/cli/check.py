@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.cli.options import add_config_option
+from pipeline.errors import CheckFailed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -15,7 +16,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_program, read_scene
-    from pipeline.errors import CheckFailed
     from synth.semantics import check
 
     config = load_config(args.config)

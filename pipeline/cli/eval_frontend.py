@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 
+from pipeline.errors import UserError
 from pipeline.evaluation.frontend import DEFAULT_MAX_DISTANCE
 
 
@@ -25,7 +26,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from extractors.frames import read_frames
-    from pipeline.errors import UserError
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
     from storage.atomic import write_text_atomic

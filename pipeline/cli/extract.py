@@ -5,8 +5,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from extractors.base import ExtractOptions
-from extractors.registry import SOURCES, sources
+from tqdm import tqdm
+
+from extractors.base import ExtractOptions, ExtractTally
+from extractors.categories import CategorySelection
+from extractors.frames import FramesError
+from extractors.registry import SOURCES, source, sources
+from extractors.sniff import wrong_source_hint
+from extractors.writer import frames_writer
+from pipeline.batch.extract import extract_parallel, is_dataset
+from pipeline.errors import UserError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,16 +43,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from extractors.base import ExtractTally
-    from extractors.categories import CategorySelection
-    from extractors.frames import FramesError
-    from extractors.registry import source
-    from extractors.sniff import wrong_source_hint
-    from extractors.writer import frames_writer
-    from pipeline.errors import UserError
-
     src = source(args.source)
     try:
         options = src.options.options_from(
@@ -55,7 +53,6 @@ def run(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise UserError(f"--jobs must be at least 1, got {args.jobs}")
     tally = ExtractTally(warn=lambda line: tqdm.write(line, file=sys.stderr))
-    from pipeline.batch.extract import extract_parallel, is_dataset
 
     if args.jobs > 1 or is_dataset(args.out):
         try:

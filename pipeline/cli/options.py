@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Mapping
 
-from synth.config import ORACLES, SOLVERS, STRATEGIES
+from synth.config import ORACLES, SOLVERS, STRATEGIES, UNCERTAINTY_FIELDS, ConfigError, parse_uncertainty
 
 # How `r2s synth` words the synthesis options; `r2s run` rewords some (its limits are per frame).
 SYNTHESIS_HELP = {
@@ -58,8 +58,6 @@ def synthesis_config(args: argparse.Namespace):
 
 def uncertainty_arg(text: str) -> dict[str, float]:
     """argparse type of --uncertainty: the SynthConfig fields it sets."""
-    from synth.config import UNCERTAINTY_FIELDS, ConfigError, parse_uncertainty
-
     try:
         values = parse_uncertainty(text)
     except ConfigError as exc:

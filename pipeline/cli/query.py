@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from pipeline.cli.options import add_config_option
+from pipeline.errors import UserError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,7 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_pattern
-    from pipeline.errors import UserError
     from pipeline.query.mining import query_frames
 
     for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):

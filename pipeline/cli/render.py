@@ -10,8 +10,10 @@ Exit codes: 0 written; 2 bad input (one line, nothing written); 4 no variant fou
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
+from pipeline.errors import UserError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,10 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from pipeline.cli.inputs import load_config, read_program, read_scene
-    from pipeline.errors import UserError
     from pipeline.variants.render import FORMATS, View, draw, save
     from synth.semantics import check
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pipeline.errors import UserError
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("programs", help="programs file or dataset directory written by `r2s run`")
@@ -24,7 +26,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.errors import UserError
     from pipeline.report.output import check_replaceable, staged_directory
     from pipeline.report.stats import ProgramsDB
 
@@ -46,8 +47,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _query_sections(args: argparse.Namespace) -> tuple:
-    from pipeline.errors import UserError
-
     if args.query is None:
         return ()
     from pipeline.cli.inputs import read_pattern

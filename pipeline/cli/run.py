@@ -11,13 +11,12 @@ import argparse
 import signal
 import sys
 
-from pipeline.cli.options import add_synthesis_options
+from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
+from pipeline.cli.options import add_synthesis_options, synthesis_config
 from synth.errors import ExitCode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from pipeline.batch.stage import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
-
     p.add_argument("frames", help="frames Parquet file, or a directory of them (r2s extract)")
     p.add_argument("--out", required=True, metavar="PATH",
                    help="programs dataset directory (part files, readable as one table), or one file if PATH "
@@ -50,7 +49,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.batch.stage import run_frames
-    from pipeline.cli.options import synthesis_config
 
     config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.

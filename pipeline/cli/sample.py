@@ -20,8 +20,11 @@ file); 1 internal error.
 from __future__ import annotations
 
 import argparse
+import re
+from pathlib import Path
 
 from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
+from pipeline.errors import UserError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -39,11 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import re
-    from pathlib import Path
-
     from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
-    from pipeline.errors import UserError
     from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
     from storage.atomic import write_text_atomic
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.errors import UserError
+
 # Beyond this many frames, "did you mean" only looks at ids of the same scene (the part before the last '/').
 MAX_HINT_POOL = 200_000
 
@@ -20,7 +22,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from extractors.frames import frame_to_scene, validate_frames
     from extractors.frames_dataset import FramesDataset
-    from pipeline.errors import UserError
     from storage.atomic import write_text_atomic
 
     dataset = FramesDataset.open(args.frames)

@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-from pipeline.cli.options import add_synthesis_options
+from pipeline.cli.options import add_synthesis_options, synthesis_config
+from synth.synthesize import synthesize
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -20,9 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene
-    from pipeline.cli.options import synthesis_config
     from storage.atomic import write_text_atomic
-    from synth.synthesize import synthesize
 
     config = synthesis_config(args)
     scene = read_scene(args.scene, max_entities=args.max_entities)

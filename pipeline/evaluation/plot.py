@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pipeline.variants.render import save
+
 
 def plot(ev, doc: dict, method: str, path: Path) -> None:
     """Recall by range bucket per category (left) and the matched pairs' error histograms (right)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from pipeline.variants.render import save
 
     buckets = doc["protocol"]["range_buckets_m"]
     series = {"all": doc["recall_by_range"]} | {t: c["recall_by_range"] for t, c in doc["per_category"].items()}

@@ -24,9 +24,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import duckdb
+import pyarrow as pa
+import pyarrow.parquet as pq
+from tqdm import tqdm
+
 from extractors.frames import FramesError
 from extractors.frames_dataset import FramesDataset
 from pipeline.query.sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
+from storage.atomic import atomic_path
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
 from synth.scene import EGO_ID, Entity
@@ -54,8 +60,6 @@ def _sql_list(files: Sequence[str]) -> str:
 
 def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str):
     """A DuckDB session with the rows view of the files."""
-    import duckdb
-
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
                                  **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
     # Progress is tracked for _Progress, never printed by DuckDB itself (it would write to stdout).
@@ -76,8 +80,6 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
 
 def _write_matches(reader, path: Path) -> tuple[int, int]:
     """Stream the query's batches into Parquet; returns (frames matched, bindings)."""
-    import pyarrow.parquet as pq
-
     frames_matched = bindings = 0
     last = None
     with pq.ParquetWriter(path, reader.schema, compression="zstd") as writer:
@@ -98,8 +100,6 @@ class _ExactCheck:
         self.pattern, self.config, self.calls = pattern, config, 0
 
     def __call__(self, numbers, types):
-        import pyarrow as pa
-
         names = self.pattern.names
         out = []
         for v, t in zip(numbers.to_pylist(), types.to_pylist()):
@@ -126,8 +126,6 @@ class _Progress:
         self.thread.join()
 
     def _poll(self) -> None:
-        from tqdm import tqdm
-
         tty = sys.stderr.isatty()
         bar = tqdm(total=100, desc="r2s query", unit="%", file=sys.stderr, disable=not tty, leave=False)
         t0 = last = time.monotonic()
@@ -147,10 +145,6 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
                  config: SynthConfig | None = None, threads: int | None = None, memory_limit_mb: int | None = None,
                  log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
     """Write matches.parquet (atomically) for `pattern` over a frames file or dataset; bad input is a FramesError."""
-    import duckdb
-
-    from storage.atomic import atomic_path
-
     t0 = time.monotonic()
     config = config or SynthConfig()
     dataset = FramesDataset.open(frames)

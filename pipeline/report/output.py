@@ -10,18 +10,17 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from pipeline.errors import UserError
+from pipeline.report.document import HTML_NAME, MD_NAME
+from pipeline.report.plots import PLOT_FILES
+
 
 def report_files() -> frozenset[str]:
-    from pipeline.report.document import HTML_NAME, MD_NAME
-    from pipeline.report.plots import PLOT_FILES
-
     return frozenset((MD_NAME, HTML_NAME, *PLOT_FILES))
 
 
 def check_replaceable(target: Path) -> None:
     """DIR is replaced wholesale, so it must be absent, empty or an earlier report: never a user's other files."""
-    from pipeline.errors import UserError
-
     if not target.exists():
         return
     if not target.is_dir():
@@ -35,8 +34,6 @@ def check_replaceable(target: Path) -> None:
 @contextmanager
 def staged_directory(target: Path) -> Iterator[Path]:
     """Yield an empty directory beside target; on success it takes target's place (an old target is removed)."""
-    from pipeline.errors import UserError
-
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         # mkdir (not mkdtemp, which makes it 0700) so the report gets the user's usual permissions.

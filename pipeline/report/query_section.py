@@ -11,6 +11,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import pyarrow.parquet as pq
+
+from pipeline.query.mining import query_frames
 from pipeline.report.document import MISSING, Details, ReportContext, Section, SectionBuilder, Table, render_command
 from pipeline.report.stats import programs_text
 from synth.config import SynthConfig
@@ -26,8 +29,6 @@ class MatchedFrame:
 
 def top_matches(matches: Path, top: int) -> list[MatchedFrame]:
     """The frames with the most bindings (ties in input order), from a matches.parquet."""
-    import pyarrow.parquet as pq
-
     rows = pq.read_table(matches, columns=["frame_id", "n_matches", "binding"]).to_pylist()
     ranked = sorted(range(len(rows)), key=lambda i: (-rows[i]["n_matches"], i))[:top]
     return [MatchedFrame(rows[i]["frame_id"], rows[i]["n_matches"], rows[i]["binding"]) for i in ranked]
@@ -36,8 +37,6 @@ def top_matches(matches: Path, top: int) -> list[MatchedFrame]:
 def query_section(pattern: Pattern, pattern_name: str, frames: str, top: int = 10,
                   config: SynthConfig | None = None) -> SectionBuilder:
     def build(ctx: ReportContext) -> Section:
-        from pipeline.query.mining import query_frames
-
         with tempfile.TemporaryDirectory(prefix="r2s-report-query-") as tmp:
             summary = query_frames(frames, pattern, Path(tmp) / "matches.parquet", config=config, log=lambda _: None)
             best = top_matches(Path(tmp) / "matches.parquet", top)

@@ -17,11 +17,14 @@ import tempfile
 from collections import Counter
 from dataclasses import dataclass
 
+import duckdb
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
-from pipeline.programs import STATUSES, ProgramsError
-from synth.dsl import AbsoluteHeading, AbsoluteXYPos
+from pipeline.programs import STATUSES, ProgramsError, check_programs_schema, programs_files
+from synth.dsl import AbsoluteHeading, AbsoluteXYPos, DslError, parse_program
 from synth.parts import HEADING, MOTION, POSITION
 
 # Entity-count buckets (N excludes ego). Later buckets are wide because dense frames are rare and slow.
@@ -92,10 +95,6 @@ class ProgramsDB:
     file_row_number) to fetch its text later. The text columns stay in the files."""
 
     def __init__(self, path: str | os.PathLike, memory_limit_mb: int = 1024) -> None:
-        import duckdb
-
-        from pipeline.programs import check_programs_schema, programs_files
-
         self.source = str(path)
         self.files = programs_files(path)
         for f in self.files:
@@ -171,9 +170,6 @@ class ProgramsDB:
 
 
 def _schema(path: str, where: str):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     try:
         return pq.ParquetFile(path).schema_arrow
     except (pa.ArrowException, OSError, ValueError) as exc:
@@ -256,8 +252,6 @@ class RelationUsage:
 
 def relation_kinds(program_text: str) -> Counter:
     """How often each relation kind occurs in one DSL program (parsed with the DSL's own parser)."""
-    from synth.dsl import parse_program
-
     return Counter(part.kind(clause) for s in parse_program(program_text).statements for part, clause in s.clauses())
 
 
@@ -270,8 +264,6 @@ def relation_usage(db: ProgramsDB, examples: int = 3) -> RelationUsage:
     """Counts per kind and config. The counts come from substrings where every line of a program is one
     statement with one position and one heading (every program r2s writes); any other program is parsed with
     the DSL's own parser, and counted if it parses, or listed with the parser's message if not."""
-    from synth.dsl import DslError
-
     k = {name: f'"k_{name}"' for name in _MARKS}
     consistent = (f"statements = lines AND {k['ahead']} + {k['behind']} + {k['left']} + {k['right']} + {k['at']} "
                   f"= statements AND {k['toward']} + {k['away']} + {k['deg']} = statements AND "

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from storage.atomic import atomic_path
 from synth.dsl import Program
 from synth.geometry import heading_vector, normalize, to_local
 from synth.parts import CLAUSE_KINDS
@@ -235,8 +236,6 @@ def draw(view: View):
 
 def save(fig, path: str | Path) -> None:
     """Write the figure atomically; the format is the file's suffix (png, svg or pdf)."""
-    from storage.atomic import atomic_path
-
     fmt = Path(path).suffix.lstrip(".").lower()
     with atomic_path(path) as tmp:
         # No timestamps or version strings in the file: the same view gives the same bytes.

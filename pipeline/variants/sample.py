@@ -33,6 +33,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import numpy
+from tqdm import tqdm
+
 from pipeline.errors import SamplingError, UserError
 from synth.config import SynthConfig
 from synth.dsl import Program
@@ -47,6 +50,7 @@ from synth.emit_scenic import (
     render_scenic,
 )
 from synth.geometry import normalize
+from synth.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.semantics import check
 
@@ -85,8 +89,6 @@ class SampleOptions:
             raise UserError("--burn-in must be at least 0 and --thin at least 1")
 
     def chain_settings(self):
-        from synth.gibbs import ChainSettings
-
         default = ChainSettings()
         return ChainSettings(burn_in=default.burn_in if self.burn_in is None else self.burn_in,
                              thin=default.thin if self.thin is None else self.thin)
@@ -122,8 +124,6 @@ class ProgressReport:
         now = time.monotonic()
         if self.tty:
             if self.bar is None and now - self.started > 1.0:
-                from tqdm import tqdm
-
                 self.bar = tqdm(total=total, desc=self.what, unit=" sweeps", file=sys.stderr, leave=False)
             if self.bar is not None:
                 self.bar.total = total
@@ -146,8 +146,6 @@ def _first_line(exc: BaseException) -> str:
 
 @contextmanager
 def _seeded(seed: int) -> Iterator[None]:
-    import numpy
-
     saved = random.getstate(), numpy.random.get_state()
     random.seed(seed)
     numpy.random.seed(seed)
@@ -282,8 +280,6 @@ def sample_program(program: Program, scene: Scene, config: SynthConfig, options:
 def _sample(program: Program, scene: Scene, config: SynthConfig, options: SampleOptions, sampler: str,
             text: str | None, filename: str, progress: Progress | None) -> Samples:
     if sampler == "gibbs":
-        from synth.gibbs import NoVariant, sample_variants
-
         try:
             v = sample_variants(program, scene, config, options.n, options.seed, options.chain_settings(),
                                 options.allow_collisions, progress)
@@ -314,8 +310,6 @@ def _sample(program: Program, scene: Scene, config: SynthConfig, options: Sample
 
 def blockers(program: Program, scene: Scene, config: SynthConfig, seed: int, draws: int = 200) -> str:
     """Why whole-scene rejection fails: how often independent draws satisfy the rule, and the pairs that collide."""
-    from synth.gibbs import rejection_odds
-
     odds = rejection_odds(program, scene, config, seed, draws)
     top = ", ".join(f"{a} and {b} ({share:.0%})" for (a, b), share in odds.pairs[:3])
     return (f"{odds.clear}/{draws} independent draws from the program satisfy the collision rule"
