@@ -122,3 +122,15 @@ def test_its_options_have_their_group_and_bad_lines_one_line(tmp_path, capsys, t
     out = tmp_path / "out" / "frames.parquet"
     assert_refused(r2s(capsys, "extract", "toy", str(toy), "--out", str(out)), out,
                    "queue.toy line 2 is not `frame track category x y heading`")
+
+
+def test_the_registry_names_each_source_by_its_own_name(toy, monkeypatch):
+    from extractors.registry import source, sources
+
+    assert [s.name for s in sources()] == list(SOURCES) and source("toy").units(str(toy)) == [
+        str(toy / "crossing.toy"), str(toy / "queue.toy")]
+    with pytest.raises(KeyError, match="unknown source 'toys'.*toy"):
+        source("toys")
+    monkeypatch.setitem(SOURCES, "toy2", MODULE)  # a second key for the same module: its SOURCE says "toy"
+    with pytest.raises(KeyError, match="named 'toy', not 'toy2'"):
+        source("toy2")
