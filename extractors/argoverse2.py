@@ -33,6 +33,7 @@ from extractors.base import (
 from extractors.categories import Taxonomy
 from extractors.sniff import Look
 from extractors.speed import speeds_by_track, track_speeds
+from storage.regular_files import open_regular
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
 # Argoverse 2 sensor-dataset annotation categories (30 classes).
@@ -87,7 +88,7 @@ def annotation_files(path: Path) -> list[Path]:
 
 def _read_columns(path: Path, columns: tuple[str, ...], floats: tuple[str, ...], what: str) -> dict[str, np.ndarray]:
     try:
-        with pa.memory_map(str(path)) as source:
+        with open_regular(path) as source:  # never a FIFO or a device
             table = pa.ipc.open_file(source).read_all()
     except (pa.ArrowException, OSError) as exc:
         raise ExtractError(f"{path} is not a readable Feather (Arrow IPC) file ({str(exc)[:100]})") from None

@@ -29,6 +29,7 @@ import numpy as np
 
 from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Taxonomy
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
+from storage.regular_files import check_regular
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 if TYPE_CHECKING:
@@ -273,9 +274,16 @@ def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:
 
 
 def require_path(path: str | os.PathLike, what: str) -> Path:
+    """An input that exists and is a directory or a regular file (symbolic links followed): never a FIFO, a
+    socket or a device (storage.regular_files)."""
     p = Path(path)
     if not p.exists():
         raise ExtractError(f"{what} {path} does not exist")
+    if not p.is_dir():
+        try:
+            check_regular(p)
+        except OSError as exc:
+            raise ExtractError(f"{what} {path} {exc.strerror}") from None
     return p
 
 
@@ -283,7 +291,8 @@ def files_with_suffix(path: Path, suffixes: Sequence[str], what: str) -> list[Pa
     """A file, or the files under a directory (recursively, sorted) whose names end in one of suffixes."""
     if path.is_file():
         return [path]
-    found = sorted(p for p in path.rglob("*") if p.is_file() and p.name.endswith(tuple(suffixes)))
+    # not only regular files: a FIFO or a device named like an input is refused by its reader, not skipped
+    found = sorted(p for p in path.rglob("*") if not p.is_dir() and p.name.endswith(tuple(suffixes)))
     if not found:
         raise ExtractError(f"{path} holds no {what} ({' / '.join(suffixes)} files)")
     return found

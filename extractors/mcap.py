@@ -26,6 +26,7 @@ from extractors.messages import (
     pose_samples,
 )
 from extractors.sniff import Look, head
+from storage.regular_files import open_regular
 
 DESCRIPTION = "MCAP files with foxglove.SceneUpdate (protobuf / JSON) or ROS 2 Detection3DArray / MarkerArray"
 TAXONOMY = messages.TAXONOMY
@@ -57,7 +58,7 @@ def check_mcap(path: Path, limit: int) -> dict[str, str]:
     schemas: dict[int, str] = {}
     channels: dict[str, int] = {}
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             for rec in StreamReader(fh, emit_chunks=True, record_size_limit=limit).records:
                 inner = [rec]
                 if isinstance(rec, Chunk):
@@ -107,7 +108,7 @@ def _messages(path: Path, topics: list[str], schema_of: dict[str, str]) -> Itera
     if not topics:
         return
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             reader = make_reader(fh, decoder_factories=_decoders())
             for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics, log_time_order=True):
                 yield schema_of[channel.topic], int(message.log_time), decoded

@@ -35,6 +35,7 @@ from extractors.base import (
 )
 from extractors.categories import Taxonomy
 from extractors.sniff import Look
+from storage.regular_files import check_regular
 
 DESCRIPTION = "nuScenes dataroot (JSON tables of --version) through nuscenes-devkit"
 # nuScenes v1.0 category names (23 classes), and the name of the ego vehicle.
@@ -108,6 +109,11 @@ def load(dataroot: Path, version: str) -> Any:
             f"{dataroot} has no nuScenes tables for version {version!r}"
             + (f" (versions here: {', '.join(found)})" if found else " (no version folder with sample.json)")
         )
+    for table in sorted((dataroot / version).glob("*.json")):  # the devkit reads each whole: regular files only
+        try:
+            check_regular(table)
+        except OSError as exc:
+            raise ExtractError(f"{table} {exc.strerror}") from None
     try:
         import nuscenes.nuscenes as devkit
     except ImportError:

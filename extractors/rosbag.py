@@ -27,6 +27,7 @@ from extractors.messages import (
     pose_samples,
 )
 from extractors.sniff import Look, head
+from storage.regular_files import check_regular
 
 DESCRIPTION = "ROS 1 .bag or ROS 2 bag directory (sqlite3 / mcap storage) through rosbags"
 TAXONOMY = messages.TAXONOMY
@@ -64,7 +65,7 @@ def bag_paths(path: Path) -> list[tuple[Path, bool]]:
         if path.suffix != ".bag":
             raise ExtractError(f"{path} is not a ROS 1 .bag file nor a ROS 2 bag directory")
         return [(path, True)]
-    if (path / "metadata.yaml").is_file():
+    if (path / "metadata.yaml").exists():  # even when it is no regular file: _open refuses it by name
         return [(path, False)]
     bags = sorted(path.rglob("*.bag"))
     if not bags:
@@ -103,6 +104,13 @@ def _cap_ros1_chunks(reader: Any, limit: int, where: Path) -> None:
 def _open(bag: Path, ros1: bool, options: LogOptions) -> Any:
     from rosbags.highlevel import AnyReader
 
+    # rosbags opens the files itself: each must be a regular file first (a FIFO would block it, /dev/zero fill
+    # memory). A ROS 2 bag directory holds its metadata.yaml and its storage files, nothing else.
+    for f in [bag] if ros1 else sorted(p for p in bag.iterdir() if not p.is_dir()):
+        try:
+            check_regular(f)
+        except OSError as exc:
+            raise ExtractError(f"{f} {exc.strerror}") from None
     if not ros1:
         for f in sorted(bag.glob("*.mcap")):
             check_mcap(f, options.max_chunk_bytes)

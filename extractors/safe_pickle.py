@@ -30,6 +30,7 @@ from numpy.core import multiarray as _multiarray
 from numpy.core import numeric as _numeric
 
 from extractors.base import ExtractError
+from storage.regular_files import FileTooLarge, read_regular
 from synth.errors import InputError
 
 ALLOWED_GLOBALS: dict[tuple[str, str], Any] = {
@@ -118,12 +119,10 @@ class _RestrictedUnpickler(pickle.Unpickler):
 
 def load_pickle(path: str | os.PathLike, max_bytes: int = MAX_PICKLE_BYTES) -> Any:
     """Unpickle a data file through the allow-list; every failure is one ExtractError naming the file."""
-    try:
-        size = os.path.getsize(path)
-        if size > max_bytes:
-            raise ExtractError(f"{path} is {size / 2**20:.0f} MB, larger than the {max_bytes / 2**20:.0f} MB limit")
-        with open(path, "rb") as fh:
-            data = fh.read()
+    try:  # a regular file only (never a FIFO or /dev/zero), read at most max_bytes + 1 bytes
+        data = read_regular(path, max_bytes)
+    except FileTooLarge:
+        raise ExtractError(f"{path} is larger than the {max_bytes / 2**20:.0f} MB limit") from None
     except OSError as exc:
         raise ExtractError(f"cannot read {path}: {exc.strerror or exc}") from None
     if not data.startswith(b"\x80"):

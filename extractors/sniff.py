@@ -14,6 +14,7 @@ from itertools import islice
 from pathlib import Path
 
 from extractors.registry import sources
+from storage.regular_files import open_regular
 
 MAX_ENTRIES = 2000
 MAX_DEPTH = 4
@@ -29,7 +30,7 @@ class Look:
 def head(path: Path, n: int = 32) -> bytes:
     """The first n bytes of a file (b"" if it cannot be read)."""
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:  # a FIFO among the entries must not block the hint
             return fh.read(n)
     except OSError:
         return b""

@@ -15,6 +15,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from pyarrow import fs
 
+from storage.regular_files import check_regular
+
 
 def filesystem(path: str):
     """(pyarrow filesystem, path inside it) for a local path or a URL (s3://, gs://, file://, or any fsspec
@@ -40,6 +42,8 @@ def dataset_files(path: str, what: str, error: type[ValueError]) -> tuple[object
         raise error(f"{path}: cannot open ({str(exc)[:120]})") from None
     if info.type == fs.FileType.NotFound:
         raise error(f"{path} does not exist")
+    if info.type not in (fs.FileType.File, fs.FileType.Directory):  # a FIFO, a device (/dev/zero), a socket
+        raise error(f"{path} {_not_regular(inner)}")
     if info.type == fs.FileType.File:
         return pafs, [inner]
     selector = fs.FileSelector(inner, recursive=True)
@@ -51,6 +55,14 @@ def dataset_files(path: str, what: str, error: type[ValueError]) -> tuple[object
     if not files:
         raise error(f"{path} is a directory without {what} Parquet files (*.parquet)")
     return pafs, files
+
+
+def _not_regular(path: str) -> str:
+    try:
+        check_regular(path)
+    except OSError as exc:
+        return exc.strerror
+    return "is not a regular file"
 
 
 def _kind(t: pa.DataType) -> str:

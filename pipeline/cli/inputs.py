@@ -13,15 +13,19 @@ MAX_TEXT_BYTES = 64 * 1024 * 1024
 
 
 def read_text_file(path: str, what: str) -> str:
+    """A small UTF-8 text input (scene, program, pattern, config, Scenic): a regular file (storage.regular_files:
+    never a FIFO or a device, read at most MAX_TEXT_BYTES + 1 bytes)."""
+    from storage.regular_files import FileTooLarge, NotRegularFile, read_regular
+
     p = Path(path)
     if not p.exists():
         raise UserError(f"{what} {path} does not exist")
-    if p.is_dir():
-        raise UserError(f"{what} {path} is a directory, not a file")
     try:
-        if p.stat().st_size > MAX_TEXT_BYTES:
-            raise UserError(f"{what} {path} is larger than {MAX_TEXT_BYTES // 2**20} MB")
-        data = p.read_bytes()
+        data = read_regular(p, MAX_TEXT_BYTES)
+    except FileTooLarge:
+        raise UserError(f"{what} {path} is larger than {MAX_TEXT_BYTES // 2**20} MB") from None
+    except NotRegularFile as exc:
+        raise UserError(f"{what} {path} {exc.strerror}") from None
     except OSError as exc:
         raise UserError(f"cannot read {what} {path}: {exc.strerror}") from None
     try:
