@@ -6,6 +6,7 @@ import tomllib
 from pathlib import Path
 
 from pipeline.errors import UserError
+from storage.regular_files import FileTooLarge, NotRegularFile, read_regular
 from synth.config import ConfigError, SynthConfig, config_from_mapping
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, scene_from_json
 
@@ -15,8 +16,6 @@ MAX_TEXT_BYTES = 64 * 1024 * 1024
 def read_text_file(path: str, what: str) -> str:
     """A small UTF-8 text input (scene, program, pattern, config, Scenic): a regular file (storage.regular_files:
     never a FIFO or a device, read at most MAX_TEXT_BYTES + 1 bytes)."""
-    from storage.regular_files import FileTooLarge, NotRegularFile, read_regular
-
     p = Path(path)
     if not p.exists():
         raise UserError(f"{what} {path} does not exist")
