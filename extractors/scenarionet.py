@@ -75,6 +75,9 @@ TAXONOMY = Taxonomy("scenarionet", {
 })
 SUMMARY, MAPPING = "dataset_summary.pkl", "dataset_mapping.pkl"
 NUSCENES_KEYFRAME_STEP = 5
+MAX_STEPS = 10**6
+# tracks x steps a scenario may stack: one per BYTES_PER_CELL bytes of its file, and MIN_CELLS whatever its size
+BYTES_PER_CELL, MIN_CELLS = 4, 2**20
 
 
 def scenario_files(path: Path) -> list[Path]:
@@ -102,6 +105,8 @@ def database_files(db: Path) -> list[Path]:
     scenario of 200 tracks: gigabytes for a full dataset). The summary is read only when there is no mapping,
     in which case ScenarioNet takes every scenario to be in the database folder itself."""
     mapping = load_pickle(db / MAPPING) if (db / MAPPING).is_file() else None
+    if mapping is not None and not isinstance(mapping, dict):
+        raise ExtractError(f"{db}: {MAPPING} is not a ScenarioNet index (it holds {_kind(mapping)}, not a dict)")
     index = mapping if mapping else load_pickle(db / SUMMARY)
     if not isinstance(index, dict):
         raise ExtractError(f"{db}: {MAPPING if mapping else SUMMARY} is not a ScenarioNet index (a dict)")
@@ -110,18 +115,18 @@ def database_files(db: Path) -> list[Path]:
     for name, rel in index.items():
         rel = rel if mapping else ""
         if not isinstance(name, str) or not name.endswith(".pkl") or Path(name).name != name:
-            raise ExtractError(f"{db}: {where} entry {name!r} is not the file name of a scenario (.pkl)")
+            raise ExtractError(f"{db}: {where} entry {_shown(name)} is not the file name of a scenario (.pkl)")
         if not isinstance(rel, str):
-            raise ExtractError(f"{db}: {where} entry {name!r} maps to {rel!r}, not a folder")
+            raise ExtractError(f"{db}: {where} entry {_shown(name)} maps to {_shown(rel)}, not a folder")
         target = db / rel / name
         try:
             # strict: a missing file or a symlink loop (ELOOP) raises instead of resolving forever
             is_file = Path(os.path.realpath(target, strict=True)).is_file()
         except (OSError, RuntimeError, ValueError) as exc:
             why = "is a symlink loop" if getattr(exc, "errno", None) == errno.ELOOP else "does not exist"
-            raise ExtractError(f"{db}: {where} entry {name!r} maps to {target}, which {why}") from None
+            raise ExtractError(f"{db}: {where} entry {_shown(name)} maps to {target}, which {why}") from None
         if not is_file:
-            raise ExtractError(f"{db}: {where} entry {name!r} maps to {target}, which is not a file")
+            raise ExtractError(f"{db}: {where} entry {_shown(name)} maps to {target}, which is not a file")
         files.append(target)
     return files
 
@@ -149,20 +154,77 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
             tally.skip("no step with a valid ego")
 
 
+def _kind(value: Any) -> str:
+    """What a value of a pickle is, in a message: its type, never its repr (which may nest without end)."""
+    return f"a {type(value).__module__}.{type(value).__qualname__}".replace("builtins.", "")
+
+
+def _shown(value: Any) -> str:
+    """A value of a pickle in a message: the repr of a short name or number, else its type."""
+    if isinstance(value, (str, float, bool, type(None))) or (isinstance(value, int) and value.bit_length() < 64):
+        return repr(value)[:80]
+    return _kind(value)
+
+
+def _as_id(value: Any) -> str | None:
+    """A scenario or track id as text: converters write strings, older and hand-made files ints. None for
+    anything else (str() of a pickled structure may recurse without end or take exponential time)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (int, np.integer)) and (not isinstance(value, int) or value.bit_length() < 64):
+        return str(value)
+    return None
+
+
+def _scenario(path: Path, sd: Any) -> dict:
+    if not isinstance(sd, dict):
+        raise ExtractError(f"{path} is not a ScenarioNet scenario (it holds {_kind(sd)}, not a dict)")
+    if not isinstance(sd.get("metadata"), dict):
+        raise ExtractError(f"{path} is not a ScenarioNet scenario (missing 'metadata')")
+    return sd
+
+
 def scenario_id(path: Path, sd: Any) -> str:
     """The scene name frames are named after: metadata.scenario_id (every converter writes it), else an id."""
-    try:
-        meta = sd["metadata"]
-        return str(meta.get("scenario_id") or meta.get("id") or sd.get("id") or path.stem)
-    except (KeyError, TypeError, AttributeError) as exc:
-        raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {exc})") from None
+    meta = _scenario(path, sd)["metadata"]
+    for where, value in (("metadata.scenario_id", meta.get("scenario_id")), ("metadata.id", meta.get("id")),
+                         ("id", sd.get("id"))):
+        if value is None:
+            continue
+        name = _as_id(value)
+        if name is None:
+            raise ExtractError(f"{path}: {where} is {_kind(value)}, not a scenario name")
+        if value:
+            return name
+    return path.stem
+
+
+def _numbers(value: Any, path: Path, tid: str, key: str) -> np.ndarray:
+    """state.KEY as floats: a numeric array as converters write it, or numbers (a list of numbers or of short
+    lists of numbers, as hand-made files may hold). Strings, objects and ints too large for a float are refused."""
+    plain = (bool, int, float, np.bool_, np.integer, np.floating)
+    if isinstance(value, np.ndarray):
+        ok = value.dtype.kind in "biuf"
+    elif isinstance(value, (list, tuple)):
+        ok = len(value) <= MAX_STEPS and all(
+            isinstance(v, plain) or (isinstance(v, (list, tuple)) and len(v) <= 16 and all(isinstance(w, plain)
+                                                                                          for w in v))
+            for v in value)
+    else:
+        ok = isinstance(value, plain)
+    if ok:
+        try:
+            return np.asarray(value, dtype=float)
+        except (ValueError, TypeError, OverflowError):
+            pass  # ragged lists, ints beyond a float
+    raise ExtractError(f"{path}: track {tid} state.{key} is {_kind(value)} that is not an array of numbers")
 
 
 def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int | None = None) -> np.ndarray:
     """A per-step state array, checked for its length (ScenarioNet stores (T,), (T, 1) or (T, k))."""
     if key not in state:
         raise ExtractError(f"{path}: track {tid} lacks state.{key}")
-    a = np.asarray(state[key], dtype=float)
+    a = _numbers(state[key], path, tid, key)
     if width is None:
         a = a.reshape(-1)
         if a.size == 1:
@@ -175,33 +237,49 @@ def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int 
 def scenario_frames(
     path: Path, sd: Any, options: ExtractOptions, tally: ExtractTally | None = None
 ) -> Iterator[list[dict[str, Any]]]:
+    scene = scenario_id(path, sd)
+    meta = sd["metadata"]
+    for key, where in (("tracks", sd), ("length", sd), ("sdc_id", meta)):
+        if key not in where:
+            raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {key!r})")
+    tracks, sdc, ts, dataset = sd["tracks"], meta["sdc_id"], meta.get("ts"), meta.get("dataset", "")
+    dataset = dataset.lower() if isinstance(dataset, str) else ""
     try:
-        meta, tracks, steps = sd["metadata"], sd["tracks"], int(sd["length"])
-        sdc = meta["sdc_id"]
-        dataset = str(meta.get("dataset", "")).lower()
-        scene = scenario_id(path, sd)
-        ts = meta.get("ts")
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise ExtractError(f"{path} is not a ScenarioNet scenario (missing {exc})") from None
+        steps = int(sd["length"])
+    except (TypeError, ValueError, OverflowError):
+        raise ExtractError(f"{path}: scenario length is {_kind(sd['length'])}, not a number of steps") from None
+    if not isinstance(tracks, dict):
+        raise ExtractError(f"{path}: tracks is {_kind(tracks)}, not a dict of tracks")
     # Converters write string ids (Waymo: str(obj.id)); older and hand-made files have ints: compare as text.
-    if not isinstance(tracks, dict) or [str(t) for t in tracks].count(str(sdc)) != 1:
-        raise ExtractError(f"{path}: the ego track (metadata.sdc_id = {sdc!r}) is not among the tracks")
-    if steps < 1 or steps > 10**6:
+    track_ids = [_as_id(t) for t in tracks]
+    if None in track_ids:
+        raise ExtractError(f"{path}: a track id is {_kind(list(tracks)[track_ids.index(None)])}, not a name")
+    if _as_id(sdc) is None or track_ids.count(_as_id(sdc)) != 1:
+        raise ExtractError(f"{path}: the ego track (metadata.sdc_id = {_shown(sdc)}) is not among the tracks")
+    if steps < 1 or steps > MAX_STEPS:
         raise ExtractError(f"{path}: implausible scenario length {steps}")
+    # Every track holds its own per-step arrays (at least a position: two numbers a step), so a file holds at
+    # least 4 bytes per track and step; tracks sharing one array through the pickle's memo would otherwise make
+    # the arrays stacked below (about 100 bytes per track and step) gigabytes from a few megabytes.
+    cells, limit = len(tracks) * steps, max(MIN_CELLS, _file_size(path) // BYTES_PER_CELL)
+    if cells > limit:
+        raise ExtractError(f"{path}: {len(tracks)} tracks x {steps} steps is more than a file of its size holds "
+                           f"(at most one track-step per {BYTES_PER_CELL} bytes, or {MIN_CELLS:,} in all)")
 
     nuscenes = dataset == "nuscenes"
     builder = FrameBuilder("scenarionet", TAXONOMY, options, tally)
     ids, cats, coarse, pos, yaw, valid, length, width, speed = [], [], [], [], [], [], [], [], []
-    for tid, tr in tracks.items():
-        try:
-            state, tmeta = tr["state"], tr.get("metadata") or {}
-            # metadata.type holds the dataset's own type where the converter keeps one (nuScenes, Lyft), else
-            # the MetaDrive type again; `type` is the MetaDrive type (None for the nuScenes converter's animals).
-            own, kind = tmeta.get("type"), tr.get("type")
-        except (TypeError, AttributeError, KeyError):
-            raise ExtractError(f"{path}: track {tid!r} is not a ScenarioNet track") from None
-        kind = str(kind) if isinstance(kind, str) and kind else None
-        ids.append(str(tid))
+    for tid, tr in zip(track_ids, tracks.values()):
+        state = tr.get("state") if isinstance(tr, dict) else None
+        tmeta = tr.get("metadata") if isinstance(tr, dict) else None
+        tmeta = {} if tmeta is None else tmeta
+        if not isinstance(state, dict) or not isinstance(tmeta, dict):
+            raise ExtractError(f"{path}: track {tid!r} is not a ScenarioNet track")
+        # metadata.type holds the dataset's own type where the converter keeps one (nuScenes, Lyft), else
+        # the MetaDrive type again; `type` is the MetaDrive type (None for the nuScenes converter's animals).
+        own, kind = tmeta.get("type"), tr.get("type")
+        kind = kind if isinstance(kind, str) and kind else None
+        ids.append(tid)
         cats.append(str(own) if isinstance(own, str) and own else kind or "UNSET")
         coarse.append(kind if kind != cats[-1] else None)
         pos.append(_series(state, "position", steps, path, tid, width=2)[:, :2])
@@ -212,7 +290,7 @@ def scenario_frames(
         speed.append(_speeds(state, steps, path, tid))
     pos, yaw, valid = np.stack(pos), np.stack(yaw), np.stack(valid)
     length, width, speed = np.stack(length), np.stack(width), np.stack(speed)
-    ego_i = ids.index(str(sdc))
+    ego_i = ids.index(_as_id(sdc))
 
     stride = NUSCENES_KEYFRAME_STEP if nuscenes else 1
     for step in range(0, steps, stride):
@@ -233,6 +311,13 @@ def scenario_frames(
         yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
 
 
+def _file_size(path: Path) -> int:
+    try:
+        return os.path.getsize(path)
+    except OSError:
+        return 0
+
+
 def _speeds(state: dict, steps: int, path: Path, tid: str) -> np.ndarray:
     """|state.velocity| per step (m/s; converters write (T, 2) in the scenario's ground frame), as recorded:
     nuScenes-derived scenarios hold the forward difference of the interpolated positions. NaN without one."""
@@ -246,7 +331,7 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
     """metadata.ts is seconds from the scenario start; absent or odd values leave the timestamp empty."""
     try:
         t = float(ts[step])
-    except (TypeError, ValueError, IndexError, KeyError):
+    except (TypeError, ValueError, IndexError, KeyError, OverflowError):
         return None
     return round(t * 1e6) if np.isfinite(t) else None
 

@@ -1,0 +1,263 @@
+"""Hostile ScenarioNet pickles (issue 22): dtypes given object fields through their state, memory bombs of a few
+bytes, BUILD on the allow-list's own tokens, and structures that are valid pickles but not scenarios.
+
+Each reproduction runs `r2s extract` as a user does, in a child process under a 2 GB address-space cap, so that a
+crash is the child's exit status (a segfault is -11 there, not a dead test run) and its peak memory is measured
+(ru_maxrss of a fresh intermediate process's children: Linux keeps a process's peak across fork and exec, so
+the child must not descend from this large pytest process directly). The cap turns a bomb that gets past the
+bounds into a MemoryError, so each case also checks that the one line names the bound that stopped it."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.core.multiarray import _reconstruct
+
+from extractors.base import ExtractError
+from extractors.safe_pickle import _GLOBALS, RefusedGlobal, _Token, load_pickle
+from tests.support import ROOT
+from tests.support.extract import EXCERPT
+
+SCENARIOS = EXCERPT / "scenarionet"
+SCENARIO = SCENARIOS / "sd_nuscenes_v1.0-mini_scene-0796.pkl"
+CAP_BYTES = 2 * 2**30
+SMALL_MB = 500
+
+_RUN = """
+import json, resource, subprocess, sys
+cap = int(sys.argv[1])
+p = subprocess.run(sys.argv[2:], capture_output=True, text=True, timeout=300,
+                   preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (cap, cap)))
+peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+print(json.dumps({"returncode": p.returncode, "stdout": p.stdout, "stderr": p.stderr, "peak_mb": peak}))
+"""
+
+
+def r2s_child(*args: str) -> dict:
+    """`r2s ARGS` in a child (address space capped): its exit status, output and peak resident memory in MB."""
+    cmd = [sys.executable, "-c", _RUN, str(CAP_BYTES), sys.executable, "-m", "pipeline.cli", *args]
+    return json.loads(subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=True).stdout)
+
+
+def assert_refused_small(res: dict, out: Path, contains: str) -> None:
+    """Exit 2 with one line naming the problem, nothing written, and the child stayed small."""
+    lines = res["stderr"].strip().splitlines()
+    assert res["returncode"] == 2, res
+    assert len(lines) == 1 and "Traceback" not in res["stderr"], res["stderr"]
+    assert contains.lower() in lines[0].lower(), lines[0]
+    assert res["peak_mb"] < SMALL_MB, res
+    assert not out.exists() or (out.is_dir() and not any(out.iterdir()))
+
+
+def database_with(tmp_path: Path, name: str, blob: bytes) -> Path:
+    """The shipped scenarios (without their index, so that every .pkl is read) plus one more file."""
+    db = tmp_path / "db"
+    db.mkdir()
+    for f in SCENARIOS.glob("sd_*.pkl"):
+        shutil.copy(f, db / f.name)
+    (db / name).write_bytes(blob)
+    return db
+
+
+def real_scenario() -> dict:
+    with open(SCENARIO, "rb") as fh:
+        return pickle.load(fh)
+
+
+def with_heading(value) -> bytes:
+    """The shipped scenario, under an id of its own, with one track's state.heading replaced by VALUE (pickled by
+    its __reduce__)."""
+    sd = real_scenario()
+    sd["metadata"]["scenario_id"] = "evil"
+    tid = next(t for t in sd["tracks"] if t != sd["metadata"]["sdc_id"])
+    sd["tracks"][tid]["state"]["heading"] = value
+    return pickle.dumps(sd, protocol=4)
+
+
+# --- 1. numpy dtypes restored through their state --------------------------------------------------------------
+
+class _Dtype:
+    """A dtype as numpy pickles one, np.dtype(spec, False, True) then BUILD with `state`."""
+
+    def __init__(self, spec, state):
+        self.spec, self.state = spec, state
+
+    def __reduce__(self):
+        return np.dtype, (self.spec, False, True), self.state
+
+
+class _Array:
+    """An array as numpy pickles one, _reconstruct(ndarray, (0,), b'b') then BUILD (1, shape, dtype, F, data)."""
+
+    def __init__(self, shape, dtype, data):
+        self.shape, self.dtype, self.data = shape, dtype, data
+
+    def __reduce__(self):
+        return _reconstruct, (np.ndarray, (0,), b"b"), (1, self.shape, self.dtype, False, self.data)
+
+
+OBJECT_FIELD = (3, "|", None, ("a",), {"a": (np.dtype("O"), 0)}, 8, 1, 0)  # flags 0: numpy copies raw bytes
+STEPS = 11  # the shipped scene-0796 excerpt
+
+
+@pytest.mark.parametrize("heading, refused", [
+    # a void dtype given an object field: the array's bytes become object pointers (segfault on reading)
+    (_Array((STEPS,), _Dtype("V8", OBJECT_FIELD), b"\x41" * 8 * STEPS), "numpy.dtype 'V8'"),
+    # a float dtype given the same fields by its state (the field's object dtype is refused first), or plain
+    # fields, or an item size
+    (_Array((STEPS,), _Dtype("f8", OBJECT_FIELD), b"\x41" * 8 * STEPS), "numpy.dtype 'O8'"),
+    (_Array((STEPS,), _Dtype("f8", (3, "|", None, ("a",), {"a": (np.dtype("f8"), 0)}, 8, 1, 0)), b"\0" * 8 * STEPS),
+     "numpy.dtype with a state other than a byte order (BUILD)"),
+    (_Array((STEPS,), _Dtype("f8", (3, "<", None, None, None, 4096, 8, 0)), b"\0" * 8 * STEPS),
+     "numpy.dtype with a state other than a byte order (BUILD)"),
+    # an object array (numpy's own pickle: a list of objects)
+    (np.array([float(i) for i in range(STEPS)], dtype=object), "numpy.dtype 'O8'"),
+    # a structured array of numbers, and strings
+    (np.zeros(STEPS, dtype=[("x", "f8")]), "numpy.dtype 'V8'"),
+    (np.array(["1.5"] * STEPS), "numpy.dtype 'U3'"),
+])
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_dtypes_other_than_plain_numbers_are_refused_without_a_crash(tmp_path, heading, refused, jobs):
+    db = database_with(tmp_path, "sd_evil.pkl", with_heading(heading))
+    out = tmp_path / "frames"
+    res = r2s_child("extract", "scenarionet", str(db), "--out", str(out), "--jobs", jobs, "--categories", "all")
+    assert_refused_small(res, out, f"refused to unpickle: it references {refused}")
+    assert "sd_evil.pkl" in res["stderr"]
+
+
+def test_array_data_must_match_its_shape(tmp_path):
+    path = tmp_path / "a.pkl"
+    for shape, data in (((4,), b"\x00" * 24), ((2, 2), b"\x00" * 40), ((3,), "text"), ((-1,), b"")):
+        path.write_bytes(pickle.dumps(_Array(shape, np.dtype("f8"), data), protocol=4))
+        with pytest.raises(ExtractError, match="not a readable pickle"):
+            load_pickle(path)
+    path.write_bytes(pickle.dumps(_Array((2, 2), np.dtype(">f8"), np.arange(4.0).astype(">f8").tobytes()), 4))
+    back, plain = load_pickle(path), pickle.loads(path.read_bytes())
+    assert back.dtype == plain.dtype and back.tolist() == plain.tolist() == [[0.0, 1.0], [2.0, 3.0]]
+
+
+@pytest.mark.parametrize("protocol", [2, 3, 4, 5])
+def test_plain_arrays_and_scalars_of_every_kind_load_as_numpy_gives_them(tmp_path, protocol):
+    data = {k: np.arange(6).astype(k).reshape(2, 3) for k in ("?", "i1", "u2", ">i4", "i8", "f2", "f4", ">f8", "c16")}
+    data["fortran"] = np.asfortranarray(np.arange(6.0).reshape(2, 3))
+    data["empty"] = np.zeros((0, 3))
+    data["scalars"] = [np.float32(1.5), np.int64(-3), np.bool_(True), np.complex64(1j)]
+    path = tmp_path / "p.pkl"
+    path.write_bytes(pickle.dumps(data, protocol=protocol))
+    back, plain = load_pickle(path), pickle.loads(path.read_bytes())  # numpy's own unpickling is the reference
+    for k, v in data.items():
+        if isinstance(v, np.ndarray):
+            got, want = back[k], plain[k]
+            assert (got.dtype, got.shape, got.flags.f_contiguous) == (want.dtype, want.shape, want.flags.f_contiguous)
+            assert np.array_equal(got, v), k
+    assert back["scalars"] == data["scalars"] and [type(s) for s in back["scalars"]] == [type(s) for s in data["scalars"]]
+    # numpy's shared dtypes keep their byte order whatever a pickle's dtypes were given
+    assert np.dtype("f8").byteorder == "=" and np.dtype("i4").byteorder == "="
+
+
+# --- 2. memory bombs of a few bytes ----------------------------------------------------------------------------
+
+def _shared_state_scenario(tracks: int, steps: int) -> bytes:
+    """A scenario whose tracks all hold the same state dict (one copy in the file, `tracks` references)."""
+    state = {"position": np.zeros((steps, 3)), "heading": np.zeros(steps), "velocity": np.zeros((steps, 2)),
+             "valid": np.ones(steps), "length": np.full(steps, 4.0), "width": np.full(steps, 2.0)}
+    track = {"type": "VEHICLE", "state": state, "metadata": {"type": "VEHICLE"}}
+    sd = {"id": "shared", "length": steps, "metadata": {"scenario_id": "shared", "sdc_id": "0", "dataset": "waymo"},
+          "tracks": {str(i): track for i in range(tracks)}}
+    return pickle.dumps(sd, protocol=4)
+
+
+@pytest.mark.parametrize("blob, refused", [
+    # LONG_BINPUT 0x10000000: the C unpickler sizes its memo to twice that (4.2 GB)
+    (b"\x80\x02Nr\x00\x00\x00\x10.", "memo index 268435456 out of order"),
+    (b"\x80\x02Np268435456\n.", "memo index 268435456 out of order"),
+    # bytearray(3 GiB), 30 bytes: 3.2 GB of zeros
+    (b"\x80\x02c__builtin__\nbytearray\n\x8a\x05\x00\x00\x00\xc0\x00\x85R.", "bytearray() of int"),
+    (b"\x80\x03cbuiltins\nbytes\n\x8a\x05\x00\x00\x00\xc0\x00\x85R.", "bytes() of int"),
+    # BYTEARRAY8 / BINBYTES8 / BINUNICODE8 announcing 3 GiB
+    (b"\x80\x05\x96\x00\x00\x00\xc0\x00\x00\x00\x00.", "a length of 3221225472 bytes"),
+    (b"\x80\x05\x8e\x00\x00\x00\xc0\x00\x00\x00\x00.", "a length of 3221225472 bytes"),
+    (b"\x80\x05\x8d\x00\x00\x00\xc0\x00\x00\x00\x00.", "a length of 3221225472 bytes"),
+    # an 8 MB scenario whose 600 tracks share one state of 100,000 steps: 2.25 GB once stacked
+    (_shared_state_scenario(600, 100_000), "600 tracks x 100000 steps is more than a file of its size holds"),
+])
+def test_memory_bombs_are_refused_in_little_memory(tmp_path, blob, refused):
+    db = tmp_path / "db"
+    db.mkdir()
+    (db / "sd_bomb.pkl").write_bytes(blob)
+    out = tmp_path / "frames.parquet"
+    res = r2s_child("extract", "scenarionet", str(db), "--out", str(out), "--categories", "all")
+    assert_refused_small(res, out, refused)
+
+
+def test_tuples_nested_deeper_than_a_hash_can_follow_are_refused(tmp_path):
+    # hashing a tuple recurses in C without a depth check: a million nested tuples as a dict key crash Python
+    blob = b"\x80\x02}" + b")" + b"\x85" * 1_000_000 + b"Ns."
+    db = tmp_path / "db"
+    db.mkdir()
+    (db / "sd_deep.pkl").write_bytes(blob)
+    out = tmp_path / "frames.parquet"
+    res = r2s_child("extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused_small(res, out, "tuples nested more than 100 deep")
+
+
+# --- 3. the allow-list cannot be changed from inside a pickle --------------------------------------------------
+
+_TWO_LOADS = """
+import sys
+from extractors.base import ExtractError
+from extractors.safe_pickle import load_pickle
+try:
+    load_pickle(sys.argv[1])
+    print("loaded")
+except ExtractError as exc:
+    print("refused:", exc)
+d = load_pickle(sys.argv[2])["counts"]
+print(d.default_factory.__name__)
+"""
+
+
+@pytest.mark.parametrize("state", [
+    b"}X\x07\x00\x00\x00factoryccollections\nOrderedDict\ns",  # {"factory": OrderedDict}: the token's __dict__
+    b"N}X\x07\x00\x00\x00factoryccollections\nOrderedDict\ns\x86",  # (None, {"factory": ...}): setattr
+])
+def test_build_on_a_factory_token_is_refused_and_changes_nothing(tmp_path, state):
+    # BUILD on the shared `builtins.int` token (written as __builtin__.long) would make every later
+    # defaultdict(int) of the process a defaultdict(OrderedDict): a callable the closed set never allowed
+    evil, good = tmp_path / "evil.pkl", tmp_path / "good.pkl"
+    evil.write_bytes(b"\x80\x02c__builtin__\nlong\n" + state + b"b.")
+    import collections
+    good.write_bytes(pickle.dumps({"counts": collections.defaultdict(int, {"a": 1})}, protocol=2))
+    out = subprocess.run([sys.executable, "-c", _TWO_LOADS, str(evil), str(good)], capture_output=True, text=True,
+                         cwd=ROOT, check=True).stdout.splitlines()
+    assert out[0].startswith("refused:") and "__builtin__.long with state set after construction (BUILD)" in out[0]
+    assert out[1] == "int"
+
+
+@pytest.mark.parametrize("key", sorted(_GLOBALS))
+def test_every_name_a_pickle_can_reach_is_immutable_and_refuses_state(key):
+    token = _GLOBALS[key]
+    before = {slot: getattr(token, slot) for cls in type(token).__mro__ for slot in getattr(cls, "__slots__", ())}
+    with pytest.raises(RefusedGlobal):
+        token.__setstate__({"factory": dict})
+    for slot in [*before, "__dict__", "anything"]:
+        with pytest.raises(AttributeError):
+            setattr(token, slot, dict)
+    assert not hasattr(token, "__dict__") and isinstance(token, _Token)
+    assert {slot: getattr(token, slot) for slot in before} == before
+    # and not through the stdlib's own unpickler either (a BUILD there calls __setstate__)
+    with pytest.raises(RefusedGlobal):
+        pickle._Unpickler.dispatch[pickle.BUILD[0]](_FakeStack(token, {"factory": dict}))
+    assert {slot: getattr(token, slot) for slot in before} == before
+
+
+class _FakeStack:
+    def __init__(self, inst, state):
+        self.stack = [inst, state]
