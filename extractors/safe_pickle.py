@@ -19,9 +19,11 @@ stack machine of our own: pickle's pure-Python Unpickler with every opcode that 
   its bytes). Every other BUILD is refused (numpy.dtype's own __setstate__ would take fields, flags and item
   sizes from the pickle: an object field over raw bytes crashed the interpreter).
 - Memo indices must be the next free one (what every pickler writes); a length is never more than the bytes
-  left; bytearray and bytes are made only from bytes read; tuples nest at most MAX_TUPLE_DEPTH deep (hashing a
-  tuple recurses in C with no depth check: a million nested tuples used as a dict key crash the interpreter);
-  INST, OBJ, persistent ids and out-of-band buffers, which no ScenarioNet writer uses, are refused.
+  left; bytearray and bytes are made only from bytes read. Tuples nest at most MAX_TUPLE_DEPTH deep and hold at
+  most the file's size in items spelled out (inner tuples counted each time they occur): hashing a tuple recurses
+  in C with no depth check (a million nested tuples as a dict key crash the interpreter) and visits every item
+  spelled out (64 levels of t = (t, t), a few bytes through the memo, would hash for ever). INST, OBJ, EXT,
+  persistent ids and out-of-band buffers, which no ScenarioNet writer uses, are refused.
 
 So whatever the bytes, loading either gives plain data (containers, numbers, strings, numeric arrays, and the
 inert tokens) or raises one ExtractError; what it builds is at most a fixed multiple of the file's size.
@@ -65,7 +67,7 @@ class RefusedGlobal(InputError, pickle.UnpicklingError):
     take for more than numbers."""
 
 
-class _Malformed(pickle.UnpicklingError):
+class _Malformed(InputError, pickle.UnpicklingError):
     """A pickle that breaks the rules every pickler follows (memo order, lengths, nesting)."""
 
 
@@ -347,7 +349,7 @@ class _SafeUnpickler(_P):
         super().__init__(_ExactFile(data))
         self._size = len(data)
         self._pending: dict[int, tuple[Any, Callable[[Any, Any], None]]] = {}  # id -> (object, its one BUILD)
-        self._deep: dict[int, tuple[int, tuple]] = {}  # id -> (depth, tuple) of tuples holding tuples
+        self._deep: dict[int, tuple[int, int, tuple]] = {}  # id -> (depth, size, tuple) of tuples of tuples
 
     def find_class(self, module: str, name: str) -> Any:
         try:
@@ -369,15 +371,21 @@ class _SafeUnpickler(_P):
         return made
 
     def _tuple(self, items: list | tuple) -> tuple:
-        deep, depth = self._deep, 0
+        """A tuple, with its depth and its size spelled out (items, counting those of inner tuples every time
+        they occur): what hashing it costs, in C stack and in time. A tuple of tuples is kept in _deep (alive,
+        so that its id stays its own); a flat one's depth is 1 and its size its length."""
+        deep, depth, size = self._deep, 0, len(items)
         for x in items:
             if type(x) is tuple and x:
-                depth = max(depth, deep[id(x)][0] if id(x) in deep else 1)
+                d, n, _ = deep[id(x)] if id(x) in deep else (1, len(x), None)
+                depth, size = max(depth, d), size + n
         t = tuple(items)
         if depth:
             if depth >= MAX_TUPLE_DEPTH:
                 raise _Malformed(f"tuples nested more than {MAX_TUPLE_DEPTH} deep")
-            deep[id(t)] = (depth + 1, t)  # kept alive so that the id stays this tuple's
+            if size > self._size:  # only a tuple shared through the memo is larger spelled out than its file
+                raise _Malformed(f"a tuple of {size} items spelled out, more than its file's {self._size} bytes")
+            deep[id(t)] = (depth + 1, size, t)
         return t
 
     def _into(self, kind: str) -> Any:

@@ -156,7 +156,8 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
 
 def _kind(value: Any) -> str:
     """What a value of a pickle is, in a message: its type, never its repr (which may nest without end)."""
-    return f"a {type(value).__module__}.{type(value).__qualname__}".replace("builtins.", "")
+    name = f"{type(value).__module__}.{type(value).__qualname__}".removeprefix("builtins.")
+    return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
 
 
 def _shown(value: Any) -> str:

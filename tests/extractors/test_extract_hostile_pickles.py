@@ -107,7 +107,7 @@ OBJECT_FIELD = (3, "|", None, ("a",), {"a": (np.dtype("O"), 0)}, 8, 1, 0)  # fla
 STEPS = 11  # the shipped scene-0796 excerpt
 
 
-@pytest.mark.parametrize("heading, refused", [
+NOT_PLAIN = [
     # a void dtype given an object field: the array's bytes become object pointers (segfault on reading)
     (_Array((STEPS,), _Dtype("V8", OBJECT_FIELD), b"\x41" * 8 * STEPS), "numpy.dtype 'V8'"),
     # a float dtype given the same fields by its state (the field's object dtype is refused first), or plain
@@ -122,8 +122,12 @@ STEPS = 11  # the shipped scene-0796 excerpt
     # a structured array of numbers, and strings
     (np.zeros(STEPS, dtype=[("x", "f8")]), "numpy.dtype 'V8'"),
     (np.array(["1.5"] * STEPS), "numpy.dtype 'U3'"),
-])
-@pytest.mark.parametrize("jobs", ["1", "2"])
+]
+
+
+# every case with one reader; the ones made by hand (the crashes on main) also with two worker processes
+@pytest.mark.parametrize("heading, refused, jobs", [(*case, "1") for case in NOT_PLAIN]
+                         + [(*case, "2") for case in NOT_PLAIN if isinstance(case[0], _Array)])
 def test_dtypes_other_than_plain_numbers_are_refused_without_a_crash(tmp_path, heading, refused, jobs):
     db = database_with(tmp_path, "sd_evil.pkl", with_heading(heading))
     out = tmp_path / "frames"
@@ -261,3 +265,119 @@ def test_every_name_a_pickle_can_reach_is_immutable_and_refuses_state(key):
 class _FakeStack:
     def __init__(self, inst, state):
         self.stack = [inst, state]
+
+
+# --- 4. valid pickles that are not scenarios: one line and exit 2, never an internal error ---------------------
+
+def _nested_lists(depth: int) -> bytes:
+    """A list nested `depth` deep as protocol 2 opcodes (MARK x depth, [], LIST x depth): pickle.dumps itself
+    recurses and cannot write it."""
+    return b"(" * depth + b"]" + b"l" * depth
+
+
+def _spliced(sd: dict, where: tuple, blob: bytes) -> bytes:
+    """sd pickled (protocol 2, no frames) with the value at `where` replaced by the opcodes `blob`."""
+    target = sd
+    for key in where[:-1]:
+        target = target[key]
+    target[where[-1]] = "SPLICE"
+    data = pickle.dumps(sd, protocol=2)
+    mark = b"X\x06\x00\x00\x00SPLICE"
+    assert data.count(mark) == 1
+    return data.replace(mark, blob)
+
+
+SHARED_TUPLES = b")" + b"2\x86" * 64  # t = (); 64 x t = (t, t) (DUP, TUPLE2): 2**64 leaves to hash or print
+
+
+def _first_track(sd: dict) -> str:
+    return next(t for t in sd["tracks"] if t != sd["metadata"]["sdc_id"])
+
+
+def _case(name: str) -> bytes:
+    sd = real_scenario()
+    tid, steps = _first_track(sd), int(sd["length"])
+    state = sd["tracks"][tid]["state"]
+    if name == "ndarray":
+        return pickle.dumps(np.arange(3.0), protocol=4)
+    if name == "heading-strings":
+        state["heading"] = ["1.5"] * steps
+    elif name == "heading-huge-int":
+        state["heading"] = [10**400] * steps
+    elif name == "heading-huge-scalar":
+        state["heading"] = 10**400
+    elif name == "position-ragged":
+        state["position"] = [[1.0, 2.0], [3.0]] * steps
+    elif name == "nested-scenario-id":
+        return _spliced(sd, ("metadata", "scenario_id"), _nested_lists(100_000))
+    elif name == "shared-scenario-id":
+        return _spliced(sd, ("metadata", "scenario_id"), SHARED_TUPLES)
+    elif name == "shared-track-id":
+        sd["tracks"]["SPLICE"] = sd["tracks"].pop(tid)
+        data = pickle.dumps(sd, protocol=2)
+        return data.replace(b"X\x06\x00\x00\x00SPLICE", SHARED_TUPLES)
+    elif name == "length-inf":
+        sd["length"] = float("inf")
+    elif name == "track-metadata-array":
+        sd["tracks"][tid]["metadata"] = np.arange(3.0)
+    elif name == "tracks-list":
+        sd["tracks"] = list(sd["tracks"].values())
+    elif name == "metadata-list":
+        sd["metadata"] = [sd["metadata"]]
+    return pickle.dumps(sd, protocol=4)
+
+
+@pytest.mark.parametrize("name, message", [
+    ("ndarray", "is not a ScenarioNet scenario (it holds a numpy.ndarray, not a dict)"),
+    ("heading-strings", "state.heading is a list that is not an array of numbers"),
+    ("heading-huge-int", "state.heading is a list that is not an array of numbers"),
+    ("heading-huge-scalar", "state.heading is an int that is not an array of numbers"),
+    ("position-ragged", "state.position is a list that is not an array of numbers"),
+    ("nested-scenario-id", "metadata.scenario_id is a list, not a scenario name"),
+    ("shared-scenario-id", "items spelled out, more than its file's"),
+    ("shared-track-id", "items spelled out, more than its file's"),
+    ("length-inf", "scenario length is a float, not a number of steps"),
+    ("track-metadata-array", "is not a ScenarioNet track"),
+    ("tracks-list", "tracks is a list, not a dict of tracks"),
+    ("metadata-list", "is not a ScenarioNet scenario (missing 'metadata')"),
+])
+def test_scenarios_that_are_not_scenarionet_data_exit_2(tmp_path, name, message):
+    db = tmp_path / "db"
+    db.mkdir()
+    (db / "sd_odd.pkl").write_bytes(_case(name))
+    out = tmp_path / "frames.parquet"
+    res = r2s_child("extract", "scenarionet", str(db), "--out", str(out), "--categories", "all")
+    assert_refused_small(res, out, message)
+
+
+@pytest.mark.parametrize("index, message", [
+    (np.arange(4.0), "dataset_mapping.pkl is not a ScenarioNet index (it holds a numpy.ndarray, not a dict)"),
+    ({"SPLICE": ""}, "items spelled out, more than its file's"),
+    ({"sd_nuscenes_v1.0-mini_scene-0103.pkl": "SPLICE"}, "maps to a tuple, not a folder"),
+    ({"sd_nuscenes_v1.0-mini_scene-0103.pkl": [[[]]] * 3}, "maps to a list, not a folder"),
+    ({3: ""}, "entry 3 is not the file name of a scenario"),
+])
+def test_odd_database_indexes_exit_2(tmp_path, index, message):
+    db = tmp_path / "db"
+    shutil.copytree(SCENARIOS, db)
+    data = pickle.dumps(index, protocol=2)
+    if message.startswith("maps to a tuple"):  # a small tuple: a value is not hashed
+        data = data.replace(b"X\x06\x00\x00\x00SPLICE", b")" + b"2\x86" * 3)
+    (db / "dataset_mapping.pkl").write_bytes(data.replace(b"X\x06\x00\x00\x00SPLICE", SHARED_TUPLES))
+    out = tmp_path / "frames.parquet"
+    res = r2s_child("extract", "scenarionet", str(db), "--out", str(out))
+    assert_refused_small(res, out, message)
+
+
+def test_odd_timestamps_leave_the_timestamp_empty(tmp_path, capsys):
+    from tests.support.extract import r2s
+
+    sd = real_scenario()
+    sd["metadata"]["ts"] = [10**400] * int(sd["length"])
+    db = tmp_path / "db"
+    db.mkdir()
+    (db / "sd.pkl").write_bytes(pickle.dumps(sd, protocol=4))
+    out = tmp_path / "frames.parquet"
+    assert r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out)).returncode == 0
+    import pandas as pd
+    assert pd.read_parquet(out)["timestamp_us"].isna().all()
