@@ -559,6 +559,10 @@ def load_pickle(path: str | os.PathLike, max_bytes: int = MAX_PICKLE_BYTES) -> A
     except MemoryError:
         raise ExtractError(f"{path}: pickle needs more memory than is available") from None
     except _Malformed as exc:
-        raise ExtractError(f"{path} is not a readable pickle ({str(exc)[:200]})") from None
+        raise ExtractError(f"{path} is not a readable pickle ({_one_line(exc, 200)})") from None
     except Exception as exc:  # corrupt or truncated data raises almost anything from inside pickle / numpy
-        raise ExtractError(f"{path} is not a readable pickle ({type(exc).__name__}: {str(exc)[:100]})") from None
+        raise ExtractError(f"{path} is not a readable pickle ({type(exc).__name__}: {_one_line(exc, 100)})") from None
+
+
+def _one_line(exc: BaseException, limit: int) -> str:
+    return " ".join(str(exc).split())[:limit]

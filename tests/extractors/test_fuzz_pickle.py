@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 from tests.support import ROOT
 from tests.support.extract import EXCERPT
+from tests.support.mutate import EDITS, mutated
 
 SEEDS = [EXCERPT / "scenarionet" / name for name in
          ("dataset_mapping.pkl", "dataset_summary.pkl", "sd_nuscenes_v1.0-mini_scene-0796.pkl")]
@@ -157,27 +158,12 @@ def fuzz_opcode_programs(counts: collections.Counter) -> None:
 
 def fuzz_mutated_pickles(counts: collections.Counter) -> None:
     seeds = [p.read_bytes() for p in SEEDS]
-    mutation = st.tuples(st.sampled_from(["flip", "insert", "delete", "duplicate", "truncate"]),
-                         st.floats(0, 1), st.floats(0, 1), st.binary(min_size=1, max_size=8))
 
     @settings(derandomize=True, max_examples=300, deadline=None, database=None,
               suppress_health_check=list(HealthCheck))
-    @given(st.sampled_from(range(len(seeds))), st.lists(mutation, min_size=1, max_size=4))
-    def run(seed, mutations):
-        data = bytearray(seeds[seed])
-        for kind, where, span, blob in mutations:
-            i, n = int(where * len(data)), max(1, int(span * 64))
-            if kind == "flip":
-                data[i:i + len(blob)] = bytes(a ^ b for a, b in zip(data[i:i + len(blob)], blob))
-            elif kind == "insert":
-                data[i:i] = blob
-            elif kind == "delete":
-                del data[i:i + n]
-            elif kind == "duplicate":
-                data[i:i] = data[i:i + n]
-            else:
-                del data[i:]
-        load_or_refuse(bytes(data), counts)
+    @given(st.sampled_from(range(len(seeds))), EDITS)
+    def run(seed, edits):
+        load_or_refuse(mutated(seeds[seed], edits), counts)
     run()
 
 
