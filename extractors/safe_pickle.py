@@ -540,10 +540,13 @@ class _SafeUnpickler(_P):
 
 def load_pickle(path: str | os.PathLike, max_bytes: int = MAX_PICKLE_BYTES) -> Any:
     """Unpickle a data file through the stack machine above; every failure is one ExtractError naming the file."""
-    try:  # a regular file only (never a FIFO or /dev/zero), read at most max_bytes + 1 bytes
-        data = read_regular(path, max_bytes)
+    try:  # a regular file only (never a FIFO or /dev/zero), read at most max_bytes + 1 bytes; no more than its
+        # size + 1 either, since read(n) reserves n bytes up front (2 GiB of address space for every pickle)
+        size = os.stat(path).st_size
+        data = read_regular(path, min(size, max_bytes))
     except FileTooLarge:
-        raise ExtractError(f"{path} is larger than the {max_bytes / 2**20:.0f} MB limit") from None
+        why = f"larger than the {max_bytes / 2**20:.0f} MB limit" if size > max_bytes else "growing while it is read"
+        raise ExtractError(f"{path} is {why}") from None
     except OSError as exc:
         raise ExtractError(f"cannot read {path}: {exc.strerror or exc}") from None
     if not data.startswith(b"\x80"):
