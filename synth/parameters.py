@@ -31,6 +31,20 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from synth.config import SynthConfig
+from synth.draws import (
+    HEADING,
+    REACH_SLACK,
+    SPEED,
+    XY,
+    Arc,
+    Draws,
+    Pose,
+    Reach,
+    clipped,
+    disc_plus,
+    inside,
+    rotated,
+)
 from synth.dsl import (
     DIRECTIONS,
     AbsoluteHeading,
@@ -42,96 +56,8 @@ from synth.dsl import (
     RelativeHeading,
 )
 from synth.geometry import bearing, normalize, signed, to_local
-from synth.parts.motion import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary
 from synth.parts.position import sampled_distance
 from synth.scene import EGO_ID, Entity, Scene
-
-# Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
-REACH_SLACK = 1e-6
-
-
-@dataclass
-class Pose:
-    """The values of one entity the parts write (mutable: a sampler's working state)."""
-
-    x: float = 0.0
-    y: float = 0.0
-    heading: float = 0.0
-    speed: float = 0.0  # m/s (motion); 0 for an entity without a motion clause, as Scenic's default
-
-
-@dataclass(frozen=True)
-class Arc:
-    """Headings within `half` degrees of `mid`; half >= 180 is every heading."""
-
-    mid: float
-    half: float
-
-    @property
-    def full(self) -> bool:
-        return self.half >= 180.0
-
-    def widened(self, by: float) -> Arc:
-        return Arc(self.mid, min(180.0, self.half + by))
-
-
-@dataclass(frozen=True)
-class Reach:
-    """Where an entity can be: its centre within r of (x, y), its heading in the arc."""
-
-    x: float
-    y: float
-    r: float
-    heading: Arc
-
-
-XY, HEADING, SPEED = "xy", "heading", "speed"  # the fields of a Pose that clauses write and read
-
-
-class Draws:
-    """One clause of a statement: the parameters Scenic draws for it and what they make of the entity.
-
-    `writes` is the Pose field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
-    entity (set by an earlier clause of the statement): what a sampler must re-evaluate when something moves.
-    `lo` / `hi` bound the box of its parameters.
-    """
-
-    ref: str | None
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
-    writes: str
-    reads: tuple[str, ...] = ()
-    reads_own: tuple[str, ...] = ()
-
-    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
-        raise NotImplementedError
-
-    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        raise NotImplementedError
-
-    def reach(self, own: Reach, ref: Reach | None) -> Reach:
-        raise NotImplementedError
-
-    def area(self, p: Sequence[float], ref: Pose | None) -> float:
-        """Jacobian of the map from parameters to the field it writes (1: volume-preserving)."""
-        return 1.0
-
-    requires = False  # does the emitted text add a requirement beyond the box (`allowed`)?
-
-    def allowed(self, ref: Pose | None) -> bool:
-        """That requirement (Scenic rejects a draw that fails it)."""
-        return True
-
-
-def _clip(v: float, lo: float, hi: float) -> float:
-    return lo if v < lo else hi if v > hi else v
-
-
-def _offset(angle: float, lateral: float, forward: float) -> tuple[float, float]:
-    """(lateral @ forward).rotatedBy(angle): Scenic's vector rotation, counter-clockwise, degrees."""
-    t = math.radians(angle)
-    c, s = math.cos(t), math.sin(t)
-    return (lateral * c - forward * s, lateral * s + forward * c)
 
 
 def _sector_disc(mid: float, half: float, r0: float, r1: float) -> tuple[float, float, float]:
@@ -146,12 +72,8 @@ def _sector_disc(mid: float, half: float, r0: float, r1: float) -> tuple[float, 
     cw = math.cos(math.radians(half))
     rho, rad = min(((rho, max(math.sqrt(max(0.0, rho * rho + r * r - 2 * rho * r * cw)) for r in (r0, r1)))
                     for rho in (r1 * k / 8 for k in range(9))), key=lambda t: t[1])
-    ox, oy = _offset(mid, 0.0, rho)
+    ox, oy = rotated(mid, 0.0, rho)
     return (ox, oy, rad)
-
-
-def _disc_plus(ref: Reach, dx: float, dy: float, r: float, heading: Arc) -> Reach:
-    return Reach(ref.x + dx, ref.y + dy, ref.r + r + REACH_SLACK, heading)
 
 
 # ------------------------------------------------------------------------------------------------ positions
@@ -168,7 +90,7 @@ class SectorDraws(Draws):
     reads = (XY, HEADING)
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
-        dx, dy = _offset(ref.heading + self.phi + p[1], 0.0, p[0])
+        dx, dy = rotated(ref.heading + self.phi + p[1], 0.0, p[0])
         own.x, own.y = ref.x + dx, ref.y + dy
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
@@ -182,7 +104,7 @@ class SectorDraws(Draws):
     def reach(self, own: Reach, ref: Reach | None) -> Reach:
         half = ref.heading.half + self.hi[1]
         cx, cy, r = _sector_disc(ref.heading.mid + self.phi, half, self.lo[0], self.hi[0])
-        return _disc_plus(ref, cx, cy, r, own.heading)
+        return disc_plus(ref, cx, cy, r, own.heading)
 
 
 @dataclass(frozen=True)
@@ -196,7 +118,7 @@ class RelativeXYDraws(Draws):
     reads = (XY, HEADING)
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
-        dx, dy = _offset(ref.heading, p[0], p[1])
+        dx, dy = rotated(ref.heading, p[0], p[1])
         own.x, own.y = ref.x + dx, ref.y + dy
 
     def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
@@ -209,8 +131,8 @@ class RelativeXYDraws(Draws):
         # The rectangle's centre turns with REF's heading: a chord of at most 2 m sin(half / 2).
         half = min(ref.heading.half, 180.0)
         chord = 2 * m * math.sin(math.radians(half) / 2)
-        dx, dy = _offset(ref.heading.mid, mx, my)
-        return _disc_plus(ref, dx, dy, corner + chord, own.heading)
+        dx, dy = rotated(ref.heading.mid, mx, my)
+        return disc_plus(ref, dx, dy, corner + chord, own.heading)
 
 
 @dataclass(frozen=True)
@@ -312,66 +234,10 @@ class AbsoluteHeadingDraws(Draws):
         return Reach(own.x, own.y, own.r, Arc(normalize((self.lo[0] + self.hi[0]) / 2), min(180.0, half)))
 
 
-# ------------------------------------------------------------------------------------------------- motion
-
-@dataclass(frozen=True)
-class SpeedDraws(Draws):
-    """A motion clause (synth.parts.motion): Scenic draws the speed uniformly in [a, b], a and b following the
-    reference's speed and clamped at 0 (`Range(0, dsl__V_STOP)`, dsl__speed_like, dsl__speed_relative, an
-    absolute Range). The parameter is that uniform draw t in [0, 1], speed = a + (b - a) t: a fixed box, while
-    the interval moves with the reference."""
-
-    ref: str | None
-    offsets: tuple[float, float]  # added to the reference's speed (0 without one), then clamped at 0
-    lo: tuple[float, ...] = (0.0,)
-    hi: tuple[float, ...] = (1.0,)
-    writes = SPEED
-
-    @property
-    def reads(self) -> tuple[str, ...]:
-        return () if self.ref is None else (SPEED,)
-
-    def interval(self, ref: Pose | None) -> tuple[float, float]:
-        base = 0.0 if ref is None else ref.speed
-        return (max(0.0, base + self.offsets[0]), max(0.0, base + self.offsets[1]))
-
-    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
-        a, b = self.interval(ref)
-        own.speed = a + (b - a) * p[0]
-
-    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        a, b = self.interval(ref)
-        return ((own.speed - a) / (b - a) if b > a else 0.0,)
-
-    def area(self, p: Sequence[float], ref: Pose | None) -> float:
-        a, b = self.interval(ref)
-        return b - a
-
-    @property
-    def requires(self) -> bool:
-        # A relative Range wholly below 0 holds no speed unless the reference is fast enough: the emitted text
-        # requires it (MotionPart.scenic_requirements), so Scenic rejects such draws.
-        return self.ref is not None and self.offsets[1] < 0.0
-
-    def allowed(self, ref: Pose | None) -> bool:
-        return not self.requires or ref.speed >= -self.offsets[1]
-
-    def reach(self, own: Reach, ref: Reach | None) -> Reach:
-        return own  # a speed places nothing
-
-
 def _angle_near(angle: float, lo: float, hi: float) -> float:
     """The representative of `angle` (mod 360) in [lo, hi], or outside it the one nearest to it."""
     a = lo + normalize(angle - lo)
     return a if a <= hi or a - hi < (lo + 360.0) - a else a - 360.0
-
-
-def clipped(draws: Draws, values: Sequence[float]) -> tuple[float, ...]:
-    return tuple(_clip(v, lo, hi) for v, lo, hi in zip(values, draws.lo, draws.hi))
-
-
-def inside(draws: Draws, values: Sequence[float]) -> bool:
-    return all(lo <= v <= hi for v, lo, hi in zip(values, draws.lo, draws.hi))
 
 
 # ------------------------------------------------------------------------------------------------- programs
@@ -397,21 +263,9 @@ def heading_draws(head, config: SynthConfig) -> Draws:
     raise TypeError(f"not a DSL heading: {head!r}")
 
 
-def motion_draws(motion, config: SynthConfig) -> Draws:
-    if isinstance(motion, Stationary):
-        return SpeedDraws(None, (0.0, config.v_stop))
-    if isinstance(motion, MovingLike):
-        return SpeedDraws(motion.ref, (-config.dv, config.dv))
-    if isinstance(motion, RelativeSpeed):
-        return SpeedDraws(motion.ref, (motion.speed.lo, motion.speed.hi))
-    if isinstance(motion, AbsoluteSpeed):
-        return SpeedDraws(None, (motion.speed.lo, motion.speed.hi))
-    raise TypeError(f"not a DSL motion: {motion!r}")
-
-
 # A clause's Draws, by the name of its part (synth.parts): a new part is one more entry.
 DRAWS: dict[str, Callable[[object, SynthConfig], Draws]] = {"position": position_draws, "heading": heading_draws,
-                                                             "motion": motion_draws}
+                                                             "motion": lambda clause, config: clause.draws(config)}
 
 
 @dataclass(frozen=True)
@@ -487,3 +341,7 @@ def parameterise(program: Program, scene: Scene, config: SynthConfig) -> Paramet
         refs.append(tuple(None if p.ref is None else index[p.ref] for p in ps))
     return Parameterisation(ids, (scene.ego.type, *(s.type for s in program.statements)), scene.ego,
                             tuple(draws), tuple(refs))
+
+
+__all__ = ["HEADING", "REACH_SLACK", "SPEED", "XY", "Arc", "Draws", "Parameterisation", "Pose", "Reach", "clipped",
+           "inside", "parameterise"]

@@ -37,9 +37,9 @@ from synth.syntax import Line
 from synth.tables import SceneArrays
 
 if TYPE_CHECKING:
+    from synth.draws import Draws
     from synth.smt.backend import ExactBackend, SolverBackend
 
-Clause = Any  # a part's clause dataclass: .cost, .ref, str()
 Formula = Any  # a solver term of the backend at hand
 
 
@@ -49,9 +49,13 @@ class Part(ABC):
     # Codes that need no reference: always available, like ego, so they are recorded in ego's row (index 0).
     refless: ClassVar[frozenset[int]] = frozenset()
     keyword: ClassVar[str]  # the Scenic specifier the clause becomes (at, facing, with speed)
-    # Every kind of clause the part has, grammar order: the one classification the report, its plots and the
-    # pictures read (labels, costs, how a picture draws it).
-    clause_kinds: ClassVar[tuple[ClauseKind, ...]]
+    clauses: ClassVar[tuple[type[Clause], ...]]  # its clause kinds, grammar order
+
+    @property
+    def clause_kinds(self) -> tuple[ClauseKind, ...]:
+        """Every kind of clause the part has, grammar order: the one classification the report, its plots and
+        the pictures read (labels, costs, how a picture draws it)."""
+        return tuple(k for c in self.clauses for k in c.kinds())
 
     @property
     def kinds(self) -> tuple[str, ...]:
@@ -103,19 +107,17 @@ class Part(ABC):
     def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
         """(constraints, variables) whose unique model values are the exact quantity (see quantity())."""
 
-    @abstractmethod
     def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Formula:
-        """The clause's semantics on the scene, Range bounds at their printed values (certification)."""
+        return clause.formula(backend, e, ref)
 
-    @abstractmethod
     def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
-        """Ways the clause could fail under a perturbation within the bounds: each must be unsat."""
+        return clause.violations(backend, e, ref)
 
     # ------------------------------------------------------------------------------- exact, without a solver
     def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
         """formula(), decided rigorously without the solver (synth.intervals; exact rationals where cheap):
         True / False, or None where it cannot tell and the solver must. A part may leave it all to the solver."""
-        return None
+        return clause.decide(e, ref, config)
 
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...] | None:
         """The quantity measure_terms pins down, without the solver, for centring Ranges: the exact value
@@ -145,9 +147,8 @@ class Part(ABC):
         """The same with Ranges that cover every perturbation (robust synthesis)."""
 
     # ------------------------------------------------------------------------------- semantics
-    @abstractmethod
     def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-        """The paper's semantics read literally, in floats (independent of the oracles)."""
+        return clause.holds(e, ref, config)
 
     @abstractmethod
     def observed(self, e: Entity) -> str:
@@ -159,17 +160,15 @@ class Part(ABC):
         """The clause at the line's cursor."""
 
     # ------------------------------------------------------------------------------- Scenic
-    @abstractmethod
     def scenic(self, clause: Clause, at: str) -> str:
-        """The Scenic value of the specifier `keyword`; `at` names the entity's own position."""
+        return clause.scenic(at)
 
+    # Until position and heading are clause kinds too (their clauses are plain dataclasses, with neither).
     def needs_own_position(self, clause: Clause) -> bool:
-        """Does the Scenic value refer to the entity's own position (which a specifier cannot name)?"""
-        return False
+        return isinstance(clause, Clause) and clause.needs_own_position()
 
     def scenic_requirements(self, clause: Clause, entity: str) -> list[str]:
-        """Scenic `require` lines that keep sampled values inside the clause where a value alone cannot."""
-        return []
+        return clause.scenic_requirements(entity) if isinstance(clause, Clause) else []
 
     def scenic_prelude(self, config: SynthConfig) -> str:
         """Helpers the part's Scenic values use beyond the paper's prelude."""
@@ -200,6 +199,86 @@ class ClauseKind:
 
     def matches(self, clause: Clause) -> bool:
         return type(clause) is self.clause and (self.field is None or getattr(clause, self.field[0]) == self.field[1])
+
+
+class Clause(ABC):
+    """A clause kind: one form of a part's grammar, a frozen dataclass of its fields (`ref`: its reference, None
+    for the forms without one), that knows everything the core asks of a clause. Subclasses declare their fields,
+    `cost`, `text` and the report's `labels`, and implement the abstract methods.
+
+      text         the DSL text, str.format'ed with the clause as `c` (printing; parsing is the part's grammar)
+      holds        the paper's semantics read literally, in floats (the independent checker, synth.semantics)
+      observed     what the checker reports of e when the clause does not hold
+      decide       formula(), decided rigorously without a solver (None: the solver must)
+      formula      the semantics as an SMT formula, Range bounds at their printed values (certification)
+      violations   ways the clause could fail under a perturbation within the bounds: each must be unsat
+      scenic       the Scenic value of the part's specifier (Part.keyword); `at` names the entity's position
+      draws        what Scenic draws for it (synth.draws: the sampler's parameters)
+      labels       the report's kinds: one, or one per value of the field `label_field` (four directions)
+    """
+
+    cost: ClassVar[int]
+    text: ClassVar[str]
+    labels: ClassVar[tuple[str, ...]]
+    label_field: ClassVar[str | None] = None
+    drawn_as: ClassVar[str]  # pipeline.variants.render: an arrow from the reference, or a mark on the entity
+    ref: str | None  # a dataclass field, or a class attribute None where the form has no reference
+
+    def __str__(self) -> str:
+        return self.text.format(c=self)
+
+    @property
+    def kind(self) -> str:
+        """The report label of this clause (one of its class's labels)."""
+        return self.labels[0] if self.label_field is None else getattr(self, self.label_field)
+
+    @classmethod
+    def kinds(cls) -> tuple[ClauseKind, ...]:
+        """The report's classification of this class: one kind, or one per value of label_field."""
+        if cls.label_field is None:
+            return (ClauseKind(cls.labels[0], cls, cls.drawn_as),)
+        return tuple(ClauseKind(label, cls, cls.drawn_as, (cls.label_field, label)) for label in cls.labels)
+
+    # ------------------------------------------------------------------------------- semantics
+    @abstractmethod
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        """The paper's semantics read literally, in floats (independent of the oracles)."""
+
+    @abstractmethod
+    def observed(self, e: Entity) -> str:
+        """What the checker reports of e when the clause does not hold."""
+
+    # ------------------------------------------------------------------------------- exact
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        """formula(), decided rigorously without the solver (synth.intervals; exact rationals where cheap):
+        True / False, or None where it cannot tell and the solver must."""
+        return None
+
+    @abstractmethod
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Formula:
+        """The clause's semantics on the scene, Range bounds at their printed values (certification)."""
+
+    @abstractmethod
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Formula]:
+        """Ways the clause could fail under a perturbation within the bounds: each must be unsat."""
+
+    # ------------------------------------------------------------------------------- Scenic
+    @abstractmethod
+    def scenic(self, at: str) -> str:
+        """The Scenic value of its part's specifier (Part.keyword); `at` names the entity's own position."""
+
+    def needs_own_position(self) -> bool:
+        """Does the Scenic value refer to the entity's own position (which a specifier cannot name)?"""
+        return False
+
+    def scenic_requirements(self, entity: str) -> list[str]:
+        """Scenic `require` lines that keep sampled values inside the clause where a value alone cannot."""
+        return []
+
+    # ------------------------------------------------------------------------------- sampler
+    @abstractmethod
+    def draws(self, config: SynthConfig) -> Draws:
+        """What Scenic draws for the clause, in its own parameterisation (synth.draws)."""
 
 
 @dataclass(frozen=True)

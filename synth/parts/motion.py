@@ -15,6 +15,7 @@ relation holds robustly iff it holds at the corners of those intervals, and a Ra
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING, Any
@@ -22,7 +23,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from synth.config import SynthConfig
-from synth.parts.base import Clause, ClauseKind, Part
+from synth.draws import SPEED, Draws, Pose, Reach
+from synth.parts.base import Clause, Part
 from synth.perturbation import Bounds, covering, speed_box
 from synth.ranges import centred
 from synth.scene import Entity
@@ -37,50 +39,221 @@ STATIONARY, LIKE = 0, 1
 SPEED_EPS = 1e-9  # m/s: the checker's slack for float rounding, as LENGTH_EPS for metres
 
 
+class MotionClause(Clause):
+    """What the motion clauses share: the checker's view of an entity's speed, and Scenic's speed specifier."""
+
+    def observed(self, e: Entity) -> str:
+        return "no speed" if e.speed is None else f"speed {e.speed:.3f}"
+
+    @staticmethod
+    def _boxed(backend: ExactBackend, e: Entity) -> tuple[Any, list[Any]]:
+        """A variable over every speed e may have had (speed_box), with its constraints."""
+        lo, hi = speed_box(e, backend.config)
+        v = backend.var("v")
+        return v, [backend.constant(lo) <= v, v <= backend.constant(hi)]
+
+    @staticmethod
+    def _known(e: Entity, ref: Entity | None) -> bool:
+        return e.speed is not None and (ref is None or ref.speed is not None)
+
+
 @dataclass(frozen=True)
-class Stationary:
+class Stationary(MotionClause):
     """`stationary`: speed at most V_STOP, cost 0, no reference."""
 
     cost = 0
     ref = None
+    text = "stationary"
+    labels = ("stationary",)
+    drawn_as = "stationary"
 
-    def __str__(self) -> str:
-        return "stationary"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self._known(e, ref) and e.speed <= config.v_stop + SPEED_EPS
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        # formula() is linear in the speeds, whose terms are rationals of floats and printed bounds: exact.
+        if not self._known(e, ref):
+            return None  # formula's own business (the solver path reports it)
+        return Fraction(e.speed) <= Fraction(config.v_stop)
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const = backend.constant
+        return const(e.speed) <= const(backend.config.v_stop)
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        ve, box = self._boxed(backend, e)
+        return [backend.And(*box, ve > backend.constant(backend.config.v_stop))]
+
+    def scenic(self, at: str) -> str:
+        # Scenic >= 3.1 derives velocity from speed along the heading; speeds are never negative.
+        return "Range(0, dsl__V_STOP)"
+
+    def draws(self, config: SynthConfig) -> SpeedDraws:
+        return SpeedDraws(None, (0.0, config.v_stop))
 
 
 @dataclass(frozen=True)
-class MovingLike:
+class MovingLike(MotionClause):
     """`moving like REF`: speed within DV of REF's, cost 0."""
 
     ref: str
     cost = 0
+    text = "moving like {c.ref}"
+    labels = ("moving like",)
+    drawn_as = "moving_like"
 
-    def __str__(self) -> str:
-        return f"moving like {self.ref}"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self._known(e, ref) and abs(e.speed - ref.speed) <= config.dv + SPEED_EPS
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        if not self._known(e, ref):
+            return None
+        gap = Fraction(e.speed) - Fraction(ref.speed)
+        return -Fraction(config.dv) <= gap <= Fraction(config.dv)
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const, dv = backend.constant, backend.config.dv
+        gap = const(e.speed) - const(ref.speed)
+        return backend.And(gap <= const(dv), -gap <= const(dv))
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        const, dv = backend.constant, backend.config.dv
+        (ve, box), (vr, box_r) = self._boxed(backend, e), self._boxed(backend, ref)
+        gap = ve - vr
+        return [backend.And(*box, *box_r, bad) for bad in (gap > const(dv), -gap > const(dv))]
+
+    def scenic(self, at: str) -> str:
+        return f"dsl__speed_like({self.ref})"
+
+    def draws(self, config: SynthConfig) -> SpeedDraws:
+        return SpeedDraws(self.ref, (-config.dv, config.dv))
 
 
 @dataclass(frozen=True)
-class RelativeSpeed:
+class RelativeSpeed(MotionClause):
     """`moving Range m/s relative to REF`: speed minus REF's speed in the Range, cost 1."""
 
     speed: Range
     ref: str
     cost = 1
+    text = "moving {c.speed} m/s relative to {c.ref}"
+    labels = ("relative speed",)
+    drawn_as = "relative_speed"
 
-    def __str__(self) -> str:
-        return f"moving {self.speed} m/s relative to {self.ref}"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self._known(e, ref) and self.speed.contains(e.speed - ref.speed, SPEED_EPS)
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        if not self._known(e, ref):
+            return None
+        return printed(self.speed.lo) <= Fraction(e.speed) - Fraction(ref.speed) <= printed(self.speed.hi)
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const = backend.constant
+        gap = const(e.speed) - const(ref.speed)
+        return backend.And(const(printed(self.speed.lo)) <= gap, gap <= const(printed(self.speed.hi)))
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        const = backend.constant
+        (ve, box), (vr, box_r) = self._boxed(backend, e), self._boxed(backend, ref)
+        gap = ve - vr
+        bad = (gap < const(printed(self.speed.lo)), gap > const(printed(self.speed.hi)))
+        return [backend.And(*box, *box_r, b) for b in bad]
+
+    def scenic(self, at: str) -> str:
+        return f"dsl__speed_relative({self.ref}, {fmt_number(self.speed.lo)}, {fmt_number(self.speed.hi)})"
+
+    def scenic_requirements(self, entity: str) -> list[str]:
+        # REF's speed + Range(a, b) holds no speed >= 0 when REF is slower than -b: such draws are rejected.
+        if self.speed.hi < 0:
+            return [f"require {self.ref}.speed >= {fmt_number(-self.speed.hi)}"]
+        return []
+
+    def draws(self, config: SynthConfig) -> SpeedDraws:
+        return SpeedDraws(self.ref, (self.speed.lo, self.speed.hi))
 
 
 @dataclass(frozen=True)
-class AbsoluteSpeed:
+class AbsoluteSpeed(MotionClause):
     """`moving Range m/s`: speed in the Range, cost 2."""
 
     speed: Range
     cost = 2
     ref = None
+    text = "moving {c.speed} m/s"
+    labels = ("absolute speed",)
+    drawn_as = "absolute_speed"
 
-    def __str__(self) -> str:
-        return f"moving {self.speed} m/s"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self._known(e, ref) and self.speed.contains(e.speed, SPEED_EPS)
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        if not self._known(e, ref):
+            return None
+        return printed(self.speed.lo) <= Fraction(e.speed) <= printed(self.speed.hi)
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const, se = backend.constant, backend.constant(e.speed)
+        return backend.And(const(printed(self.speed.lo)) <= se, se <= const(printed(self.speed.hi)))
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        const = backend.constant
+        ve, box = self._boxed(backend, e)
+        bad = (ve < const(printed(self.speed.lo)), ve > const(printed(self.speed.hi)))
+        return [backend.And(*box, b) for b in bad]
+
+    def scenic(self, at: str) -> str:
+        # A Range below 0 describes no speed at all; its negative part is never drawn.
+        return f"Range({fmt_number(max(self.speed.lo, 0.0))}, {fmt_number(max(self.speed.hi, 0.0))})"
+
+    def draws(self, config: SynthConfig) -> SpeedDraws:
+        return SpeedDraws(None, (self.speed.lo, self.speed.hi))
+
+
+@dataclass(frozen=True)
+class SpeedDraws(Draws):
+    """What Scenic draws for a motion clause: the speed uniformly in [a, b], a and b following the reference's
+    speed and clamped at 0 (`Range(0, dsl__V_STOP)`, dsl__speed_like, dsl__speed_relative, an absolute Range).
+    The parameter is that uniform draw t in [0, 1], speed = a + (b - a) t: a fixed box, while the interval moves
+    with the reference."""
+
+    ref: str | None
+    offsets: tuple[float, float]  # added to the reference's speed (0 without one), then clamped at 0
+    lo: tuple[float, ...] = (0.0,)
+    hi: tuple[float, ...] = (1.0,)
+    writes = SPEED
+
+    @property
+    def reads(self) -> tuple[str, ...]:
+        return () if self.ref is None else (SPEED,)
+
+    def interval(self, ref: Pose | None) -> tuple[float, float]:
+        base = 0.0 if ref is None else ref.speed
+        return (max(0.0, base + self.offsets[0]), max(0.0, base + self.offsets[1]))
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        a, b = self.interval(ref)
+        own.speed = a + (b - a) * p[0]
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        a, b = self.interval(ref)
+        return ((own.speed - a) / (b - a) if b > a else 0.0,)
+
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
+        a, b = self.interval(ref)
+        return b - a
+
+    @property
+    def requires(self) -> bool:
+        # A relative Range wholly below 0 holds no speed unless the reference is fast enough: the emitted text
+        # requires it (RelativeSpeed.scenic_requirements), so Scenic rejects such draws.
+        return self.ref is not None and self.offsets[1] < 0.0
+
+    def allowed(self, ref: Pose | None) -> bool:
+        return not self.requires or ref.speed >= -self.offsets[1]
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        return own  # a speed places nothing
 
 
 def _decide(margin: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,12 +268,7 @@ class MotionPart(Part):
     relations = MOTION_NAMES
     refless = frozenset({STATIONARY})
     keyword = "with speed"
-    clause_kinds = (
-        ClauseKind("stationary", Stationary, "stationary"),
-        ClauseKind("moving like", MovingLike, "moving_like"),
-        ClauseKind("relative speed", RelativeSpeed, "relative_speed"),
-        ClauseKind("absolute speed", AbsoluteSpeed, "absolute_speed"),
-    )
+    clauses = (Stationary, MovingLike, RelativeSpeed, AbsoluteSpeed)
 
     def perturbed(self, b: Bounds) -> bool:
         return b.speed != 0.0
@@ -147,18 +315,12 @@ class MotionPart(Part):
         vr, pin_r = self._speed(backend, ref)
         return backend.check(pin_e, pin_r, ve - vr <= const(cfg.dv), vr - ve <= const(cfg.dv))
 
-    def _boxed(self, backend: ExactBackend, e: Entity) -> tuple[Any, list[Any]]:
-        """A variable over every speed e may have had (speed_box), with its constraints."""
-        lo, hi = speed_box(e, backend.config)
-        v = backend.var("v")
-        return v, [backend.constant(lo) <= v, v <= backend.constant(hi)]
-
     def robust_relation(self, backend: ExactBackend, code: int, ref: Entity, e: Entity) -> bool:
         const, cfg = backend.constant, backend.config
-        ve, box_e = self._boxed(backend, e)
+        ve, box_e = MotionClause._boxed(backend, e)
         if code == STATIONARY:
             return not backend.check_quantified(*box_e, ve > const(cfg.v_stop))
-        vr, box_r = self._boxed(backend, ref)
+        vr, box_r = MotionClause._boxed(backend, ref)
         apart = backend.Or(ve - vr > const(cfg.dv), vr - ve > const(cfg.dv))
         return not backend.check_quantified(*box_e, *box_r, apart)
 
@@ -172,49 +334,6 @@ class MotionPart(Part):
         v = backend.var("v")
         base = backend.constant(ref.speed) if quantity == "speed_offset" else backend.constant(0)
         return [v == backend.constant(target.speed) - base], [v]
-
-    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
-        const, cfg = backend.constant, backend.config
-        se = const(e.speed)
-        if isinstance(clause, Stationary):
-            return se <= const(cfg.v_stop)
-        if isinstance(clause, AbsoluteSpeed):
-            return backend.And(const(printed(clause.speed.lo)) <= se, se <= const(printed(clause.speed.hi)))
-        gap = se - const(ref.speed)
-        if isinstance(clause, MovingLike):
-            return backend.And(gap <= const(cfg.dv), -gap <= const(cfg.dv))
-        return backend.And(const(printed(clause.speed.lo)) <= gap, gap <= const(printed(clause.speed.hi)))
-
-    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
-        const, cfg = backend.constant, backend.config
-        ve, box = self._boxed(backend, e)
-        if isinstance(clause, Stationary):
-            return [backend.And(*box, ve > const(cfg.v_stop))]
-        if isinstance(clause, AbsoluteSpeed):
-            bad = (ve < const(printed(clause.speed.lo)), ve > const(printed(clause.speed.hi)))
-            return [backend.And(*box, b) for b in bad]
-        vr, box_r = self._boxed(backend, ref)
-        gap = ve - vr
-        if isinstance(clause, MovingLike):
-            bad = (gap > const(cfg.dv), -gap > const(cfg.dv))
-        else:
-            bad = (gap < const(printed(clause.speed.lo)), gap > const(printed(clause.speed.hi)))
-        return [backend.And(*box, *box_r, b) for b in bad]
-
-    # ------------------------------------------------------------------------------- exact, without a solver
-    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
-        # formula() is linear in the speeds, whose terms are rationals of floats and printed bounds: exact.
-        if e.speed is None or (ref is not None and ref.speed is None):
-            return None  # formula's own business (the solver path reports it)
-        se = Fraction(e.speed)
-        if isinstance(clause, Stationary):
-            return se <= Fraction(config.v_stop)
-        if isinstance(clause, AbsoluteSpeed):
-            return printed(clause.speed.lo) <= se <= printed(clause.speed.hi)
-        gap = se - Fraction(ref.speed)
-        if isinstance(clause, MovingLike):
-            return -Fraction(config.dv) <= gap <= Fraction(config.dv)
-        return printed(clause.speed.lo) <= gap <= printed(clause.speed.hi)
 
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         return self.float_measure(quantity, target, ref)  # already exact: a difference of two floats
@@ -244,22 +363,8 @@ class MotionPart(Part):
         return RelativeSpeed(covering(lo_e - hi_r, hi_e - lo_r, config.c_speed), ref.id)
 
     # ------------------------------------------------------------------------------- semantics
-    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-        if e.speed is None or (ref is not None and ref.speed is None):
-            return False
-        if isinstance(clause, Stationary):
-            return e.speed <= config.v_stop + SPEED_EPS
-        if isinstance(clause, AbsoluteSpeed):
-            return clause.speed.contains(e.speed, SPEED_EPS)
-        assert ref is not None
-        if isinstance(clause, MovingLike):
-            return abs(e.speed - ref.speed) <= config.dv + SPEED_EPS
-        if isinstance(clause, RelativeSpeed):
-            return clause.speed.contains(e.speed - ref.speed, SPEED_EPS)
-        raise TypeError(f"not a motion: {clause!r}")
-
     def observed(self, e: Entity) -> str:
-        return "no speed" if e.speed is None else f"speed {e.speed:.3f}"
+        return MotionClause.observed(None, e)
 
     # ------------------------------------------------------------------------------- syntax
     def parse(self, ln: Line, declared: set[str]) -> Clause:
@@ -277,29 +382,9 @@ class MotionPart(Part):
         return AbsoluteSpeed(speed)
 
     # ------------------------------------------------------------------------------- Scenic
-    def scenic(self, clause: Clause, at: str) -> str:
-        # Scenic >= 3.1 derives velocity from speed along the heading; speeds are never negative.
-        if isinstance(clause, Stationary):
-            return "Range(0, dsl__V_STOP)"
-        if isinstance(clause, MovingLike):
-            return f"dsl__speed_like({clause.ref})"
-        if isinstance(clause, RelativeSpeed):
-            return f"dsl__speed_relative({clause.ref}, {fmt_number(clause.speed.lo)}, {fmt_number(clause.speed.hi)})"
-        if isinstance(clause, AbsoluteSpeed):
-            # A Range below 0 describes no speed at all; its negative part is never drawn.
-            return f"Range({fmt_number(max(clause.speed.lo, 0.0))}, {fmt_number(max(clause.speed.hi, 0.0))})"
-        raise TypeError(f"not a DSL motion: {clause!r}")
-
-    def scenic_requirements(self, clause: Clause, entity: str) -> list[str]:
-        # REF's speed + Range(a, b) holds no speed >= 0 when REF is slower than -b: such draws are rejected.
-        if isinstance(clause, RelativeSpeed) and clause.speed.hi < 0:
-            return [f"require {clause.ref}.speed >= {fmt_number(-clause.speed.hi)}"]
-        return []
-
     def scenic_prelude(self, config: SynthConfig) -> str:
         return MOTION_PRELUDE.format(v_stop=fmt_number(config.v_stop), dv=fmt_number(config.dv))
 
-    # ------------------------------------------------------------------------------- report
 
 MOTION_PRELUDE = '''\
 # Motion (r2sgen's MOTION clause): every object gets its speed; Scenic derives its velocity along its heading.

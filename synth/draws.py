@@ -1,0 +1,122 @@
+"""What Scenic draws for one clause, as the sampler sees it: the Draws protocol and the values it works on.
+
+Every clause kind (synth.parts) says what Scenic draws for it (Clause.draws): a box of parameters in Scenic's
+own parameterisation of the emitted text, and the maps between those parameters and the entity's fields.
+synth.parameters assembles a program's draws; synth.gibbs and synth.collision_rule read them. Angles are degrees
+here (Scenic draws radians; a uniform draw is the same distribution in either unit).
+
+- `evaluate`: the entity's fields from its parameters and its reference's (and its own earlier clauses') values;
+- `invert`: the parameters that give a placed entity (how a recorded scene, or a scene Scenic sampled, is read
+  back as parameters), possibly outside the box (`clipped`, `inside`);
+- `area`: the plane area (or angle) a unit box of parameters covers at p, relative to the entity's field: the
+  Jacobian of the map from parameters to placement, which a move that re-expresses a placed entity in new
+  parameters must weigh (synth.gibbs);
+- `reach`: a sound bound on every value the clause can take over the whole box, given its reference's bound: a
+  disc for the centre, an arc for the heading (synth.collision_rule keeps only the pairs of boxes that can meet).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+# Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
+REACH_SLACK = 1e-6
+
+XY, HEADING, SPEED = "xy", "heading", "speed"  # the fields of a Pose that the built-in clauses write and read
+
+
+@dataclass
+class Pose:
+    """The values of one entity the clauses write (mutable: a sampler's working state). A part whose clauses
+    write a field of their own sets it as an attribute (Draws.writes names it)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    heading: float = 0.0
+    speed: float = 0.0  # m/s (motion); 0 for an entity without a motion clause, as Scenic's default
+
+
+@dataclass(frozen=True)
+class Arc:
+    """Headings within `half` degrees of `mid`; half >= 180 is every heading."""
+
+    mid: float
+    half: float
+
+    @property
+    def full(self) -> bool:
+        return self.half >= 180.0
+
+    def widened(self, by: float) -> Arc:
+        return Arc(self.mid, min(180.0, self.half + by))
+
+
+@dataclass(frozen=True)
+class Reach:
+    """Where an entity can be: its centre within r of (x, y), its heading in the arc."""
+
+    x: float
+    y: float
+    r: float
+    heading: Arc
+
+
+class Draws:
+    """One clause of a statement: the parameters Scenic draws for it and what they make of the entity.
+
+    `writes` is the Pose field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
+    entity (set by an earlier clause of the statement): what a sampler must re-evaluate when something moves.
+    `lo` / `hi` bound the box of its parameters.
+    """
+
+    ref: str | None
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    writes: str
+    reads: tuple[str, ...] = ()
+    reads_own: tuple[str, ...] = ()
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        raise NotImplementedError
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        raise NotImplementedError
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        raise NotImplementedError
+
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
+        """Jacobian of the map from parameters to the field it writes (1: volume-preserving)."""
+        return 1.0
+
+    requires = False  # does the emitted text add a requirement beyond the box (`allowed`)?
+
+    def allowed(self, ref: Pose | None) -> bool:
+        """That requirement (Scenic rejects a draw that fails it)."""
+        return True
+
+
+def _clip(v: float, lo: float, hi: float) -> float:
+    return lo if v < lo else hi if v > hi else v
+
+
+def clipped(draws: Draws, values: Sequence[float]) -> tuple[float, ...]:
+    return tuple(_clip(v, lo, hi) for v, lo, hi in zip(values, draws.lo, draws.hi))
+
+
+def inside(draws: Draws, values: Sequence[float]) -> bool:
+    return all(lo <= v <= hi for v, lo, hi in zip(values, draws.lo, draws.hi))
+
+
+def rotated(angle: float, lateral: float, forward: float) -> tuple[float, float]:
+    """(lateral @ forward).rotatedBy(angle): Scenic's vector rotation, counter-clockwise, degrees."""
+    t = math.radians(angle)
+    c, s = math.cos(t), math.sin(t)
+    return (lateral * c - forward * s, lateral * s + forward * c)
+
+
+def disc_plus(ref: Reach, dx: float, dy: float, r: float, heading: Arc) -> Reach:
+    """A reach about ref's centre moved by (dx, dy), r wider (and the slack)."""
+    return Reach(ref.x + dx, ref.y + dy, ref.r + r + REACH_SLACK, heading)
