@@ -57,7 +57,7 @@ def run(scenes: list[Scene]) -> list[dict]:
         a = synthesize(scene, static)
         b = synthesize(scene, motion)
         types = {e.id: e.type for e in scene.others}
-        kinds = Counter((MOTION.kind(s.motion), family(types[s.id])) for s in b.program.statements)
+        kinds = Counter((s.motion.kind, family(types[s.id])) for s in b.program.statements)
         out.append({
             "frame_id": scene.frame_id, "n": len(scene.others),
             "static": {"cost": a.cost, "status": a.status, "certified": a.certified, "runtime_s": a.stats.runtime_s,

@@ -14,7 +14,8 @@
     REF     ::= ego | an ID declared earlier
 
 Each part's clauses (their classes, printing and parsing) live with the part, in synth.parts; they are
-re-exported here, where programs are assembled.
+re-exported here, where programs are assembled. A statement carries one clause per part, in the registry's
+order (synth.parts): the required parts, comma-separated, then the optional ones it has, each after a comma.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from typing import Union
 
-from synth.parts import ALL_PARTS, MOTION, STATIC_PARTS
+from synth.parts import Clause, Part, all_parts, part_named
 from synth.parts.heading import FACINGS, AbsoluteHeading, FacingRelation, RelativeHeading
 from synth.parts.motion import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary
 from synth.parts.position import DIRECTIONS, AbsoluteXYPos, DirectionPos, LocalXYPos
@@ -35,20 +36,46 @@ Heading = Union[FacingRelation, RelativeHeading, AbsoluteHeading]
 Motion = Union[Stationary, MovingLike, RelativeSpeed, AbsoluteSpeed]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Statement:
+    """`ID = new TYPE` and one clause per part it carries, read by the part's name (st.position, st.heading,
+    st.motion: None where the statement has no such clause; static programs, the paper's, have no motion)."""
+
     id: str
     type: str
-    position: Position
-    heading: Heading
-    motion: Motion | None = None  # static programs (the paper's) have none
+    parts: tuple[tuple[str, Clause], ...]  # (part name, clause), in the registry's order
 
-    def clauses(self) -> Iterator[tuple[object, object]]:
+    def __init__(self, id: str, type: str, position: Position | None = None, heading: Heading | None = None,
+                 motion: Motion | None = None, parts: tuple[tuple[str, Clause], ...] = (), **more: Clause | None):
+        # `parts` (what dataclasses.replace passes on), then the clauses named here.
+        given = dict(parts)
+        named = {"position": position, "heading": heading, "motion": motion, **more}
+        given.update({n: c for n, c in named.items() if c is not None})
+        order = {p.name: k for k, p in enumerate(all_parts())}
+        unknown = sorted(set(given) - set(order))
+        if unknown:
+            raise TypeError(f"Statement: no part named {unknown[0]!r}")
+        missing = [p.name for p in all_parts() if not p.optional and given.get(p.name) is None]
+        if missing:
+            raise TypeError(f"Statement: no {missing[0]} clause")
+        object.__setattr__(self, "id", id)
+        object.__setattr__(self, "type", type)
+        object.__setattr__(self, "parts", tuple(sorted(((n, c) for n, c in given.items() if c is not None),
+                                                       key=lambda nc: order[nc[0]])))
+
+    def __getattr__(self, name: str) -> Clause | None:
+        # Only reached for names that are not attributes: a registered part's name reads its clause.
+        if name.startswith("_") or name == "parts":
+            raise AttributeError(name)
+        clause = next((c for n, c in self.parts if n == name), None)
+        if clause is None and all(p.name != name for p in all_parts()):
+            raise AttributeError(f"'Statement' object has no attribute {name!r}")
+        return clause
+
+    def clauses(self) -> Iterator[tuple[Part, Clause]]:
         """(part, clause) for every part the statement carries, in statement order."""
-        for part in ALL_PARTS:
-            clause = getattr(self, part.name)
-            if clause is not None:
-                yield part, clause
+        for name, clause in self.parts:
+            yield part_named(name), clause
 
     @property
     def cost(self) -> int:
@@ -113,12 +140,19 @@ def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statemen
     if etype not in types:
         raise DslError(f"{ln.where(back=1)}: unknown type {etype!r}")
     clauses = {}
-    for k, part in enumerate(STATIC_PARTS):
+    parts = all_parts()
+    for k, part in enumerate(p for p in parts if not p.optional):
         if k:
             ln.take(text=",")
         clauses[part.name] = part.parse(ln, declared)
-    if ln.accept(","):
-        clauses[MOTION.name] = MOTION.parse(ln, declared)
+    optional = [p for p in parts if p.optional]
+    while optional and ln.accept(","):
+        # The first optional part that begins here; with none, the only one left says what it expected.
+        k = next((k for k, p in enumerate(optional) if p.starts(ln)), None)
+        if k is None and len(optional) > 1:
+            raise DslError(f"{ln.where()}: expected one of: {', '.join(sorted(w for p in optional for w in p.first_words))}")
+        part, optional = optional[k or 0], optional[(k or 0) + 1:]
+        clauses[part.name] = part.parse(ln, declared)
     ln.end()
     return Statement(name, etype, **clauses)
 

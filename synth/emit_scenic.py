@@ -58,7 +58,7 @@ from synth.collision_rule import collision_rule
 from synth.config import SynthConfig
 from synth.dsl import Program, Statement, parse_program
 from synth.errors import InputError
-from synth.parts import MOTION
+from synth.parts import all_parts
 from synth.parts.position import DIRECTIONS, MIN_DISTANCE
 from synth.scene import ENTITY_TYPES, Entity, Scene, SceneError, scene_from_dict
 from synth.syntax import fmt_number
@@ -151,8 +151,10 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
     ]
     ego = scene.ego
     speed = ""
+    # Each part's own helpers, once, where some clause of the program uses them.
+    carried = {name for st in program.statements for name, _ in st.parts}
+    lines += [text for p in all_parts() if p.name in carried and (text := p.scenic_prelude(config))]
     if motion:
-        lines.append(MOTION.scenic_prelude(config))
         if ego.speed is None:
             raise SceneError("ego has no speed, which the program's motion clauses need")
         speed = f", with speed {ego.speed!r}"
@@ -166,19 +168,19 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
 
 
 def _statement(st: Statement, e: Entity) -> list[str]:
-    """One object per statement: each part's clause is one specifier (Part.keyword, Part.scenic)."""
+    """One object per statement: each part's clause is one specifier (Part.keyword, Clause.scenic)."""
     (position, located), *others = st.clauses()
-    where = position.scenic(located, "")
+    where = located.scenic("")
     lines = []
-    if any(p.needs_own_position(c) for p, c in others):
+    if any(c.needs_own_position() for _, c in others):
         # A clause depends on this entity's own position, which a specifier cannot name (no `self`).
         at = f"{st.id}{POSITION_SUFFIX}"
         lines.append(f"{at} = {where}")
         where = at
     specifiers = [f"{position.keyword} {where}"]
-    specifiers += [f"{p.keyword} {p.scenic(c, where)}" for p, c in others]
+    specifiers += [f"{p.keyword} {c.scenic(where)}" for p, c in others]
     lines.append(f"{st.id} = new {st.type} {', '.join(specifiers)}{_props(e)}")
-    lines += [line for p, c in others for line in p.scenic_requirements(c, st.id)]
+    lines += [line for _, c in others for line in c.scenic_requirements(st.id)]
     return lines
 
 

@@ -68,7 +68,7 @@ class RelationOracle:
         for code in part.codes_from(r == 0):
             key = (part.relations[code], e, r)
             if key not in self.cache:
-                self.cache[key] = self.backend.relation(part, code, ents[r], ents[e])
+                self.cache[key] = part.ask(self.backend, code, ents[r], ents[e])
             if self.cache[key]:
                 return code
         return NONE

@@ -1,6 +1,6 @@
 """Does a program contain a scene? The paper's denotational semantics, read literally.
 
-This module is the test oracle for everything else. Each statement part reads its own clauses (Part.holds)
+This module is the test oracle for everything else. Each clause reads itself (Clause.holds)
 with nothing but the angle helpers: float atan2 bearings, the W difference, and the Range bounds as printed,
 never the cone test, the tables or the solver of the oracles. Decisions at the exact edge of a tolerance are
 accepted within ANGLE_EPS (1e-9 degrees) to absorb float rounding of atan2; the synthesizer itself decides
@@ -16,7 +16,6 @@ from typing import Any
 
 from synth.config import SynthConfig, as_config
 from synth.dsl import Program, Statement, parse_program
-from synth.parts import HEADING, POSITION
 from synth.parts.position import ANGLE_EPS, LENGTH_EPS
 from synth.scene import EGO_ID, Entity, Scene, as_scene
 
@@ -44,11 +43,11 @@ class CheckResult:
 
 
 def position_holds(pos, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-    return POSITION.holds(pos, e, ref, config)
+    return pos.holds(e, ref, config)
 
 
 def heading_holds(head, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-    return HEADING.holds(head, e, ref, config)
+    return head.holds(e, ref, config)
 
 
 def check_statement(st: Statement, scene_by_id: dict[str, Entity], config: SynthConfig) -> list[Violation]:
@@ -58,8 +57,8 @@ def check_statement(st: Statement, scene_by_id: dict[str, Entity], config: Synth
         out.append(Violation(st.id, "type", f"declared {st.type}, scene has {e.type}"))
     for part, clause in st.clauses():
         ref = scene_by_id.get(clause.ref) if clause.ref else None
-        if not part.holds(clause, e, ref, config):
-            out.append(Violation(st.id, part.name, f"{part.observed(e)} is not {clause}"))
+        if not clause.holds(e, ref, config):
+            out.append(Violation(st.id, part.name, f"{clause.observed(e)} is not {clause}"))
     return out
 
 

@@ -126,6 +126,7 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     from synth.robust import is_robust
     from synth.search import Budget, CostModel, search
     from synth.search.budget import peak_rss_mb
+    from synth.smt.certify import certify
     from synth.statement import build_program
 
     scene = as_scene(scene)
@@ -151,7 +152,7 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     t = time.perf_counter()
     certified = False
     if oracle.backend is not None:
-        failed = oracle.backend.certify(program, scene)
+        failed = certify(oracle.backend, program, scene)
         if failed:
             raise CertificationError(f"the solver refutes the statements of {', '.join(failed)}")
         certified = True

@@ -252,7 +252,7 @@ class RelationUsage:
 
 def relation_kinds(program_text: str) -> Counter:
     """How often each relation kind occurs in one DSL program (parsed with the DSL's own parser)."""
-    return Counter(part.kind(clause) for s in parse_program(program_text).statements for part, clause in s.clauses())
+    return Counter(clause.kind for s in parse_program(program_text).statements for _, clause in s.clauses())
 
 
 # Programs whose text the substring counts do not account for are parsed one by one; past this many, the rest

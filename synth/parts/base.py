@@ -1,24 +1,24 @@
-"""One interface for a statement part: what every module that handles a statement asks of position, heading, motion.
+"""The two shapes every statement part is made of: its clause kinds (Clause) and what they share (Part).
 
-A statement `ID = new TYPE POS, HEADING [, MOTION]` is a sequence of parts. Each part has a few witness relations, which
-cost 0 and name a reference (or, for some parts, need none), a fallback relative to ego (cost 1) and an absolute
-form (cost 2). The rest of the core is written once, over parts:
+A statement `ID = new TYPE POS, HEADING [, MOTION]` is a sequence of parts. A part has a few witness relations,
+which cost 0 and name a reference (or, for some parts, need none), a fallback relative to ego (cost 1) and an
+absolute form (cost 2). Each form of its grammar is a clause kind: a class (Clause) that owns what a clause means
+(text, cost, report kind, semantics, exact test, SMT formulas, Scenic value, what the sampler draws). The part
+holds what its clauses share, in small interfaces the core asks one at a time:
 
-  relations and costs   relations, refless, codes_from       -> search.costs (c(e, E) sums over parts)
-  robust bounds         perturbed                            -> which parts are asked the robust question
-  float table, exact    closed_form, robust_closed_form, exact   -> relations, oracle
-  SMT                   relation, robust_relation, any_relation, measure_terms, formula, violations -> smt
-  exact, fast           decide, exact_measure               -> smt (certification, Range values)
-  Alg. 4                quantity, float_measure, clause, robust_clause  -> statement
-  semantics             holds, observed                       -> semantics (the independent checker)
-  syntax                parse (printing is the clause's __str__) -> dsl
-  Scenic                keyword, scenic, needs_own_position, scenic_requirements, scenic_prelude -> emit_scenic
-  report                clause_kinds (kinds, kind)            -> pipeline.report.stats, report.plots, variants.render
+  Relations (its relation table)    relations, refless, codes_from, perturbed, closed_form, robust_closed_form,
+                                    exact, relation, robust_relation, any_relation, ask
+                                        -> relations, oracle, robust, search (c(e, E) sums over parts)
+  Measured (synth.smt.backend)      exact_measure, measure_terms, solver_measure  -> smt (Range values)
+  Part                              quantity, float_measure, clause, robust_clause  -> statement (Alg. 4)
+                                    parse, optional, starts                        -> dsl (the grammar)
+                                    keyword, scenic_prelude                        -> emit_scenic
+                                    clauses, clause_kinds, kinds                   -> the report, the pictures
+                                    enabled                                        -> which parts a config uses
 
-The SMT methods take the backend as an argument and build formulas from its primitives (synth.smt.backend:
-constant, var, offset, cone, distance_in, And, Or, Not, check; the exact backend adds angle_in, perturbed_offset,
-cone_fails, robust_cone, check_quantified), so one encoding serves z3 and dReal. relation and solver_measure get any
-backend; the robust, certification and model questions get the exact one (z3). A clause is a frozen dataclass with `cost`, `ref` (None for absolute forms) and `__str__` (its DSL text).
+The SMT methods take the backend as an argument and build formulas from its primitives (synth.smt.backend), so
+one encoding serves z3 and dReal. relation and solver_measure get any backend; the robust, certification and
+model questions get the exact one (z3). A new part registers in synth.parts (docs/layout.md has the recipes).
 """
 
 from __future__ import annotations
@@ -26,43 +26,30 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from synth.config import SynthConfig
 from synth.perturbation import Bounds, bounds_of
 from synth.scene import Entity, Scene
+from synth.smt.backend import ExactBackend, Formula, Measured, SolverBackend
 from synth.syntax import Line
 from synth.tables import SceneArrays
 
 if TYPE_CHECKING:
     from synth.draws import Draws
-    from synth.smt.backend import ExactBackend, SolverBackend
-
-Formula = Any  # a solver term of the backend at hand
 
 
-class Part(ABC):
-    name: ClassVar[str]  # the Statement field that holds this part's clause
+class Relations(ABC):
+    """A part's witness relations (code = index into `relations`), decided for every pair of a scene at once in
+    floats, exactly for one pair, and by a solver, plainly or for every perturbation."""
+
+    name: ClassVar[str]  # the part's name: a Statement's field (st.position), the relation table's key
     relations: ClassVar[tuple[str, ...]]  # witness relations (cost 0); code = index
     # Codes that need no reference: always available, like ego, so they are recorded in ego's row (index 0).
     refless: ClassVar[frozenset[int]] = frozenset()
-    keyword: ClassVar[str]  # the Scenic specifier the clause becomes (at, facing, with speed)
-    clauses: ClassVar[tuple[type[Clause], ...]]  # its clause kinds, grammar order
 
-    @property
-    def clause_kinds(self) -> tuple[ClauseKind, ...]:
-        """Every kind of clause the part has, grammar order: the one classification the report, its plots and
-        the pictures read (labels, costs, how a picture draws it)."""
-        return tuple(k for c in self.clauses for k in c.kinds())
-
-    @property
-    def kinds(self) -> tuple[str, ...]:
-        """The report labels of the part's relation kinds, grammar order."""
-        return tuple(k.label for k in self.clause_kinds)
-
-    # ------------------------------------------------------------------------------- relations and costs
     def codes_from(self, ref_is_ego: bool) -> tuple[int, ...]:
         """The codes that may hold with a reference (refless codes only in ego's row), asked in this order."""
         return tuple(c for c in range(len(self.relations)) if ref_is_ego or c not in self.refless)
@@ -77,7 +64,7 @@ class Part(ABC):
     def pair_is_robust(self, a: Entity, b: Entity, config: SynthConfig) -> bool:
         return self.perturbed(bounds_of(a, config)) or self.perturbed(bounds_of(b, config))
 
-    # ------------------------------------------------------------------------------- float table, exact
+    # ------------------------------------------------------------------------------- floats, exact
     @abstractmethod
     def closed_form(self, arrays: SceneArrays, config: SynthConfig) -> np.ndarray:
         """codes[r, e] (int8) of every pair by floats: a code, NONE, or UNDECIDED inside the guard band."""
@@ -103,27 +90,48 @@ class Part(ABC):
     def any_relation(self, backend: ExactBackend, ref: Entity, e: Entity) -> Formula:
         """A formula true iff some witness relation of e with ref holds (the monolithic baseline)."""
 
-    @abstractmethod
-    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
-        """(constraints, variables) whose unique model values are the exact quantity (see quantity())."""
+    def ask(self, backend: SolverBackend, code: int, ref: Entity, e: Entity) -> bool:
+        """The oracle's question: does relation `code` hold between ref and e (for every perturbation, where
+        either is uncertain)?"""
+        if self.pair_is_robust(ref, e, backend.config):
+            return self.robust_relation(backend.exact, code, ref, e)
+        return self.relation(backend, code, ref, e)
 
-    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Formula:
-        return clause.formula(backend, e, ref)
+    def ask_named(self, backend: SolverBackend, relation: str, ref: Entity, e: Entity) -> bool:
+        """ask() by the relation's name (`POSITION.ask_named(backend, "ahead", ref, e)`: tests and tools)."""
+        return self.ask(backend, self.relations.index(relation), ref, e)
 
-    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Formula]:
-        return clause.violations(backend, e, ref)
 
-    # ------------------------------------------------------------------------------- exact, without a solver
-    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
-        """formula(), decided rigorously without the solver (synth.intervals; exact rationals where cheap):
-        True / False, or None where it cannot tell and the solver must. A part may leave it all to the solver."""
-        return clause.decide(e, ref, config)
+class Part(Relations, Measured):
+    """A statement part: its clause kinds, its relation table, Alg. 4's choice of clause, its grammar."""
 
+    keyword: ClassVar[str]  # the Scenic specifier its clause becomes (at, facing, with speed)
+    clauses: ClassVar[tuple[type[Clause], ...]]  # its clause kinds, grammar order
+    # An optional part follows the required ones, after a comma, and is recognised by its first word (starts).
+    optional: ClassVar[bool] = False
+    first_words: ClassVar[frozenset[str]] = frozenset()
+
+    def enabled(self, config: SynthConfig) -> bool:
+        """Does a statement carry this part under the config (motion: with --motion)?"""
+        return True
+
+    @property
+    def clause_kinds(self) -> tuple[ClauseKind, ...]:
+        """Every kind of clause the part has, grammar order: the one classification the report, its plots and
+        the pictures read (labels, costs, how a picture draws it)."""
+        return tuple(k for c in self.clauses for k in c.kinds())
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The report labels of the part's relation kinds, grammar order."""
+        return tuple(k.label for k in self.clause_kinds)
+
+    # ------------------------------------------------------------------------------- Range values
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...] | None:
-        """The quantity measure_terms pins down, without the solver, for centring Ranges: the exact value
-        (irrational ones to within 1e-15, as the solver's model gives them to 1e-12), or one that centres every
-        Range as it does (intervals.centring_value); None leaves it to the solver."""
         return None
+
+    def solver_measure(self, backend: SolverBackend, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        return self.float_measure(quantity, target, ref)
 
     # ------------------------------------------------------------------------------- Alg. 4
     @abstractmethod
@@ -134,10 +142,6 @@ class Part(ABC):
     def float_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         """The quantity from float geometry (the closed-form oracle)."""
 
-    def solver_measure(self, backend: SolverBackend, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
-        """The quantity as a solver without models of its own measures it (dReal); floats unless overridden."""
-        return self.float_measure(quantity, target, ref)
-
     @abstractmethod
     def clause(self, code: int, ref_id: str, values: tuple[Fraction, ...], config: SynthConfig) -> Clause:
         """The clause of Alg. 4: relation `code` with ref, or the fallback (NONE), Ranges centred on values."""
@@ -146,41 +150,18 @@ class Part(ABC):
     def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
         """The same with Ranges that cover every perturbation (robust synthesis)."""
 
-    # ------------------------------------------------------------------------------- semantics
-    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-        return clause.holds(e, ref, config)
-
-    @abstractmethod
-    def observed(self, e: Entity) -> str:
-        """What the checker reports of e when the clause does not hold."""
-
-    # ------------------------------------------------------------------------------- syntax
+    # ------------------------------------------------------------------------------- syntax, Scenic
     @abstractmethod
     def parse(self, ln: Line, declared: set[str]) -> Clause:
-        """The clause at the line's cursor."""
+        """The clause at the line's cursor (printing is the clause's own: Clause.text)."""
 
-    # ------------------------------------------------------------------------------- Scenic
-    def scenic(self, clause: Clause, at: str) -> str:
-        return clause.scenic(at)
-
-    # Until position and heading are clause kinds too (their clauses are plain dataclasses, with neither).
-    def needs_own_position(self, clause: Clause) -> bool:
-        return isinstance(clause, Clause) and clause.needs_own_position()
-
-    def scenic_requirements(self, clause: Clause, entity: str) -> list[str]:
-        return clause.scenic_requirements(entity) if isinstance(clause, Clause) else []
+    def starts(self, ln: Line) -> bool:
+        """Does an optional part's clause begin at the line's cursor?"""
+        return ln.peek() in self.first_words
 
     def scenic_prelude(self, config: SynthConfig) -> str:
-        """Helpers the part's Scenic values use beyond the paper's prelude."""
+        """Helpers the part's Scenic values use beyond the paper's prelude (written once, with its first clause)."""
         return ""
-
-    # ------------------------------------------------------------------------------- report
-    def kind(self, clause: Clause) -> str:
-        """The report label of a clause (one of kinds)."""
-        return self.clause_kind(clause).label
-
-    def clause_kind(self, clause: Clause) -> ClauseKind:
-        return next(k for k in self.clause_kinds if k.matches(clause))
 
 
 @dataclass(frozen=True)
@@ -223,6 +204,7 @@ class Clause(ABC):
     label_field: ClassVar[str | None] = None
     drawn_as: ClassVar[str]  # pipeline.variants.render: an arrow from the reference, or a mark on the entity
     ref: str | None  # a dataclass field, or a class attribute None where the form has no reference
+    # (ref is never given a value here: dataclass would take it as every subclass's default)
 
     def __str__(self) -> str:
         return self.text.format(c=self)
@@ -279,20 +261,3 @@ class Clause(ABC):
     @abstractmethod
     def draws(self, config: SynthConfig) -> Draws:
         """What Scenic draws for the clause, in its own parameterisation (synth.draws)."""
-
-
-@dataclass(frozen=True)
-class Want:
-    """One quantity a statement's Ranges are centred on: which part, what, relative to which reference."""
-
-    part: Part
-    quantity: str
-    ref: Entity
-
-
-@dataclass(frozen=True)
-class MeasureRequest:
-    """What to measure for one statement (a solver answers all statements of a program from one model)."""
-
-    target: Entity
-    wants: tuple[Want, ...]

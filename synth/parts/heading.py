@@ -11,6 +11,8 @@ alpha in [a, b] (mod 360).
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING, Any
@@ -19,6 +21,8 @@ import numpy as np
 
 from synth import intervals
 from synth.config import SynthConfig
+from synth.draws import HEADING as HEADING_FIELD
+from synth.draws import REACH_SLACK, XY, Arc, Draws, Pose, Reach
 from synth.geometry import (
     angular_difference,
     bearing,
@@ -28,7 +32,7 @@ from synth.geometry import (
     normalize,
     signed,
 )
-from synth.parts.base import Clause, ClauseKind, Part
+from synth.parts.base import Clause, Part
 from synth.perturbation import Bounds, angle_range, bounds_of, disc_in_cone, narrowed, narrowed_cones, radius_of
 from synth.ranges import centred
 from synth.scene import Entity
@@ -43,40 +47,135 @@ FACING_NAMES = ("toward", "away")  # index = code in the tables
 ANGLE_EPS = 1e-9
 
 
+class HeadingClause(Clause):
+    """What the heading clauses share: the checker's view of an entity's heading."""
+
+    def observed(self, e: Entity) -> str:
+        return f"heading {e.heading:.3f}"
+
+
 @dataclass(frozen=True)
-class FacingRelation:
+class FacingRelation(HeadingClause):
     """`facing toward | away from REF`: cost 0."""
 
     mode: str
     ref: str
     cost = 0
+    text = "facing {c.words} {c.ref}"
+    labels = FACING_NAMES
+    label_field = "mode"
+    drawn_as = "facing"
 
-    def __str__(self) -> str:
-        return f"facing {FACINGS[self.mode]} {self.ref}"
+    @property
+    def words(self) -> str:
+        return FACINGS[self.mode]
+
+    @property
+    def sign(self) -> int:
+        """toward: the cone test on REF - e; away: on e - REF."""
+        return -1 if self.mode == "toward" else 1
+
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        if (e.x, e.y) == (ref.x, ref.y):
+            return False
+        if self.mode == "toward":
+            target = bearing(e.x, e.y, ref.x, ref.y)
+        else:
+            target = bearing(ref.x, ref.y, e.x, e.y)
+        return angular_difference(e.heading, target) <= config.delta2 + ANGLE_EPS
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        vx, vy = intervals.offset(ref, e)
+        if self.mode == "toward":
+            vx, vy = -vx, -vy
+        return intervals.cone(vx, vy, e.heading, config.delta2)
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        vx, vy = backend.offset(ref, e)
+        if self.mode == "toward":
+            vx, vy = -vx, -vy
+        return backend.cone(vx, vy, e.heading, backend.config.delta2)
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        cfg = backend.config
+        cx, cy = exact_offset(ref, e)
+        vx, vy, cons = backend.perturbed_offset((self.sign * cx, self.sign * cy), radius_of(ref, e, cfg))
+        return [backend.cone_fails(vx, vy, cons, e.heading, narrowed(cfg.delta2, bounds_of(e, cfg).heading))]
+
+    def scenic(self, at: str) -> str:
+        return f"dsl__facing_{'toward' if self.mode == 'toward' else 'away_from'}({self.ref}, {at})"
+
+    def needs_own_position(self) -> bool:
+        return True
+
+    def draws(self, config: SynthConfig) -> FacingDraws:
+        return FacingDraws(self.ref, self.mode == "toward", (-config.delta2,), (config.delta2,))
+
+
+class AngleClause(HeadingClause):
+    """`facing Range deg [relative to REF]`: e.heading = N(base + alpha), alpha in the Range, where base is REF's
+    heading (0 without a reference)."""
+
+    angle: Range
+
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return _in_angle_range(e.heading, 0.0 if ref is None else ref.heading, self.angle)
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        # angle_in's question, whose terms are rationals of the floats and printed bounds: exact and cheap.
+        lo, hi = printed(self.angle.lo), printed(self.angle.hi)
+        gap = Fraction(e.heading) - Fraction(0.0 if ref is None else ref.heading)
+        alpha = gap - 360 * ((gap - lo) // 360)
+        return lo <= alpha <= hi
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        return backend.angle_in(e.heading, 0.0 if ref is None else ref.heading, printed(self.angle.lo),
+                                printed(self.angle.hi))
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        const, cfg = backend.constant, backend.config
+        lo, hi = printed(self.angle.lo), printed(self.angle.hi)
+        # The branch k that puts the observed offset just above lo (as angle_in): the perturbed offsets move
+        # continuously by less than half a turn, so within the Range they stay on that branch.
+        gap = Fraction(e.heading) - Fraction(ref.heading if ref else 0.0)
+        alpha = gap - 360 * ((gap - lo) // 360)
+        eta = Fraction(bounds_of(e, cfg).heading) + (Fraction(bounds_of(ref, cfg).heading) if ref else 0)
+        turn = backend.var("theta")
+        return [backend.And(-const(eta) <= turn, turn <= const(eta), bad)
+                for bad in (const(alpha) + turn < const(lo), const(alpha) + turn > const(hi))]
+
+    def draws(self, config: SynthConfig) -> AngleDraws:
+        return AngleDraws(self.ref, (self.angle.lo,), (self.angle.hi,))
 
 
 @dataclass(frozen=True)
-class RelativeHeading:
+class RelativeHeading(AngleClause):
     """`facing Range deg relative to REF`: cost 1."""
 
     angle: Range
     ref: str
     cost = 1
+    text = "facing {c.angle} deg relative to {c.ref}"
+    labels = ("relative heading",)
+    drawn_as = "relative_heading"
 
-    def __str__(self) -> str:
-        return f"facing {self.angle} deg relative to {self.ref}"
+    def scenic(self, at: str) -> str:
+        return f"{self.ref}.heading + {self.angle} deg"
 
 
 @dataclass(frozen=True)
-class AbsoluteHeading:
+class AbsoluteHeading(AngleClause):
     """`facing Range deg`: cost 2."""
 
     angle: Range
     cost = 2
     ref = None
+    text = "facing {c.angle} deg"
+    labels = ("absolute heading",)
+    drawn_as = "absolute_heading"
 
-    def __str__(self) -> str:
-        return f"facing {self.angle} deg"
+    def scenic(self, at: str) -> str:
+        return f"{self.angle} deg"
 
 
 def _in_angle_range(heading: float, base: float, rng: Range) -> bool:
@@ -88,15 +187,81 @@ def _in_angle_range(heading: float, base: float, rng: Range) -> bool:
     return past <= (rng.hi - rng.lo) + ANGLE_EPS or past >= 360.0 - ANGLE_EPS
 
 
+# ------------------------------------------------------------------------------------------- what Scenic draws
+
+@dataclass(frozen=True)
+class FacingDraws(Draws):
+    """`facing toward | away from REF`: dsl__facing_* draws an offset in +-delta2 about the bearing."""
+
+    ref: str
+    toward: bool
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    writes = HEADING_FIELD
+    reads = (XY,)
+    reads_own = (XY,)
+
+    def _target(self, own: Pose, ref: Pose) -> float:
+        if self.toward:
+            return bearing(own.x, own.y, ref.x, ref.y)
+        return bearing(ref.x, ref.y, own.x, own.y)
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        own.heading = normalize(self._target(own, ref) + p[0])
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        return (signed(own.heading - self._target(own, ref)),)
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        d = math.hypot(own.x - ref.x, own.y - ref.y)
+        spread = own.r + ref.r
+        if d <= spread:
+            return Reach(own.x, own.y, own.r, Arc(0.0, 180.0))
+        centre = bearing(own.x, own.y, ref.x, ref.y) if self.toward else bearing(ref.x, ref.y, own.x, own.y)
+        half = math.degrees(math.asin(spread / d)) + self.hi[0] + REACH_SLACK
+        return Reach(own.x, own.y, own.r, Arc(centre, min(180.0, half)))
+
+
+@dataclass(frozen=True)
+class AngleDraws(Draws):
+    """`facing Range(a, b) deg [relative to REF]`: the angle drawn, added to REF's heading where there is one."""
+
+    ref: str | None
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    writes = HEADING_FIELD
+
+    @property
+    def reads(self) -> tuple[str, ...]:
+        return () if self.ref is None else (HEADING_FIELD,)
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        own.heading = normalize(p[0] if ref is None else ref.heading + p[0])
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        offset = own.heading if ref is None else own.heading - ref.heading
+        return (_angle_near(offset, self.lo[0], self.hi[0]),)
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        if ref is None:
+            half = (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
+            return Reach(own.x, own.y, own.r, Arc(normalize((self.lo[0] + self.hi[0]) / 2), min(180.0, half)))
+        half = ref.heading.half + (self.hi[0] - self.lo[0]) / 2 + REACH_SLACK
+        mid = ref.heading.mid + (self.lo[0] + self.hi[0]) / 2
+        return Reach(own.x, own.y, own.r, Arc(normalize(mid), min(180.0, half)))
+
+
+def _angle_near(angle: float, lo: float, hi: float) -> float:
+    """The representative of `angle` (mod 360) in [lo, hi], or outside it the one nearest to it."""
+    a = lo + normalize(angle - lo)
+    return a if a <= hi or a - hi < (lo + 360.0) - a else a - 360.0
+
+
 class HeadingPart(Part):
     name = "heading"
     relations = FACING_NAMES
     keyword = "facing"
-    clause_kinds = (
-        *(ClauseKind(mode, FacingRelation, "facing", ("mode", mode)) for mode in FACING_NAMES),
-        ClauseKind("relative heading", RelativeHeading, "relative_heading"),
-        ClauseKind("absolute heading", AbsoluteHeading, "absolute_heading"),
-    )
+    clauses = (FacingRelation, RelativeHeading, AbsoluteHeading)
 
     def perturbed(self, b: Bounds) -> bool:
         return b.pos != 0.0 or b.heading != 0.0
@@ -163,46 +328,7 @@ class HeadingPart(Part):
         turns = backend.Or(*(alpha == backend.constant(gap - 360 * k) for k in (-1, 0, 1)))
         return [alpha > -180, alpha <= 180, turns], [alpha]
 
-    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
-        if isinstance(clause, AbsoluteHeading):
-            return backend.angle_in(e.heading, 0.0, printed(clause.angle.lo), printed(clause.angle.hi))
-        if isinstance(clause, RelativeHeading):
-            return backend.angle_in(e.heading, ref.heading, printed(clause.angle.lo), printed(clause.angle.hi))
-        vx, vy = backend.offset(ref, e)
-        if clause.mode == "toward":
-            vx, vy = -vx, -vy
-        return backend.cone(vx, vy, e.heading, backend.config.delta2)
-
-    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
-        const, cfg = backend.constant, backend.config
-        if isinstance(clause, FacingRelation):
-            sign = -1 if clause.mode == "toward" else 1
-            cx, cy = exact_offset(ref, e)
-            vx, vy, cons = backend.perturbed_offset((sign * cx, sign * cy), radius_of(ref, e, cfg))
-            return [backend.cone_fails(vx, vy, cons, e.heading, narrowed(cfg.delta2, bounds_of(e, cfg).heading))]
-        lo, hi = printed(clause.angle.lo), printed(clause.angle.hi)
-        # The branch k that puts the observed offset just above lo (as angle_in): the perturbed offsets move
-        # continuously by less than half a turn, so within the Range they stay on that branch.
-        gap = Fraction(e.heading) - Fraction(ref.heading if ref else 0.0)
-        alpha = gap - 360 * ((gap - lo) // 360)
-        eta = Fraction(bounds_of(e, cfg).heading) + (Fraction(bounds_of(ref, cfg).heading) if ref else 0)
-        turn = backend.var("theta")
-        return [backend.And(-const(eta) <= turn, turn <= const(eta), bad)
-                for bad in (const(alpha) + turn < const(lo), const(alpha) + turn > const(hi))]
-
     # ------------------------------------------------------------------------------- exact, without a solver
-    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
-        if isinstance(clause, FacingRelation):
-            vx, vy = intervals.offset(ref, e)
-            if clause.mode == "toward":
-                vx, vy = -vx, -vy
-            return intervals.cone(vx, vy, e.heading, config.delta2)
-        # angle_in's question, whose terms are rationals of the floats and printed bounds: exact and cheap.
-        lo, hi = printed(clause.angle.lo), printed(clause.angle.hi)
-        gap = Fraction(e.heading) - Fraction(ref.heading if isinstance(clause, RelativeHeading) else 0.0)
-        alpha = gap - 360 * ((gap - lo) // 360)
-        return lo <= alpha <= hi
-
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         base = ref.heading if quantity == "angle" else 0.0
         gap = Fraction(target.heading) - Fraction(base)
@@ -229,26 +355,6 @@ class HeadingPart(Part):
                             config.c_head)
         return RelativeHeading(angle, ref.id)
 
-    # ------------------------------------------------------------------------------- semantics
-    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-        if isinstance(clause, AbsoluteHeading):
-            return _in_angle_range(e.heading, 0.0, clause.angle)
-        assert ref is not None
-        if isinstance(clause, RelativeHeading):
-            return _in_angle_range(e.heading, ref.heading, clause.angle)
-        if isinstance(clause, FacingRelation):
-            if (e.x, e.y) == (ref.x, ref.y):
-                return False
-            if clause.mode == "toward":
-                target = bearing(e.x, e.y, ref.x, ref.y)
-            else:
-                target = bearing(ref.x, ref.y, e.x, e.y)
-            return angular_difference(e.heading, target) <= config.delta2 + ANGLE_EPS
-        raise TypeError(f"not a heading: {clause!r}")
-
-    def observed(self, e: Entity) -> str:
-        return f"heading {e.heading:.3f}"
-
     # ------------------------------------------------------------------------------- syntax
     def parse(self, ln: Line, declared: set[str]) -> Clause:
         ln.take(text="facing")
@@ -263,20 +369,5 @@ class HeadingPart(Part):
             ln.take(text="to")
             return RelativeHeading(angle, ln.reference(declared))
         return AbsoluteHeading(angle)
-
-    # ------------------------------------------------------------------------------- Scenic
-    def scenic(self, clause: Clause, at: str) -> str:
-        if isinstance(clause, FacingRelation):
-            return f"dsl__facing_{'toward' if clause.mode == 'toward' else 'away_from'}({clause.ref}, {at})"
-        if isinstance(clause, RelativeHeading):
-            return f"{clause.ref}.heading + {clause.angle} deg"
-        if isinstance(clause, AbsoluteHeading):
-            return f"{clause.angle} deg"
-        raise TypeError(f"not a DSL heading: {clause!r}")
-
-    def needs_own_position(self, clause: Clause) -> bool:
-        return isinstance(clause, FacingRelation)
-
-    # ------------------------------------------------------------------------------- report
 
 HEADING = HeadingPart()

@@ -269,6 +269,11 @@ class MotionPart(Part):
     refless = frozenset({STATIONARY})
     keyword = "with speed"
     clauses = (Stationary, MovingLike, RelativeSpeed, AbsoluteSpeed)
+    optional = True  # `, MOTION` ends a statement when the program has motion
+    first_words = frozenset({"stationary", "moving"})
+
+    def enabled(self, config: SynthConfig) -> bool:
+        return config.motion
 
     def perturbed(self, b: Bounds) -> bool:
         return b.speed != 0.0
@@ -361,10 +366,6 @@ class MotionPart(Part):
             return MovingLike(ref.id)
         (lo_e, hi_e), (lo_r, hi_r) = speed_box(target, config), speed_box(ref, config)
         return RelativeSpeed(covering(lo_e - hi_r, hi_e - lo_r, config.c_speed), ref.id)
-
-    # ------------------------------------------------------------------------------- semantics
-    def observed(self, e: Entity) -> str:
-        return MotionClause.observed(None, e)
 
     # ------------------------------------------------------------------------------- syntax
     def parse(self, ln: Line, declared: set[str]) -> Clause:

@@ -12,6 +12,7 @@ lateral lx = dx cos t + dy sin t, forward ly = dy cos t - dx sin t with t = REF.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING, Any
@@ -20,16 +21,18 @@ import numpy as np
 
 from synth import intervals
 from synth.config import SynthConfig
+from synth.draws import HEADING, REACH_SLACK, XY, Draws, Pose, Reach, disc_plus, rotated
 from synth.geometry import (
     angular_difference,
     bearing,
     exact_cos_squared,
     exact_heading_vector,
     exact_offset,
+    signed,
     sqrt_rational,
     to_local,
 )
-from synth.parts.base import Clause, ClauseKind, Part
+from synth.parts.base import Clause, Part
 from synth.perturbation import (
     Bounds,
     bounds_of,
@@ -61,54 +64,291 @@ LENGTH_EPS = 1e-9
 ANGLE_EPS = 1e-9
 
 
+class PositionClause(Clause):
+    """What the position clauses share: the checker's view of where an entity is, and the Scenic `at`."""
+
+    def observed(self, e: Entity) -> str:
+        return f"({e.x:.3f}, {e.y:.3f})"
+
+    @staticmethod
+    def _outside(backend: ExactBackend, v: Any, rng: Range) -> list[Any]:
+        const = backend.constant
+        return [v < const(printed(rng.lo)), v > const(printed(rng.hi))]
+
+
 @dataclass(frozen=True)
-class DirectionPos:
+class DirectionPos(PositionClause):
     """`ahead of | behind | left of | right of REF by Range`: cost 0."""
 
     direction: str
     ref: str
     distance: Range
     cost = 0
+    text = "{c.words} {c.ref} by {c.distance}"
+    labels = ("ahead", "behind", "left", "right")
+    label_field = "direction"
+    drawn_as = "sector"
 
-    def __str__(self) -> str:
-        return f"{DIRECTIONS[self.direction][0]} {self.ref} by {self.distance}"
+    @property
+    def words(self) -> str:
+        return DIRECTIONS[self.direction][0]
+
+    @property
+    def axis(self) -> float:
+        """phi: the sector's axis, counter-clockwise from the reference's heading."""
+        return DIRECTIONS[self.direction][1]
+
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        dist = math.hypot(e.x - ref.x, e.y - ref.y)
+        if dist == 0.0 or not self.distance.contains(dist, LENGTH_EPS):
+            return False
+        axis = ref.heading + self.axis
+        return angular_difference(bearing(ref.x, ref.y, e.x, e.y), axis) <= config.delta1 + ANGLE_EPS
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        vx, vy = intervals.offset(ref, e)
+        lo, hi = max(printed(self.distance.lo), Fraction(0)), printed(self.distance.hi)
+        sq = vx * vx + vy * vy
+        return intervals.all_of(intervals.between(lo * lo, sq, hi * hi),
+                                intervals.cone(vx, vy, ref.heading + self.axis, config.delta1))
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const = backend.constant
+        vx, vy = backend.offset(ref, e)
+        lo, hi = printed(self.distance.lo), printed(self.distance.hi)
+        # lo <= |v| <= hi with 0 <= lo, squared: no square root, a ground formula.
+        return backend.And(
+            const(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= const(hi * hi),
+            backend.cone(vx, vy, ref.heading + self.axis, backend.config.delta1),
+        )
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        """p_e - p_r ranges over the disc of radius rho_e + rho_r (Minkowski sum); the sector narrows by
+        reduction 1."""
+        const, cfg = backend.constant, backend.config
+        vx, vy, cons = backend.perturbed_offset(exact_offset(ref, e), radius_of(ref, e, cfg))
+        lo, hi = max(printed(self.distance.lo), Fraction(0)), printed(self.distance.hi)
+        sq = vx * vx + vy * vy
+        return [backend.And(*cons, sq < const(lo * lo)), backend.And(*cons, sq > const(hi * hi)),
+                backend.cone_fails(vx, vy, cons, ref.heading + self.axis,
+                                   narrowed(cfg.delta1, bounds_of(ref, cfg).heading))]
+
+    def scenic(self, at: str) -> str:
+        return f"dsl__sector_{self.direction}({self.ref}, {_scenic_distance(self.distance)})"
+
+    def draws(self, config: SynthConfig) -> SectorDraws:
+        d0, d1 = sampled_distance(self.distance)
+        return SectorDraws(self.ref, self.axis, (d0, -config.delta1), (d1, config.delta1))
 
 
 @dataclass(frozen=True)
-class LocalXYPos:
+class LocalXYPos(PositionClause):
     """`on Range @ Range relative to REF`: lateral @ forward in REF's frame, cost 1."""
 
     lateral: Range
     forward: Range
     ref: str
     cost = 1
+    text = "on {c.lateral} @ {c.forward} relative to {c.ref}"
+    labels = ("relative position",)
+    drawn_as = "relative_xy"
 
-    def __str__(self) -> str:
-        return f"on {self.lateral} @ {self.forward} relative to {self.ref}"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        lx, ly = to_local(e.x - ref.x, e.y - ref.y, ref.heading)
+        return self.lateral.contains(lx, LENGTH_EPS) and self.forward.contains(ly, LENGTH_EPS)
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        vx, vy = intervals.offset(ref, e)
+        ux, uy = (intervals.ball(c) for c in exact_heading_vector(ref.heading))
+        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+        return intervals.all_of(intervals.between(printed(self.lateral.lo), lx, printed(self.lateral.hi)),
+                                intervals.between(printed(self.forward.lo), ly, printed(self.forward.hi)))
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const = backend.constant
+        vx, vy = backend.offset(ref, e)
+        ux, uy = (const(c) for c in exact_heading_vector(ref.heading))
+        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
+        return backend.And(
+            const(printed(self.lateral.lo)) <= lx, lx <= const(printed(self.lateral.hi)),
+            const(printed(self.forward.lo)) <= ly, ly <= const(printed(self.forward.hi)),
+        )
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        """The reference frame turns by (c, s) on the unit circle with c >= cos(eta), the rational of the float
+        cos(eta) (the constant synth.perturbation widens by), and p_e - p_r moves in a disc.
+
+        Rot(c, s) L_u (c0 + w) = Rot(c, s) a + b, where a = L_u c0 is the observed local vector and b =
+        Rot(c, s) L_u w runs over the disc of radius |u| R (L_u is |u| times a rotation, and rotations map a disc
+        about 0 onto itself). Same set, but no products of unknowns: nlsat takes ms here where the literal
+        product of the turn and the disc took it up to a minute."""
+        const, cfg = backend.constant, backend.config
+        cx, cy = exact_offset(ref, e)
+        ux, uy = exact_heading_vector(ref.heading)
+        ax, ay = cx * uy - cy * ux, cy * uy + cx * ux
+        lx, ly, cons = const(ax), const(ay), []
+        eta = bounds_of(ref, cfg).heading
+        if eta > 0:
+            c, s = backend.var("c"), backend.var("s")
+            cons += [c * c + s * s == 1, c >= const(Fraction(math.cos(math.radians(eta))))]
+            lx, ly = c * const(ax) - s * const(ay), s * const(ax) + c * const(ay)
+        radius = radius_of(ref, e, cfg)
+        if radius > 0:
+            bx, by = backend.var("bx"), backend.var("by")
+            cons.append(bx * bx + by * by <= const(radius * radius * (ux * ux + uy * uy)))
+            lx, ly = lx + bx, ly + by
+        bad = self._outside(backend, lx, self.lateral) + self._outside(backend, ly, self.forward)
+        return [backend.And(*cons, b) for b in bad]
+
+    def scenic(self, at: str) -> str:
+        return f"dsl__relative_xy({self.ref}, {self.lateral}, {self.forward})"
+
+    def draws(self, config: SynthConfig) -> RelativeXYDraws:
+        return RelativeXYDraws(self.ref, (self.lateral.lo, self.forward.lo), (self.lateral.hi, self.forward.hi))
 
 
 @dataclass(frozen=True)
-class AbsoluteXYPos:
+class AbsoluteXYPos(PositionClause):
     """`on Range @ Range`: x @ y in the scene frame, cost 2."""
 
     x: Range
     y: Range
     cost = 2
     ref = None
+    text = "on {c.x} @ {c.y}"
+    labels = ("absolute position",)
+    drawn_as = "absolute_position"
 
-    def __str__(self) -> str:
-        return f"on {self.x} @ {self.y}"
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self.x.contains(e.x, LENGTH_EPS) and self.y.contains(e.y, LENGTH_EPS)
+
+    def decide(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
+        # Rational comparisons of the floats with the printed bounds: exact and cheap.
+        return all(printed(b.lo) <= Fraction(v) <= printed(b.hi) for b, v in ((self.x, e.x), (self.y, e.y)))
+
+    def formula(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> Any:
+        const = backend.constant
+        pairs = ((self.x, e.x), (self.y, e.y))
+        return backend.And(*(const(printed(b.lo)) <= const(v) for b, v in pairs),
+                           *(const(v) <= const(printed(b.hi)) for b, v in pairs))
+
+    def violations(self, backend: ExactBackend, e: Entity, ref: Entity | None) -> list[Any]:
+        """The entity anywhere in the disc of its own position bound."""
+        const = backend.constant
+        rho = Fraction(bounds_of(e, backend.config).pos)
+        wx, wy = backend.var("wx"), backend.var("wy")
+        disc = wx * wx + wy * wy <= const(rho * rho)
+        x, y = const(e.x) + wx, const(e.y) + wy
+        return [backend.And(disc, bad) for bad in self._outside(backend, x, self.x) + self._outside(backend, y, self.y)]
+
+    def scenic(self, at: str) -> str:
+        return f"({self.x} @ {self.y})"
+
+    def draws(self, config: SynthConfig) -> AbsoluteXYDraws:
+        return AbsoluteXYDraws((self.x.lo, self.y.lo), (self.x.hi, self.y.hi))
+
+
+# ------------------------------------------------------------------------------------------- what Scenic draws
+
+def _sector_disc(mid: float, half: float, r0: float, r1: float) -> tuple[float, float, float]:
+    """A disc (cx, cy, radius) holding every point at a distance in [r0, r1] and a direction within half of mid.
+
+    The centre lies on the sector's axis, at rho from its apex. The squared distance from there to a sector point
+    at (r, a) is rho^2 + r^2 - 2 rho r cos(a - mid): largest at |a - mid| = half and, convex in r, at r0 or r1.
+    So the radius is exact for that centre; rho is the best of a few.
+    """
+    if half >= 180.0:
+        return (0.0, 0.0, r1)
+    cw = math.cos(math.radians(half))
+    rho, rad = min(((rho, max(math.sqrt(max(0.0, rho * rho + r * r - 2 * rho * r * cw)) for r in (r0, r1)))
+                    for rho in (r1 * k / 8 for k in range(9))), key=lambda t: t[1])
+    ox, oy = rotated(mid, 0.0, rho)
+    return (ox, oy, rad)
+
+
+@dataclass(frozen=True)
+class SectorDraws(Draws):
+    """`DIR of REF by Range(a, b)`: dsl__sector draws (distance, angle offset in +-delta1)."""
+
+    ref: str
+    phi: float
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    writes = XY
+    reads = (XY, HEADING)
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        dx, dy = rotated(ref.heading + self.phi + p[1], 0.0, p[0])
+        own.x, own.y = ref.x + dx, ref.y + dy
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        d = math.hypot(own.x - ref.x, own.y - ref.y)
+        u = signed(bearing(ref.x, ref.y, own.x, own.y) - ref.heading - self.phi) if d > 0 else 0.0
+        return (d, u)
+
+    def area(self, p: Sequence[float], ref: Pose | None) -> float:
+        return p[0]  # polar coordinates: a step in (distance, angle) sweeps distance times as much plane
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        half = ref.heading.half + self.hi[1]
+        cx, cy, r = _sector_disc(ref.heading.mid + self.phi, half, self.lo[0], self.hi[0])
+        return disc_plus(ref, cx, cy, r, own.heading)
+
+
+@dataclass(frozen=True)
+class RelativeXYDraws(Draws):
+    """`on Range @ Range relative to REF`: dsl__relative_xy draws (lateral, forward) in REF's frame."""
+
+    ref: str
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    writes = XY
+    reads = (XY, HEADING)
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        dx, dy = rotated(ref.heading, p[0], p[1])
+        own.x, own.y = ref.x + dx, ref.y + dy
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        return to_local(own.x - ref.x, own.y - ref.y, ref.heading)
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
+        corner = math.hypot(self.hi[0] - mx, self.hi[1] - my)
+        m = math.hypot(mx, my)
+        # The rectangle's centre turns with REF's heading: a chord of at most 2 m sin(half / 2).
+        half = min(ref.heading.half, 180.0)
+        chord = 2 * m * math.sin(math.radians(half) / 2)
+        dx, dy = rotated(ref.heading.mid, mx, my)
+        return disc_plus(ref, dx, dy, corner + chord, own.heading)
+
+
+@dataclass(frozen=True)
+class AbsoluteXYDraws(Draws):
+    """`on Range @ Range`: x and y drawn in the scene frame."""
+
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    ref = None
+    writes = XY
+    reads = ()
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        own.x, own.y = p[0], p[1]
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        return (own.x, own.y)
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        mx, my = (self.lo[0] + self.hi[0]) / 2, (self.lo[1] + self.hi[1]) / 2
+        return Reach(mx, my, math.hypot(self.hi[0] - mx, self.hi[1] - my) + REACH_SLACK, own.heading)
 
 
 class PositionPart(Part):
     name = "position"
     relations = DIRECTION_NAMES
     keyword = "at"
-    clause_kinds = (
-        *(ClauseKind(d, DirectionPos, "sector", ("direction", d)) for d in ("ahead", "behind", "left", "right")),
-        ClauseKind("relative position", LocalXYPos, "relative_xy"),
-        ClauseKind("absolute position", AbsoluteXYPos, "absolute_position"),
-    )
+    clauses = (DirectionPos, LocalXYPos, AbsoluteXYPos)
 
     def perturbed(self, b: Bounds) -> bool:
         return b.pos != 0.0 or b.heading != 0.0
@@ -180,87 +420,7 @@ class PositionPart(Part):
         lx, ly = backend.var("lx"), backend.var("ly")
         return [lx == vx * uy - vy * ux, ly == vy * uy + vx * ux], [lx, ly]
 
-    def formula(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> Any:
-        const, cfg = backend.constant, backend.config
-        if isinstance(clause, AbsoluteXYPos):
-            pairs = ((clause.x, e.x), (clause.y, e.y))
-            return backend.And(*(const(printed(b.lo)) <= const(v) for b, v in pairs),
-                               *(const(v) <= const(printed(b.hi)) for b, v in pairs))
-        vx, vy = backend.offset(ref, e)
-        if isinstance(clause, DirectionPos):
-            lo, hi = printed(clause.distance.lo), printed(clause.distance.hi)
-            # lo <= |v| <= hi with 0 <= lo, squared: no square root, a ground formula.
-            return backend.And(
-                const(max(lo, Fraction(0)) ** 2) <= vx * vx + vy * vy, vx * vx + vy * vy <= const(hi * hi),
-                backend.cone(vx, vy, ref.heading + DIRECTIONS[clause.direction][1], cfg.delta1),
-            )
-        ux, uy = (const(c) for c in exact_heading_vector(ref.heading))
-        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
-        return backend.And(
-            const(printed(clause.lateral.lo)) <= lx, lx <= const(printed(clause.lateral.hi)),
-            const(printed(clause.forward.lo)) <= ly, ly <= const(printed(clause.forward.hi)),
-        )
-
-    def violations(self, backend: ExactBackend, clause: Clause, e: Entity, ref: Entity | None) -> list[Any]:
-        """A position depends on p_e - p_r only, which ranges over the disc of radius rho_e + rho_r (Minkowski
-        sum); the reference frame of a local position turns by (c, s) on the unit circle with c >= cos(eta), the
-        rational of the float cos(eta) (the constant synth.perturbation widens by); sectors narrow by reduction 1."""
-        const, cfg, out = backend.constant, backend.config, []
-
-        def outside(v: Any, rng: Range) -> list[Any]:
-            return [v < const(printed(rng.lo)), v > const(printed(rng.hi))]
-
-        if isinstance(clause, AbsoluteXYPos):
-            rho = Fraction(bounds_of(e, cfg).pos)
-            wx, wy = backend.var("wx"), backend.var("wy")
-            disc = wx * wx + wy * wy <= const(rho * rho)
-            x, y = const(e.x) + wx, const(e.y) + wy
-            return [backend.And(disc, bad) for bad in outside(x, clause.x) + outside(y, clause.y)]
-        if isinstance(clause, DirectionPos):
-            vx, vy, cons = backend.perturbed_offset(exact_offset(ref, e), radius_of(ref, e, cfg))
-            lo, hi = max(printed(clause.distance.lo), Fraction(0)), printed(clause.distance.hi)
-            sq = vx * vx + vy * vy
-            out += [backend.And(*cons, sq < const(lo * lo)), backend.And(*cons, sq > const(hi * hi))]
-            out.append(backend.cone_fails(vx, vy, cons, ref.heading + DIRECTIONS[clause.direction][1],
-                                          narrowed(cfg.delta1, bounds_of(ref, cfg).heading)))
-            return out
-        # Local coordinates: Rot(c, s) L_u (c0 + w) = Rot(c, s) a + b, where a = L_u c0 is the observed local
-        # vector and b = Rot(c, s) L_u w runs over the disc of radius |u| R (L_u is |u| times a rotation, and
-        # rotations map a disc about 0 onto itself). Same set, but no products of unknowns: nlsat takes ms
-        # here where the literal product of the turn and the disc took it up to a minute.
-        cx, cy = exact_offset(ref, e)
-        ux, uy = exact_heading_vector(ref.heading)
-        ax, ay = cx * uy - cy * ux, cy * uy + cx * ux
-        lx, ly, cons = const(ax), const(ay), []
-        eta = bounds_of(ref, cfg).heading
-        if eta > 0:
-            c, s = backend.var("c"), backend.var("s")
-            cons += [c * c + s * s == 1, c >= const(Fraction(math.cos(math.radians(eta))))]
-            lx, ly = c * const(ax) - s * const(ay), s * const(ax) + c * const(ay)
-        radius = radius_of(ref, e, cfg)
-        if radius > 0:
-            bx, by = backend.var("bx"), backend.var("by")
-            cons.append(bx * bx + by * by <= const(radius * radius * (ux * ux + uy * uy)))
-            lx, ly = lx + bx, ly + by
-        return [backend.And(*cons, bad) for bad in outside(lx, clause.lateral) + outside(ly, clause.forward)]
-
     # ------------------------------------------------------------------------------- exact, without a solver
-    def decide(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool | None:
-        if isinstance(clause, AbsoluteXYPos):
-            # Rational comparisons of the floats with the printed bounds: exact and cheap.
-            return all(printed(b.lo) <= Fraction(v) <= printed(b.hi) for b, v in ((clause.x, e.x), (clause.y, e.y)))
-        vx, vy = intervals.offset(ref, e)
-        if isinstance(clause, DirectionPos):
-            lo, hi = max(printed(clause.distance.lo), Fraction(0)), printed(clause.distance.hi)
-            sq = vx * vx + vy * vy
-            return intervals.all_of(intervals.between(lo * lo, sq, hi * hi),
-                                    intervals.cone(vx, vy, ref.heading + DIRECTIONS[clause.direction][1],
-                                                   config.delta1))
-        ux, uy = (intervals.ball(c) for c in exact_heading_vector(ref.heading))
-        lx, ly = vx * uy - vy * ux, vy * uy + vx * ux
-        return intervals.all_of(intervals.between(printed(clause.lateral.lo), lx, printed(clause.lateral.hi)),
-                                intervals.between(printed(clause.forward.lo), ly, printed(clause.forward.hi)))
-
     def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
         vx, vy = intervals.offset(ref, target)
         if quantity == "distance":
@@ -305,26 +465,6 @@ class PositionPart(Part):
         lateral, forward = local_ranges(target, ref, radius, bounds_of(ref, config).heading, config.c_dist)
         return LocalXYPos(lateral, forward, ref.id)
 
-    # ------------------------------------------------------------------------------- semantics
-    def holds(self, clause: Clause, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
-        if isinstance(clause, AbsoluteXYPos):
-            return clause.x.contains(e.x, LENGTH_EPS) and clause.y.contains(e.y, LENGTH_EPS)
-        assert ref is not None
-        dx, dy = e.x - ref.x, e.y - ref.y
-        if isinstance(clause, LocalXYPos):
-            lx, ly = to_local(dx, dy, ref.heading)
-            return clause.lateral.contains(lx, LENGTH_EPS) and clause.forward.contains(ly, LENGTH_EPS)
-        if isinstance(clause, DirectionPos):
-            dist = math.hypot(dx, dy)
-            if dist == 0.0 or not clause.distance.contains(dist, LENGTH_EPS):
-                return False
-            axis = ref.heading + DIRECTIONS[clause.direction][1]
-            return angular_difference(bearing(ref.x, ref.y, e.x, e.y), axis) <= config.delta1 + ANGLE_EPS
-        raise TypeError(f"not a position: {clause!r}")
-
-    def observed(self, e: Entity) -> str:
-        return f"({e.x:.3f}, {e.y:.3f})"
-
     # ------------------------------------------------------------------------------- syntax
     def parse(self, ln: Line, declared: set[str]) -> Clause:
         word = ln.peek()
@@ -347,18 +487,6 @@ class PositionPart(Part):
         ref = ln.reference(declared)
         ln.take(text="by")
         return DirectionPos(word, ref, ln.range_())
-
-    # ------------------------------------------------------------------------------- Scenic
-    def scenic(self, clause: Clause, at: str) -> str:
-        if isinstance(clause, DirectionPos):
-            return f"dsl__sector_{clause.direction}({clause.ref}, {_scenic_distance(clause.distance)})"
-        if isinstance(clause, LocalXYPos):
-            return f"dsl__relative_xy({clause.ref}, {clause.lateral}, {clause.forward})"
-        if isinstance(clause, AbsoluteXYPos):
-            return f"({clause.x} @ {clause.y})"
-        raise TypeError(f"not a DSL position: {clause!r}")
-
-    # ------------------------------------------------------------------------------- report
 
 def sampled_distance(r: Range) -> tuple[float, float]:
     """The distance interval Scenic draws for a sector's Range (kept off 0, where no bearing exists)."""

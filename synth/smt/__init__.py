@@ -9,15 +9,15 @@ same question. A distance Range [a, b] is encoded with d >= 0, d^2 = |v|^2, a <=
 arithmetic, exact in z3 (nlsat). dReal (optional) gets the same formula over doubles, delta-complete.
 
 The modules:
-  backend          the solver-backend protocol (SolverBackend, ExactBackend): encoding primitives and the
-                   core's questions (relation, measure, certify)
+  backend          the solver-backend protocol (SolverBackend, ExactBackend): the encoding primitives, and
+                   what a backend asks of a part to measure Range values (Measured, MeasureRequest)
   z3_backend       z3, the default and the exact backend
   dreal_backend    dReal, optional, imported only when chosen
   measure          Range values, from exact arithmetic or one model
   certify          certification, plain and robust
 
 Each statement part (synth.parts) builds its formulas from the backend's primitives, so a backend knows no
-relation by name.
+relation by name; the parts ask their own relation questions (Part.ask).
 """
 
 from __future__ import annotations

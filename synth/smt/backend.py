@@ -1,11 +1,13 @@
-"""The solver-backend protocol: what a statement part builds formulas from, and what the core asks a solver.
+"""The solver-backend protocol: what a statement part builds formulas from.
 
 Two levels, one interface. Every backend (z3, dReal) offers the encoding primitives a part's plain relation
-question needs (constant, var, offset, cone, distance_in, And, Or, Not, check) and answers the core's three
-questions (relation, measure, certify). Robust questions, certification and Range values read from a model
-need exact rational arithmetic: an ExactBackend (z3) adds those primitives, and every backend names the exact
-backend it hands them to (`exact`: itself for z3, one z3 made on first use for dReal, which is delta-complete
-only).
+question needs (constant, var, offset, cone, distance_in, And, Or, Not, check) and measures Range values (from
+the parts' Measured answers). Robust questions, certification and Range values read from a model need exact
+rational arithmetic: an ExactBackend (z3) adds those primitives, and every backend names the exact backend it
+hands them to (`exact`: itself for z3, one z3 made on first use for dReal, which is delta-complete only).
+
+This module knows no part and no program: the parts build on it (synth.parts), and the questions that need
+them live above it (Part.ask, synth.smt.certify).
 """
 
 from __future__ import annotations
@@ -14,23 +16,52 @@ import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 from synth.config import SynthConfig
 from synth.errors import InputError
-from synth.parts import HEADING, POSITION, MeasureRequest, Part
-from synth.parts.heading import FACING_NAMES
-from synth.parts.position import DIRECTION_NAMES
-from synth.scene import Entity, Scene
-from synth.smt.certify import certify
-
-if TYPE_CHECKING:
-    from synth.dsl import Program
+from synth.scene import Entity
 
 Formula = Any  # a term of the backend at hand
 
 # What a backend measures for a program: per statement, per wanted quantity, its exact values.
 Measurements = list[tuple[tuple[Fraction, ...], ...]]
+
+
+class Measured(ABC):
+    """What a backend asks of a statement part to measure the quantity its Ranges are centred on (synth.parts
+    implement it; a Want names the part, the quantity and the reference)."""
+
+    @abstractmethod
+    def measure_terms(self, backend: ExactBackend, quantity: str, target: Entity, ref: Entity) -> tuple[list, list]:
+        """(constraints, variables) whose unique model values are the exact quantity."""
+
+    @abstractmethod
+    def exact_measure(self, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...] | None:
+        """The quantity measure_terms pins down, without the solver, for centring Ranges: the exact value
+        (irrational ones to within 1e-15, as the solver's model gives them to 1e-12), or one that centres every
+        Range as it does (intervals.centring_value); None leaves it to the solver."""
+
+    @abstractmethod
+    def solver_measure(self, backend: SolverBackend, quantity: str, target: Entity, ref: Entity) -> tuple[Fraction, ...]:
+        """The quantity as a solver without models of its own measures it (dReal)."""
+
+
+@dataclass(frozen=True)
+class Want:
+    """One quantity a statement's Ranges are centred on: which part, what, relative to which reference."""
+
+    part: Measured
+    quantity: str
+    ref: Entity
+
+
+@dataclass(frozen=True)
+class MeasureRequest:
+    """What to measure for one statement (a solver answers all statements of a program from one model)."""
+
+    target: Entity
+    wants: tuple[Want, ...]
 
 
 class SolverUnavailable(InputError, RuntimeError):
@@ -54,7 +85,7 @@ def as_fraction(v: float | str | Fraction) -> Fraction:
 
 @dataclass
 class SolverBackend(ABC):
-    """A solver as the core sees it (synth.oracle, synth.statement, synth.synthesize) and as parts encode for it."""
+    """A solver as parts encode for it and as the core asks it for Range values (synth.statement)."""
 
     config: SynthConfig
     stats: SolverStats = field(default_factory=SolverStats)
@@ -90,7 +121,7 @@ class SolverBackend(ABC):
 
     @abstractmethod
     def distance_value(self, vx: float, vy: float) -> Fraction:
-        """|v| as this solver measures it (Part.solver_measure; one query)."""
+        """|v| as this solver measures it (Measured.solver_measure; one query)."""
 
     # ------------------------------------------------------------------------------- the exact backend
     @property
@@ -98,29 +129,10 @@ class SolverBackend(ABC):
     def exact(self) -> ExactBackend:
         """The backend that decides robust questions, certifies programs and measures from models."""
 
-    # ------------------------------------------------------------------------------- the core's questions
-    def relation(self, part: Part, code: int, ref: Entity, e: Entity) -> bool:
-        """Does part's relation `code` hold between ref and e (for every perturbation, where either is uncertain)?"""
-        if part.pair_is_robust(ref, e, self.config):
-            return part.robust_relation(self.exact, code, ref, e)
-        return part.relation(self, code, ref, e)
-
-    def position_relation(self, direction: str, ref: Entity, e: Entity) -> bool:
-        """The paper's position question by name (tests and tools ask it so)."""
-        return self.relation(POSITION, DIRECTION_NAMES.index(direction), ref, e)
-
-    def heading_relation(self, mode: str, ref: Entity, e: Entity) -> bool:
-        """The paper's heading question by name."""
-        return self.relation(HEADING, FACING_NAMES.index(mode), ref, e)
-
+    # ------------------------------------------------------------------------------- Range values
     @abstractmethod
     def measure(self, requests: list[MeasureRequest]) -> Measurements:
         """The exact quantities the Ranges of many statements are centred on."""
-
-    def certify(self, program: Program, scene: Scene) -> list[str]:
-        """Ids of the statements that cannot be shown to hold on the scene (empty: certified); by the exact
-        backend (synth.smt.certify)."""
-        return certify(self.exact, program, scene)
 
 
 class ExactBackend(SolverBackend):

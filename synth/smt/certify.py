@@ -3,26 +3,25 @@
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
 
 from synth.dsl import Program, Statement
-from synth.parts import Part
+from synth.parts import Clause, Part
 from synth.robust import robust_parts
 from synth.scene import Entity, Scene
-
-if TYPE_CHECKING:
-    from synth.smt.backend import ExactBackend, Formula
+from synth.smt.backend import ExactBackend, Formula, SolverBackend
 
 
-def certify(backend: ExactBackend, program: Program, scene: Scene) -> list[str]:
-    """Ids of the statements that cannot be shown to hold on the scene (empty: certified).
+def certify(backend: SolverBackend, program: Program, scene: Scene) -> list[str]:
+    """Ids of the statements that cannot be shown to hold on the scene (empty: certified), decided by the
+    backend's exact backend (backend.exact: z3).
 
     Plain parts, in the paper's all-SMT mode (oracle smt): the solver checks the whole program at once, and only
     when that fails is each statement asked alone, to name it. Otherwise each clause is first decided by rigorous
-    interval arithmetic (Part.decide, synth.intervals): a clause it proves holds needs nothing more, one it
+    interval arithmetic (Clause.decide, synth.intervals): a clause it proves holds needs nothing more, one it
     refutes fails, and the clauses it cannot decide (within rounding of a boundary) go to the solver, statement
     by statement. Robust parts: each clause's violations over every perturbation must be unsat.
     """
+    backend = backend.exact
     config = backend.config
     robust = robust_parts(scene, config)
     by_id = scene.by_id()
@@ -40,7 +39,7 @@ def certify(backend: ExactBackend, program: Program, scene: Scene) -> list[str]:
     return [st.id for st in program.statements if st.id in failed]
 
 
-def _clauses_with_refs(st: Statement, by_id: dict[str, Entity]) -> list[tuple[Part, Any, Entity | None]]:
+def _clauses_with_refs(st: Statement, by_id: dict[str, Entity]) -> list[tuple[Part, Clause, Entity | None]]:
     return [(part, clause, by_id[clause.ref] if clause.ref is not None else None) for part, clause in st.clauses()]
 
 
@@ -49,7 +48,7 @@ def statement_formula(backend: ExactBackend, st: Statement, by_id: dict[str, Ent
     """The statement's semantics on the scene, as printed (Range bounds at their printed values); the parts named
     in `skip` are left out (certified robustly instead)."""
     e = by_id[st.id]
-    return backend.And(*(part.formula(backend, clause, e, ref) for part, clause, ref in _clauses_with_refs(st, by_id)
+    return backend.And(*(clause.formula(backend, e, ref) for part, clause, ref in _clauses_with_refs(st, by_id)
                          if part.name not in skip))
 
 
@@ -60,21 +59,21 @@ def _decided_or_checked(backend: ExactBackend, st: Statement, by_id: dict[str, E
     for part, clause, ref in _clauses_with_refs(st, by_id):
         if part.name in skip:
             continue
-        fact = part.decide(clause, e, ref, backend.config)
+        fact = clause.decide(e, ref, backend.config)
         if fact is False:
             return False
         if fact is None:
-            left.append(part.formula(backend, clause, e, ref))
+            left.append(clause.formula(backend, e, ref))
     return not left or backend.check(*left)
 
 
 def robust_violations(backend: ExactBackend, st: Statement, by_id: dict[str, Entity],
                       parts: frozenset[str] | None = None) -> list[Formula]:
     """Ways `st` (as printed) could fail under a perturbation of the scene within its bounds: the statement fails
-    for some perturbation iff one of these is satisfiable (each part's, Part.violations)."""
+    for some perturbation iff one of these is satisfiable (each clause's, Clause.violations)."""
     e = by_id[st.id]
     return [f for part, clause, ref in _clauses_with_refs(st, by_id) if parts is None or part.name in parts
-            for f in part.violations(backend, clause, e, ref)]
+            for f in clause.violations(backend, e, ref)]
 
 
 def robust_holds(backend: ExactBackend, st: Statement, by_id: dict[str, Entity],

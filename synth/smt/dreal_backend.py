@@ -21,9 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from synth.geometry import exact_cos_squared, exact_heading_vector
-from synth.parts import MeasureRequest
 from synth.scene import Entity
-from synth.smt.backend import ExactBackend, Formula, Measurements, SolverBackend, SolverUnavailable
+from synth.smt.backend import ExactBackend, Formula, Measurements, MeasureRequest, SolverBackend, SolverUnavailable
 from synth.smt.z3_backend import Z3Backend
 
 # The file in the venv (sys.prefix) naming libibex.so by absolute path; tools/dreal.sh writes it.
@@ -110,7 +109,7 @@ class DrealBackend(SolverBackend):
             raise RuntimeError("dReal found no distance")
         return Fraction(box[d].mid())
 
-    # --------------------------------------------------------------------------------- the core's questions
+    # --------------------------------------------------------------------------------- Range values
     def measure(self, requests: list[MeasureRequest]) -> Measurements:
         return [tuple(w.part.solver_measure(self, w.quantity, req.target, w.ref) for w in req.wants)
                 for req in requests]

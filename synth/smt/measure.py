@@ -3,17 +3,13 @@
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
 
-from synth.parts import MeasureRequest
-
-if TYPE_CHECKING:
-    from synth.smt.backend import ExactBackend, Measurements
+from synth.smt.backend import ExactBackend, Measurements, MeasureRequest
 
 
 def measure(backend: ExactBackend, requests: list[MeasureRequest]) -> Measurements:
     """The paper's all-SMT mode (oracle smt) reads them all from one model of the solver; otherwise each part
-    computes its ground quantities in exact arithmetic (Part.exact_measure), and only those it leaves go to the
+    computes its ground quantities in exact arithmetic (Measured.exact_measure), and only those it leaves go to the
     solver, from one model.
     """
     if backend.config.oracle == "smt":

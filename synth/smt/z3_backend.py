@@ -9,9 +9,8 @@ from functools import cached_property
 from typing import Any
 
 from synth.geometry import exact_cos_squared, exact_heading_vector
-from synth.parts import MeasureRequest
 from synth.scene import Entity
-from synth.smt.backend import ExactBackend, Formula, Measurements, SolverUnavailable, as_fraction
+from synth.smt.backend import ExactBackend, Formula, Measurements, MeasureRequest, SolverUnavailable, as_fraction
 from synth.smt.measure import measure
 
 
@@ -153,6 +152,6 @@ class Z3Backend(ExactBackend):
             v = v.approx(12)
         return v.as_fraction()
 
-    # --------------------------------------------------------------------------------- the core's questions
+    # --------------------------------------------------------------------------------- Range values
     def measure(self, requests: list[MeasureRequest]) -> Measurements:
         return measure(self, requests)

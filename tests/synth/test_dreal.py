@@ -90,6 +90,7 @@ def test_dreal_certifies_with_one_z3_backend_per_frame_that_counts_into_its_stat
     from synth.dsl import Program
     from synth.parts.heading import AbsoluteHeading
     from synth.smt import make_backend
+    from synth.smt.certify import certify
     from synth.smt.z3_backend import Z3Backend
     from synth.syntax import Range
 
@@ -111,8 +112,8 @@ def test_dreal_certifies_with_one_z3_backend_per_frame_that_counts_into_its_stat
     h = round(scene.by_id()[first.id].heading)
     wrong = Program((replace(first, heading=AbsoluteHeading(Range(h + 10.0, h + 15.0))),) + program.statements[1:])
     for _ in range(3):
-        assert backend.certify(program, scene) == []
-        assert backend.certify(wrong, scene) == [first.id]
+        assert certify(backend, program, scene) == []
+        assert certify(backend, wrong, scene) == [first.id]
     assert len(made) == 1 and backend.exact is made[0]
     assert made[0].stats is backend.stats and backend.stats.queries >= 6 * len(program.statements)
 

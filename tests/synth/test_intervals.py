@@ -21,6 +21,7 @@ from synth.parts.heading import AbsoluteHeading, FacingRelation, RelativeHeading
 from synth.parts.position import DIRECTION_NAMES, DIRECTIONS, AbsoluteXYPos, DirectionPos, LocalXYPos
 from synth.scene import Entity
 from synth.smt import Z3Backend
+from synth.smt.certify import certify
 from synth.smt.measure import model_measure
 from synth.syntax import Range, fmt_number
 
@@ -31,8 +32,8 @@ def entity(eid: str, x: float, y: float, h: float) -> Entity:
     return Entity(eid, "Car", x, y, h % 360.0)
 
 
-def z3_holds(backend: Z3Backend, part, clause, e, ref) -> bool:
-    return backend.check(part.formula(backend, clause, e, ref))
+def z3_holds(backend: Z3Backend, clause, e, ref) -> bool:
+    return backend.check(clause.formula(backend, e, ref))
 
 
 def near(v: float, nudge: int) -> float:
@@ -64,8 +65,8 @@ def test_direction_clauses_are_decided_as_the_solver_decides(rx, ry, rh, ex, ey,
     dist = math.hypot(e.x - ref.x, e.y - ref.y)
     clause = DirectionPos(DIRECTION_NAMES[code], "r", rng(max(0.0, near(dist - 2.5, n_lo)), near(dist, n_hi)))
     backend = Z3Backend(CFG)
-    fact = POSITION.decide(clause, e, ref, CFG)
-    assert fact is None or fact == z3_holds(backend, POSITION, clause, e, ref)
+    fact = clause.decide(e, ref, CFG)
+    assert fact is None or fact == z3_holds(backend, clause, e, ref)
 
 
 @given(rx=coords, ry=coords, rh=angles, ex=coords, ey=coords, n=st.tuples(nudges, nudges, nudges, nudges),
@@ -81,8 +82,8 @@ def test_coordinate_clauses_are_decided_as_the_solver_decides(rx, ry, rh, ex, ey
         lx = (ex - rx) * math.cos(t) + (ey - ry) * math.sin(t)
         ly = (ey - ry) * math.cos(t) - (ex - rx) * math.sin(t)
         clause = LocalXYPos(rng(near(lx, n[0]), near(lx, n[1]) + 5), rng(near(ly, n[2]) - 5, near(ly, n[3])), "r")
-    fact = POSITION.decide(clause, e, ref, CFG)
-    assert fact is None or fact == z3_holds(backend, POSITION, clause, e, ref)
+    fact = clause.decide(e, ref, CFG)
+    assert fact is None or fact == z3_holds(backend, clause, e, ref)
 
 
 @given(rx=coords, ry=coords, rh=angles, ex=coords, ey=coords, eh=angles, mode=st.sampled_from(["toward", "away"]),
@@ -97,8 +98,8 @@ def test_facing_clauses_are_decided_as_the_solver_decides(rx, ry, rh, ex, ey, eh
     e = entity("e", ex, ey, eh)
     clause = FacingRelation(mode, "r")
     backend = Z3Backend(CFG)
-    fact = HEADING.decide(clause, e, ref, CFG)
-    assert fact is None or fact == z3_holds(backend, HEADING, clause, e, ref)
+    fact = clause.decide(e, ref, CFG)
+    assert fact is None or fact == z3_holds(backend, clause, e, ref)
 
 
 @given(rh=angles, eh=angles, n_lo=nudges, n_hi=nudges, turns=st.integers(-2, 2), relative=st.booleans())
@@ -108,19 +109,19 @@ def test_angle_clauses_are_decided_exactly(rh, eh, n_lo, n_hi, turns, relative):
     angle = Range(near(gap, n_lo), near(gap, n_hi) + 5)
     clause = RelativeHeading(angle, "r") if relative else AbsoluteHeading(angle)
     backend = Z3Backend(CFG)
-    fact = HEADING.decide(clause, e, ref if relative else None, CFG)
+    fact = clause.decide(e, ref if relative else None, CFG)
     assert fact is not None  # rational comparisons: always decided
-    assert fact == z3_holds(backend, HEADING, clause, e, ref if relative else None)
+    assert fact == z3_holds(backend, clause, e, ref if relative else None)
 
 
 def test_a_distance_on_its_printed_bound_is_decided_exactly():
     ref, e = entity("r", 0.0, 0.0, 90.0), entity("e", -3.0, 4.0, 0.0)  # |v| = 5, bearing within the left sector?
-    assert POSITION.decide(DirectionPos("left", "r", Range(0.0, 5.0)), e, ref, CFG) is False  # 53 deg off
+    assert DirectionPos("left", "r", Range(0.0, 5.0)).decide(e, ref, CFG) is False  # 53 deg off
     ahead = entity("a", 0.0, 5.0, 0.0)
     ref0 = entity("r", 0.0, 0.0, 0.0)
-    assert POSITION.decide(DirectionPos("ahead", "r", Range(0.0, 5.0)), ahead, ref0, CFG) is True
-    assert POSITION.decide(DirectionPos("ahead", "r", Range(5.0, 10.0)), ahead, ref0, CFG) is True
-    assert POSITION.decide(DirectionPos("ahead", "r", Range(0.0, 4.99)), ahead, ref0, CFG) is False
+    assert DirectionPos("ahead", "r", Range(0.0, 5.0)).decide(ahead, ref0, CFG) is True
+    assert DirectionPos("ahead", "r", Range(5.0, 10.0)).decide(ahead, ref0, CFG) is True
+    assert DirectionPos("ahead", "r", Range(0.0, 4.99)).decide(ahead, ref0, CFG) is False
 
 
 def test_certification_asks_the_solver_only_what_intervals_leave(monkeypatch, real_frames):
@@ -131,9 +132,9 @@ def test_certification_asks_the_solver_only_what_intervals_leave(monkeypatch, re
     assert result.certified and result.stats.smt_queries == 0
     backend = Z3Backend(CFG)
     # Intervals that can decide nothing: every clause goes to the solver, and it certifies the same program.
-    monkeypatch.setattr(type(POSITION), "decide", lambda *a: None)
-    monkeypatch.setattr(type(HEADING), "decide", lambda *a: None)
-    assert backend.certify(result.program, scene) == []
+    for kind in {k.clause for k in POSITION.clause_kinds + HEADING.clause_kinds}:
+        monkeypatch.setattr(kind, "decide", lambda *a: None)
+    assert certify(backend, result.program, scene) == []
     assert backend.stats.queries == len(result.program.statements)
 
 
@@ -149,9 +150,9 @@ def test_a_program_that_misses_the_scene_is_refuted_both_ways(monkeypatch, real_
     h = scene.by_id()[st0.id].heading
     wrong = Program((replace(st0, heading=AbsoluteHeading(Range(round(h) + 10.0, round(h) + 15.0))),)
                     + program.statements[1:])
-    assert Z3Backend(CFG).certify(wrong, scene) == [st0.id]
-    monkeypatch.setattr(type(HEADING), "decide", lambda *a: None)
-    assert Z3Backend(CFG).certify(wrong, scene) == [st0.id]
+    assert certify(Z3Backend(CFG), wrong, scene) == [st0.id]
+    monkeypatch.setattr(AbsoluteHeading, "decide", lambda *a: None)
+    assert certify(Z3Backend(CFG), wrong, scene) == [st0.id]
 
 
 def test_exact_range_values_centre_ranges_as_the_solver_model_does(real_frames):

@@ -10,6 +10,7 @@ import pytest
 from synth.config import SynthConfig
 from synth.dsl import DIRECTIONS
 from synth.geometry import heading_vector
+from synth.parts import HEADING, POSITION
 from synth.relations import DIRECTION_NAMES, FACING_NAMES, NONE, UNDECIDED, closed_form_table, settle_exactly
 from synth.scene import Entity, make_scene
 from synth.smt import Z3Backend
@@ -59,7 +60,7 @@ def test_z3_and_closed_form_agree_on_thousands_of_queries(delta1, delta2, cases)
         # The direction whose edge the point sits on, and one other (sectors are disjoint).
         edge = next(c for c, name in enumerate(DIRECTION_NAMES) if DIRECTIONS[name][1] == phi)
         for c in (edge, (edge + 1 + rng.randrange(3)) % 4):
-            assert z3b.position_relation(DIRECTION_NAMES[c], ref, tgt) == (code == c), (c, ref, tgt, code)
+            assert POSITION.ask_named(z3b, DIRECTION_NAMES[c], ref, tgt) == (code == c), (c, ref, tgt, code)
             checked += 1
     for ref, tgt in _heading_cases(rng, cases, delta2):
         scene = _pair_scene(ref, tgt)
@@ -67,7 +68,7 @@ def test_z3_and_closed_form_agree_on_thousands_of_queries(delta1, delta2, cases)
         undecided += int(raw.heading[1, 2] == UNDECIDED)
         code = settle_exactly(raw, scene, config).heading[1, 2]
         for c, name in enumerate(FACING_NAMES):
-            assert z3b.heading_relation(name, ref, tgt) == (code == c), (name, ref, tgt, code)
+            assert HEADING.ask_named(z3b, name, ref, tgt) == (code == c), (name, ref, tgt, code)
             checked += 1
     assert checked == 4 * cases
     # The edge cases really reached the guard band, so the exact path was exercised, not just floats.
@@ -80,8 +81,8 @@ def test_coincident_entities_have_no_direction_or_facing_relation():
     table = settle_exactly(closed_form_table(_pair_scene(a, b), config), _pair_scene(a, b), config)
     assert table.position[1, 2] == NONE and table.heading[1, 2] == NONE
     z3b = Z3Backend(config)
-    assert not any(z3b.position_relation(d, a, b) for d in DIRECTION_NAMES)
-    assert not any(z3b.heading_relation(m, a, b) for m in FACING_NAMES)
+    assert not any(POSITION.ask_named(z3b, d, a, b) for d in DIRECTION_NAMES)
+    assert not any(HEADING.ask_named(z3b, m, a, b) for m in FACING_NAMES)
 
 
 def test_relations_by_hand():

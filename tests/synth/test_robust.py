@@ -20,11 +20,13 @@ from synth.config import STRATEGIES, ConfigError, SynthConfig, parse_uncertainty
 from synth.dsl import DIRECTIONS, DirectionPos, FacingRelation, Range
 from synth.geometry import angular_difference, bearing, heading_vector, normalize
 from synth.oracle import make_oracle
+from synth.parts import HEADING, POSITION
 from synth.relations import DIRECTION_NAMES, FACING_NAMES, NONE, UNDECIDED
 from synth.robust import MIN_CONE, bounds_of, covering, robust_closed_form_table
 from synth.scene import Entity, Scene, SceneError, make_scene, scene_from_dict
 from synth.semantics import check, heading_holds, position_holds
 from synth.smt import Z3Backend
+from synth.smt.certify import certify
 from synth.synthesize import synthesize
 from tests.support import assert_one_line_error, run_r2s, shipped_frames
 
@@ -195,7 +197,7 @@ def test_robust_direction_decision_is_exact(rx, ry, rh, direction, d, lean, rho_
     ref = Entity("r", "Car", rx, ry, rh, pos_sigma=rho_r, heading_sigma=eta_r)
     tgt = Entity("t", "Car", rx + d * ux, ry + d * uy, 0.0, pos_sigma=rho_e, heading_sigma=0.0)
     z3b = Z3Backend(config)
-    holds = z3b.position_relation(direction, ref, tgt)
+    holds = POSITION.ask_named(z3b, direction, ref, tgt)
     table = robust_closed_form_table(_pair(ref, tgt), config)
     code = DIRECTION_NAMES.index(direction)
     if table.position[1, 2] != UNDECIDED:  # the float pre-filter, where it answers, answers as the solver
@@ -234,7 +236,7 @@ def test_robust_facing_decision_is_exact(ex, ey, eh, mode, d, lean, rho_r, rho_e
     tgt = Entity("t", "Car", ex, ey, eh, pos_sigma=rho_e, heading_sigma=eta_e)
     ref = Entity("r", "Car", ex + sign * d * ux, ey + sign * d * uy, 0.0, pos_sigma=rho_r, heading_sigma=0.0)
     z3b = Z3Backend(config)
-    holds = z3b.heading_relation(mode, ref, tgt)
+    holds = HEADING.ask_named(z3b, mode, ref, tgt)
     table = robust_closed_form_table(_pair(ref, tgt), config)
     if table.heading[1, 2] != UNDECIDED:
         assert (table.heading[1, 2] == FACING_NAMES.index(mode)) == holds
@@ -268,7 +270,7 @@ def test_disc_tangent_to_the_sector_edge_goes_to_the_solver():
     oracle = make_oracle(scene, config)
     assert oracle.backend.stats.queries >= 1
     holds = oracle.table.position[0, 1] == DIRECTION_NAMES.index("ahead")
-    assert holds == Z3Backend(config).position_relation("ahead", scene.ego, scene.others[0])
+    assert holds == POSITION.ask_named(Z3Backend(config), "ahead", scene.ego, scene.others[0])
     # Closed form has no solver: it refuses what it cannot show (conservative).
     assert make_oracle(scene, config.with_(oracle="closed-form")).table.position[0, 1] == NONE
     # Clearly outside: a little further out of the sector, no solver needed, and not a relation.
@@ -286,10 +288,10 @@ def test_heading_uncertainty_narrows_the_sector_exactly():
         ref = Entity("r", "Car", 0.0, 0.0, 0.0)  # a non-ego reference carries the 3 degrees
         ux, uy = heading_vector(off)
         tgt = Entity("t", "Car", 10 * ux, 10 * uy, 0.0)
-        assert z3b.position_relation("ahead", ref, tgt) is expected, off
+        assert POSITION.ask_named(z3b, "ahead", ref, tgt) is expected, off
         # ego's heading is exact: the full 10 degrees apply to it.
-        assert z3b.position_relation("ahead", ego, tgt) is True
-    assert z3b.position_relation("ahead", Entity("r", "Car", 0, 0, 0, heading_sigma=10.0),
+        assert POSITION.ask_named(z3b, "ahead", ego, tgt) is True
+    assert POSITION.ask_named(z3b, "ahead", Entity("r", "Car", 0, 0, 0, heading_sigma=10.0),
                                  Entity("t", "Car", 0.0, 10.0, 0.0)) is False  # no sector left
 
 
@@ -298,7 +300,7 @@ def test_certification_refutes_a_plain_program_under_uncertainty(real_frames):
     scene = SMALL_FRAMES[0]
     plain = synthesize(scene, SynthConfig()).program
     z3b = Z3Backend(SynthConfig(pos_uncertainty=3.0))
-    assert z3b.certify(plain, scene)  # some statement is refuted
+    assert certify(z3b, plain, scene)  # some statement is refuted
 
 
 # ---------------------------------------------------------------------------------------------- zero = plain

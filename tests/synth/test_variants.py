@@ -22,7 +22,8 @@ from synth.dsl import parse_program
 from synth.geometry import angular_difference
 from synth.gibbs import Chain, ChainSettings, NoVariant, autocorrelation_time, sample_variants
 from synth.overlap import boxes_overlap, scene_overlaps
-from synth.parameters import Pose, SectorDraws, inside, parameterise
+from synth.parameters import Pose, inside, parameterise
+from synth.parts.position import SectorDraws
 from synth.scene import scene_from_dict
 from synth.semantics import check
 from synth.synthesize import synthesize
