@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 # Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
 REACH_SLACK = 1e-6
@@ -63,20 +64,22 @@ class Reach:
     heading: Arc
 
 
+@dataclass(frozen=True)
 class Draws:
     """One clause of a statement: the parameters Scenic draws for it and what they make of the entity.
 
-    `writes` is the Pose field it sets; `reads` the fields of its reference it reads, `reads_own` those of its own
-    entity (set by an earlier clause of the statement): what a sampler must re-evaluate when something moves.
-    `lo` / `hi` bound the box of its parameters.
+    `ref` is the clause's reference (None: none); `lo` / `hi` bound the box of its parameters (a subclass adds
+    the fields of its own after them). `writes` is the Pose field it sets; `reads` the fields of its reference it
+    reads, `reads_own` those of its own entity (set by an earlier clause of the statement): what a sampler must
+    re-evaluate when something moves.
     """
 
     ref: str | None
     lo: tuple[float, ...]
     hi: tuple[float, ...]
-    writes: str
-    reads: tuple[str, ...] = ()
-    reads_own: tuple[str, ...] = ()
+    writes: ClassVar[str]
+    reads: ClassVar[tuple[str, ...]] = ()
+    reads_own: ClassVar[tuple[str, ...]] = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         raise NotImplementedError

@@ -109,7 +109,7 @@ class FacingRelation(HeadingClause):
         return True
 
     def draws(self, config: SynthConfig) -> FacingDraws:
-        return FacingDraws(self.ref, self.mode == "toward", (-config.delta2,), (config.delta2,))
+        return FacingDraws(self.ref, (-config.delta2,), (config.delta2,), self.mode == "toward")
 
 
 class AngleClause(HeadingClause):
@@ -193,10 +193,7 @@ def _in_angle_range(heading: float, base: float, rng: Range) -> bool:
 class FacingDraws(Draws):
     """`facing toward | away from REF`: dsl__facing_* draws an offset in +-delta2 about the bearing."""
 
-    ref: str
     toward: bool
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
     writes = HEADING_FIELD
     reads = (XY,)
     reads_own = (XY,)
@@ -226,9 +223,6 @@ class FacingDraws(Draws):
 class AngleDraws(Draws):
     """`facing Range(a, b) deg [relative to REF]`: the angle drawn, added to REF's heading where there is one."""
 
-    ref: str | None
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
     writes = HEADING_FIELD
 
     @property

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 MOTION_NAMES = ("stationary", "like")  # index = code in the tables
 STATIONARY, LIKE = 0, 1
 SPEED_EPS = 1e-9  # m/s: the checker's slack for float rounding, as LENGTH_EPS for metres
+UNIT_LO, UNIT_HI = (0.0,), (1.0,)  # the box of a speed's one parameter (SpeedDraws)
 
 
 class MotionClause(Clause):
@@ -89,7 +90,7 @@ class Stationary(MotionClause):
         return "Range(0, dsl__V_STOP)"
 
     def draws(self, config: SynthConfig) -> SpeedDraws:
-        return SpeedDraws(None, (0.0, config.v_stop))
+        return SpeedDraws(None, UNIT_LO, UNIT_HI, (0.0, config.v_stop))
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,7 @@ class MovingLike(MotionClause):
         return f"dsl__speed_like({self.ref})"
 
     def draws(self, config: SynthConfig) -> SpeedDraws:
-        return SpeedDraws(self.ref, (-config.dv, config.dv))
+        return SpeedDraws(self.ref, UNIT_LO, UNIT_HI, (-config.dv, config.dv))
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,7 @@ class RelativeSpeed(MotionClause):
         return []
 
     def draws(self, config: SynthConfig) -> SpeedDraws:
-        return SpeedDraws(self.ref, (self.speed.lo, self.speed.hi))
+        return SpeedDraws(self.ref, UNIT_LO, UNIT_HI, (self.speed.lo, self.speed.hi))
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ class AbsoluteSpeed(MotionClause):
         return f"Range({fmt_number(max(self.speed.lo, 0.0))}, {fmt_number(max(self.speed.hi, 0.0))})"
 
     def draws(self, config: SynthConfig) -> SpeedDraws:
-        return SpeedDraws(None, (self.speed.lo, self.speed.hi))
+        return SpeedDraws(None, UNIT_LO, UNIT_HI, (self.speed.lo, self.speed.hi))
 
 
 @dataclass(frozen=True)
@@ -217,10 +218,7 @@ class SpeedDraws(Draws):
     The parameter is that uniform draw t in [0, 1], speed = a + (b - a) t: a fixed box, while the interval moves
     with the reference."""
 
-    ref: str | None
     offsets: tuple[float, float]  # added to the reference's speed (0 without one), then clamped at 0
-    lo: tuple[float, ...] = (0.0,)
-    hi: tuple[float, ...] = (1.0,)
     writes = SPEED
 
     @property

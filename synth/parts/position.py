@@ -138,7 +138,7 @@ class DirectionPos(PositionClause):
 
     def draws(self, config: SynthConfig) -> SectorDraws:
         d0, d1 = sampled_distance(self.distance)
-        return SectorDraws(self.ref, self.axis, (d0, -config.delta1), (d1, config.delta1))
+        return SectorDraws(self.ref, (d0, -config.delta1), (d1, config.delta1), self.axis)
 
 
 @dataclass(frozen=True)
@@ -245,7 +245,7 @@ class AbsoluteXYPos(PositionClause):
         return f"({self.x} @ {self.y})"
 
     def draws(self, config: SynthConfig) -> AbsoluteXYDraws:
-        return AbsoluteXYDraws((self.x.lo, self.y.lo), (self.x.hi, self.y.hi))
+        return AbsoluteXYDraws(None, (self.x.lo, self.y.lo), (self.x.hi, self.y.hi))
 
 
 # ------------------------------------------------------------------------------------------- what Scenic draws
@@ -270,10 +270,7 @@ def _sector_disc(mid: float, half: float, r0: float, r1: float) -> tuple[float, 
 class SectorDraws(Draws):
     """`DIR of REF by Range(a, b)`: dsl__sector draws (distance, angle offset in +-delta1)."""
 
-    ref: str
-    phi: float
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
+    phi: float  # the sector's axis, from REF's heading
     writes = XY
     reads = (XY, HEADING)
 
@@ -299,9 +296,6 @@ class SectorDraws(Draws):
 class RelativeXYDraws(Draws):
     """`on Range @ Range relative to REF`: dsl__relative_xy draws (lateral, forward) in REF's frame."""
 
-    ref: str
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
     writes = XY
     reads = (XY, HEADING)
 
@@ -327,11 +321,7 @@ class RelativeXYDraws(Draws):
 class AbsoluteXYDraws(Draws):
     """`on Range @ Range`: x and y drawn in the scene frame."""
 
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
-    ref = None
     writes = XY
-    reads = ()
 
     def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
         own.x, own.y = p[0], p[1]
