@@ -34,7 +34,7 @@ from synth.config import SynthConfig
 from synth.perturbation import Bounds, bounds_of
 from synth.scene import Entity, Scene
 from synth.smt.backend import ExactBackend, Formula, Measured, SolverBackend
-from synth.syntax import Line
+from synth.syntax import DslError, Line
 from synth.tables import SceneArrays
 
 if TYPE_CHECKING:
@@ -109,7 +109,6 @@ class Part(Relations, Measured):
     clauses: ClassVar[tuple[type[Clause], ...]]  # its clause kinds, grammar order
     # An optional part follows the required ones, after a comma, and is recognised by its first word (starts).
     optional: ClassVar[bool] = False
-    first_words: ClassVar[frozenset[str]] = frozenset()
 
     def enabled(self, config: SynthConfig) -> bool:
         """Does a statement carry this part under the config (motion: with --motion)?"""
@@ -151,9 +150,20 @@ class Part(Relations, Measured):
         """The same with Ranges that cover every perturbation (robust synthesis)."""
 
     # ------------------------------------------------------------------------------- syntax, Scenic
-    @abstractmethod
     def parse(self, ln: Line, declared: set[str]) -> Clause:
-        """The clause at the line's cursor (printing is the clause's own: Clause.text)."""
+        """The clause at the line's cursor (printing is the clause's own: Clause.text). By default each clause
+        kind is asked in turn (Clause.read); a part whose forms share their first words parses them itself."""
+        for kind in self.clauses:
+            if (clause := kind.read(ln, declared)) is not None:
+                return clause
+        found = ln.peek()
+        raise DslError(f"{ln.where()}: expected a {self.name} clause ({', '.join(sorted(self.first_words))}), "
+                       f"found {'end of line' if found is None else repr(found)}")
+
+    @property
+    def first_words(self) -> frozenset[str]:
+        """The words its clauses begin with (Clause.first_word)."""
+        return frozenset(k.first_word for k in self.clauses if k.first_word is not None)
 
     def starts(self, ln: Line) -> bool:
         """Does an optional part's clause begin at the line's cursor?"""
@@ -187,7 +197,7 @@ class Clause(ABC):
     for the forms without one), that knows everything the core asks of a clause. Subclasses declare their fields,
     `cost`, `text` and the report's `labels`, and implement the abstract methods.
 
-      text         the DSL text, str.format'ed with the clause as `c` (printing; parsing is the part's grammar)
+      text         the DSL text, str.format'ed with the clause as `c` (printing; read or the part's parse reads it)
       holds        the paper's semantics read literally, in floats (the independent checker, synth.semantics)
       observed     what the checker reports of e when the clause does not hold
       decide       formula(), decided rigorously without a solver (None: the solver must)
@@ -203,6 +213,7 @@ class Clause(ABC):
     labels: ClassVar[tuple[str, ...]]
     label_field: ClassVar[str | None] = None
     drawn_as: ClassVar[str]  # pipeline.variants.render: an arrow from the reference, or a mark on the entity
+    first_word: ClassVar[str | None] = None  # the word its text begins with (how an optional part is recognised)
     ref: str | None  # a dataclass field, or a class attribute None where the form has no reference
     # (ref is never given a value here: dataclass would take it as every subclass's default)
 
@@ -213,6 +224,12 @@ class Clause(ABC):
     def kind(self) -> str:
         """The report label of this clause (one of its class's labels)."""
         return self.labels[0] if self.label_field is None else getattr(self, self.label_field)
+
+    @classmethod
+    def read(cls, ln: Line, declared: set[str]) -> Clause | None:
+        """The clause at the line's cursor if it is of this kind, else None with nothing taken (what Part.parse
+        asks by default; `declared` are the ids a reference may name)."""
+        return None
 
     @classmethod
     def kinds(cls) -> tuple[ClauseKind, ...]:

@@ -65,6 +65,7 @@ class Stationary(MotionClause):
     cost = 0
     ref = None
     text = "stationary"
+    first_word = "stationary"
     labels = ("stationary",)
     drawn_as = "stationary"
 
@@ -100,6 +101,7 @@ class MovingLike(MotionClause):
     ref: str
     cost = 0
     text = "moving like {c.ref}"
+    first_word = "moving"
     labels = ("moving like",)
     drawn_as = "moving_like"
 
@@ -138,6 +140,7 @@ class RelativeSpeed(MotionClause):
     ref: str
     cost = 1
     text = "moving {c.speed} m/s relative to {c.ref}"
+    first_word = "moving"
     labels = ("relative speed",)
     drawn_as = "relative_speed"
 
@@ -182,6 +185,7 @@ class AbsoluteSpeed(MotionClause):
     cost = 2
     ref = None
     text = "moving {c.speed} m/s"
+    first_word = "moving"
     labels = ("absolute speed",)
     drawn_as = "absolute_speed"
 
@@ -268,7 +272,6 @@ class MotionPart(Part):
     keyword = "with speed"
     clauses = (Stationary, MovingLike, RelativeSpeed, AbsoluteSpeed)
     optional = True  # `, MOTION` ends a statement when the program has motion
-    first_words = frozenset({"stationary", "moving"})
 
     def enabled(self, config: SynthConfig) -> bool:
         return config.motion
