@@ -65,11 +65,11 @@ def type_matches(pattern_type: str, entity_type: str) -> bool:
 
 def statement_holds(st: Statement, bound: Mapping[str, Entity], config: SynthConfig) -> bool:
     """Does statement st hold of bound[st.id], its references looked up in `bound` (which maps ego too)? Every
-    part's clause is read by the part's own semantics (Part.holds, what `r2s check` uses)."""
+    clause is read by its own semantics (Clause.holds, what `r2s check` uses)."""
     e = bound[st.id]
     return type_matches(st.type, e.type) and all(
-        part.holds(clause, e, bound[clause.ref] if clause.ref is not None else None, config)
-        for part, clause in st.clauses())
+        clause.holds(e, bound[clause.ref] if clause.ref is not None else None, config)
+        for _, clause in st.clauses())
 
 
 def binding_holds(pattern: Pattern, ego: Entity, binding: Mapping[str, Entity], config: SynthConfig) -> bool:
