@@ -81,7 +81,7 @@ class Condition:
     @staticmethod
     def all(conds: list[Condition]) -> Condition:
         if not conds:
-            return Condition("TRUE", "TRUE")
+            return Condition("TRUE", "FALSE")
         return Condition(" AND ".join(f"({c.candidate})" for c in conds), " AND ".join(f"({c.sure})" for c in conds))
 
 
@@ -160,7 +160,7 @@ def facing_relation(head: FacingRelation, e: str, r: str | None, config: SynthCo
 def _angle_range(heading: str, base: str | None, lo: float, hi: float) -> Condition:
     """synth.semantics._in_angle_range: heading = N(base + alpha) for some alpha in [lo, hi]."""
     if hi - lo >= 360.0:
-        return Condition("TRUE", "TRUE")
+        return Condition("TRUE", "FALSE")
     offset = f"({heading} - {base})" if base is not None else heading
     past = f"r2s_norm({offset} - {lit(lo)})"
     width, wrap = (hi - lo) + ANGLE_EPS, 360.0 - ANGLE_EPS
@@ -196,6 +196,12 @@ def absolute_speed(clause: AbsoluteSpeed, e: str, r: str | None, config: SynthCo
 
 
 Builder = Callable[[object, str, "str | None", SynthConfig], Condition]
+
+
+def _undecided(clause, e: str, r: str | None, config: SynthConfig) -> Condition:
+    return Condition("TRUE", "FALSE")
+
+
 BUILDERS: dict[type, Builder] = {
     DirectionPos: direction_pos,
     LocalXYPos: local_xy_pos,
@@ -211,8 +217,10 @@ BUILDERS: dict[type, Builder] = {
 
 
 def clause_condition(clause, e: str, r: str | None, config: SynthConfig) -> Condition:
-    """A clause's condition, with wild entities always to check (see the module docstring)."""
-    cond = BUILDERS[type(clause)](clause, e, r, config)
+    """A clause's condition, with wild entities always to check (see the module docstring). A clause kind without
+    a builder here (a part registered in synth.parts) is never sure and always a candidate: the exact check
+    (Clause.holds) decides it."""
+    cond = BUILDERS.get(type(clause), _undecided)(clause, e, r, config)
     wild = f"{e}.wild" + (f" OR {r}.wild" if r is not None else "")
     return Condition(f"({cond.candidate}) OR {wild}", f"({cond.sure}) AND NOT ({wild})")
 

@@ -148,3 +148,31 @@ def test_the_clause_kind_recipe(cruising):
     assert "with speed Range(10, 15), with name 'car1'" in render_scenic(program, scene, SynthConfig())
     draw = parameterise(program, scene, SynthConfig()).draws[1][-1]
     assert (draw.writes, draw.lo, draw.hi) == (SPEED, (10.0,), (15.0,))
+
+
+def test_r2s_query_decides_a_registered_clause_kind_exactly(pace, tmp_path):
+    # A clause kind without a SQL condition of its own (pipeline.query.sql) goes to the exact check; the matches
+    # are those of the brute force, which asks r2s check's semantics of every tuple.
+    from extractors.frames import scene_to_rows, write_frames
+    from pipeline.query.mining import query_frames
+    from synth.pattern import parse_pattern
+    from tests.support.query_bruteforce import brute_matches
+
+    rng = random.Random(3)
+    scenes = [scene_of([(rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(0, 360),
+                         rng.choice([0.5, 2.0, 3.0, 9.0])) for _ in range(rng.randrange(1, 6))])
+              for _ in range(12)]
+    scenes = [Scene(f"toy/{k}", s.entities) for k, s in enumerate(scenes)]
+    frames = tmp_path / "frames.parquet"
+    write_frames([r for s in scenes for r in scene_to_rows(s, source="test", scene_name="toy")], frames)
+    text = "a = new Car on Range(-40, 40) @ Range(-40, 40), facing Range(0, 360) deg, slow\n"
+    pattern = parse_pattern(text)
+    out = tmp_path / "matches.parquet"
+    query_frames(frames, pattern, out, all_bindings=True, log=lambda s: None)
+    import pyarrow.parquet as pq
+
+    got = {}
+    for row in pq.read_table(out).to_pylist():
+        got.setdefault(row["frame_id"], []).append((row["binding"]["a"],))
+    expected = {s.frame_id: b for s in scenes if (b := brute_matches(pattern, s))}
+    assert got == expected and len(expected) >= 3
