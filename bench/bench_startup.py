@@ -28,6 +28,9 @@ COMMANDS = {
     "r2s run --help": ["-m", "pipeline.cli", "run", "--help"],
     "r2s synth --help": ["-m", "pipeline.cli", "synth", "--help"],
     "r2s extract --help": ["-m", "pipeline.cli", "extract", "--help"],
+    "r2s sample --help": ["-m", "pipeline.cli", "sample", "--help"],
+    "r2s render --help": ["-m", "pipeline.cli", "render", "--help"],
+    "r2s eval-frontend --help": ["-m", "pipeline.cli", "eval-frontend", "--help"],
     "import synth": ["-c", "import synth"],
 }
 

@@ -43,15 +43,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from synth.collision_rule import CollisionRule, collision_rule
-from synth.config import SynthConfig
+from synth.config import DEFAULT_BURN_IN, DEFAULT_THIN, SynthConfig
 from synth.dsl import Program
 from synth.errors import SamplingError
 from synth.overlap import box_radius, boxes_overlap
 from synth.parameters import SPEED, Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
 
-DEFAULT_BURN_IN = 20  # sweeps from the recorded scene to the first variant
-DEFAULT_THIN = 10  # sweeps between variants
 DEFAULT_START_SWEEPS = 200  # sweeps to find a valid start when the given scene is not one
 MAX_DRAWS = 8  # draws per move: the first from the whole box, each next from a box shrunk after a rejection
 REANCHOR_SCALES = (0.02, 0.1, 0.5)  # random-walk steps of a re-anchoring move, as shares of the box (a mixture)

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 
 from pipeline.errors import UserError
-from pipeline.evaluation.frontend import DEFAULT_MAX_DISTANCE
+from pipeline.evaluation import DEFAULT_MAX_DISTANCE
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -11,7 +11,17 @@ from __future__ import annotations
 import argparse
 from collections.abc import Mapping
 
-from synth.config import ORACLES, SOLVERS, STRATEGIES, UNCERTAINTY_FIELDS, ConfigError, parse_uncertainty
+from pipeline.variants import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
+from synth.config import (
+    DEFAULT_BURN_IN,
+    DEFAULT_THIN,
+    ORACLES,
+    SOLVERS,
+    STRATEGIES,
+    UNCERTAINTY_FIELDS,
+    ConfigError,
+    parse_uncertainty,
+)
 
 # How `r2s synth` words the synthesis options; `r2s run` rewords some (its limits are per frame).
 SYNTHESIS_HELP = {
@@ -82,9 +92,6 @@ def bounded_int(lo: int, hi: int):
 def add_sampling_options(p: argparse.ArgumentParser) -> None:
     """--seed, --sampler, --burn-in, --thin, --max-iterations, --allow-collisions: how variants are drawn, read
     back by sample_options."""
-    from pipeline.variants.sample import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
-    from synth.gibbs import DEFAULT_BURN_IN, DEFAULT_THIN
-
     p.add_argument("--seed", type=bounded_int(0, MAX_SEED), default=0, help="random seed (default 0)")
     p.add_argument("--sampler", choices=SAMPLERS, default=None,
                    help="gibbs: r2sgen's chain, any scene size (default); scenic: Scenic's rejection sampler, small "

@@ -25,7 +25,6 @@ from synth.geometry import angular_difference
 
 # Range buckets (metres from ego) of the recall-by-range breakdown; the last is open.
 RANGE_BUCKETS: tuple[tuple[float, float], ...] = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, math.inf))
-DEFAULT_MAX_DISTANCE = 5.0
 
 
 @dataclass(frozen=True)

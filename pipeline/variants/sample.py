@@ -37,6 +37,7 @@ import numpy
 from tqdm import tqdm
 
 from pipeline.errors import SamplingError, UserError
+from pipeline.variants import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
 from synth.config import SynthConfig
 from synth.dsl import Program
 from synth.emit_scenic import (
@@ -53,10 +54,6 @@ from synth.geometry import normalize
 from synth.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.semantics import check
-
-DEFAULT_MAX_ITERATIONS = 2000  # Scenic's own default for one scene
-MAX_SEED = 2**32 - 1  # numpy's seed range
-SAMPLERS = ("gibbs", "scenic")
 
 
 class ScenicProgramError(UserError):
