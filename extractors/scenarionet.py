@@ -230,7 +230,7 @@ def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int 
         a = a.reshape(-1)
         if a.size == 1:
             a = np.repeat(a, steps)
-    if a.shape[0] != steps or (width is not None and (a.ndim != 2 or a.shape[1] < width)):
+    if a.ndim == 0 or a.shape[0] != steps or (width is not None and (a.ndim != 2 or a.shape[1] < width)):
         raise ExtractError(f"{path}: track {tid} state.{key} has shape {a.shape}, not {steps} steps")
     return a
 
@@ -301,8 +301,9 @@ def scenario_frames(
         ex, ey = pos[ego_i, step]
         ego_yaw = float(yaw[ego_i, step])
         others = [i for i in np.flatnonzero(valid[:, step]) if i != ego_i]
-        x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
-                                yaw[others, step])
+        with np.errstate(all="ignore"):  # no numpy warning line: FrameBuilder refuses a non-finite box itself
+            x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
+                                    yaw[others, step])
         boxes = [RecordedObject(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step],
                                 width[i, step], coarse[i], speed[i, step]) for k, i in enumerate(others)]
         # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider

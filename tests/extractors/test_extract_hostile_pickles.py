@@ -14,10 +14,13 @@ import pickle
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.core.multiarray import _reconstruct
 
 from extractors.base import ExtractError
@@ -381,3 +384,49 @@ def test_odd_timestamps_leave_the_timestamp_empty(tmp_path, capsys):
     assert r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out)).returncode == 0
     import pandas as pd
     assert pd.read_parquet(out)["timestamp_us"].isna().all()
+
+
+# any value anywhere a scenario is read from: the reading path gives frames or one ExtractError
+_ODD = st.one_of(
+    st.none(), st.booleans(), st.integers(-3, 3), st.sampled_from([10**400, -(10**400), 2**63, float("nan"),
+                                                                  float("inf"), -0.0, 1e308, "", "x", b"x"]),
+    st.text(max_size=3), st.lists(st.integers(0, 2), max_size=3), st.dictionaries(st.text(max_size=2), st.none()),
+    st.tuples(st.integers()), st.builds(lambda n, k: np.zeros((n,) * k), st.integers(0, 12), st.integers(0, 3)),
+    st.builds(lambda k: np.ones(STEPS, dtype=k), st.sampled_from(["?", "i1", "u8", "f2", "c16"])),
+    st.sampled_from([np.float32(2.0), np.int64(-1), np.bool_(False), complex(1, 1)]))
+
+
+def _places(sd: dict) -> list[tuple]:
+    """Every key path of a scenario down to the state arrays (the map features are not read)."""
+    tid = _first_track(sd)
+    places = [(k,) for k in sd] + [("metadata", k) for k in sd["metadata"]]
+    places += [("tracks", tid, k) for k in sd["tracks"][tid]] + [("tracks", tid, "metadata", "type")]
+    places += [("tracks", tid, "state", k) for k in sd["tracks"][tid]["state"]]
+    places += [("tracks", sd["metadata"]["sdc_id"], "state", k) for k in ("position", "valid", "length")]
+    return places
+
+
+@settings(derandomize=True, max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 10**6), _ODD), min_size=1, max_size=3))
+def test_odd_values_anywhere_in_a_scenario_give_frames_or_one_extract_error(changes):
+    from extractors.base import ExtractOptions
+    from extractors.categories import ALL
+    from extractors.scenarionet import scenario_frames
+
+    sd = real_scenario()
+    places = _places(sd)
+    for i, value in changes:
+        where = places[i % len(places)]
+        target = sd
+        for key in where[:-1]:
+            target = target[key] if isinstance(target, dict) and key in target else None
+        if isinstance(target, dict):
+            target[where[-1]] = value
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a warning is one more line on stderr
+            frames = list(scenario_frames(SCENARIO, sd, ExtractOptions(categories=ALL)))
+    except ExtractError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert all(isinstance(r["x"], float) for f in frames for r in f)
