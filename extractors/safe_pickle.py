@@ -308,23 +308,6 @@ for _t in DEFAULT_FACTORIES:
 
 # --- the stack machine -----------------------------------------------------------------------------------------
 
-class _ExactFile(io.BytesIO):
-    """The pickle's bytes, where a read past the end is an error instead of fewer bytes (pickle's Python
-    Unpickler trusts lengths outside frames)."""
-
-    def read(self, n: int | None = -1) -> bytes:
-        data = super().read(n)
-        if n is not None and n >= 0 and len(data) < n:
-            raise _Malformed("pickle data was truncated")
-        return data
-
-    def readline(self, size: int | None = -1) -> bytes:
-        line = super().readline(size)
-        if not line.endswith(b"\n"):
-            raise _Malformed("pickle data was truncated")
-        return line
-
-
 class _Opcodes(dict):
     def __missing__(self, key: int) -> Any:
         raise _Malformed(f"unknown opcode {bytes([key])!r}")
@@ -346,10 +329,29 @@ class _SafeUnpickler(_P):
     dispatch = _OPS
 
     def __init__(self, data: bytes) -> None:
-        super().__init__(_ExactFile(data))
+        super().__init__(io.BytesIO(data))
+        self._data = io.BytesIO(data)
         self._size = len(data)
         self._pending: dict[int, tuple[Any, Callable[[Any, Any], None]]] = {}  # id -> (object, its one BUILD)
         self._deep: dict[int, tuple[int, int, tuple]] = {}  # id -> (depth, size, tuple) of tuples of tuples
+
+    def load(self) -> Any:
+        """pickle's loop, reading the bytes directly: frames only group the opcodes that follow them in the same
+        bytes (FRAME below checks its length and goes on), and a read cut short by the end of the data is found
+        by the next opcode's read (no STOP, EOFError) or by _bytes_of."""
+        self.read, self.readline = self._data.read, self._data.readline
+        self.metastack, self.stack = [], []
+        self.append = self.stack.append
+        self.proto = 0
+        read, dispatch = self.read, self.dispatch
+        try:
+            while True:
+                key = read(1)
+                if not key:
+                    raise EOFError
+                dispatch[key[0]](self)
+        except pickle._Stop as stop:  # what the stdlib's STOP raises
+            return stop.value
 
     def find_class(self, module: str, name: str) -> Any:
         try:
@@ -532,6 +534,12 @@ class _SafeUnpickler(_P):
     @_op(pickle.BINBYTES)
     def load_binbytes(self) -> None:
         self.append(self._bytes_of(int.from_bytes(self.read(4), "little")))
+
+    @_op(pickle.FRAME)
+    def load_frame(self) -> None:
+        n = int.from_bytes(self._bytes_of(8), "little")
+        if n > self._size - self._data.tell():
+            raise _Malformed(f"a frame of {n} bytes past the end of the pickle")
 
     @_op(pickle.BINUNICODE)
     def load_binunicode(self) -> None:
