@@ -30,6 +30,7 @@ import numpy as np
 from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Taxonomy
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from storage.regular_files import check_regular
+from extractors.naming import SceneNames
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 if TYPE_CHECKING:
@@ -215,12 +216,15 @@ def quaternion_yaw(w: Any, x: Any, y: Any, z: Any) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FrameBuilder:
-    """Turns one frame's boxes into frames rows: category selection, radius, cap, deterministic ids."""
+    """Turns one frame's boxes into frames rows: category selection, radius, cap, and ids stable across a scene
+    (extractors.naming: frames are built in order, one scene after another, so the builder keeps the scene's
+    numbering)."""
 
     source: str
     taxonomy: Taxonomy
     options: ExtractOptions
     tally: ExtractTally | None = field(default=None, compare=False)
+    names: SceneNames = field(default_factory=SceneNames, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.tally is None:
@@ -265,7 +269,8 @@ class FrameBuilder:
                 "(raise --max-entities, or lower --radius)"
             )
         self.tally.frame_of(scene)
-        return frame_rows(self.source, scene, frame_index, timestamp_us, _as_entity(ego, "Car"), kept, fid)
+        return frame_rows(self.source, scene, frame_index, timestamp_us, _as_entity(ego, "Car"), kept, fid,
+                          self.names)
 
 
 def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:

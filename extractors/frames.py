@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import pandas as pd
@@ -19,21 +19,9 @@ import pyarrow.parquet as pq
 
 from extractors.frames_dataset import FramesDataset, check_table
 from extractors.frames_schema import EXTRACTED_SCHEMA, FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from extractors.naming import SceneNames
 from storage.atomic import atomic_path
 from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
-
-
-def entity_ids(types: Iterable[str], distances: Iterable[float]) -> list[str]:
-    """Deterministic ids by distance to ego: the nearest is <type>1, the next <type>2, ... (rank over all types).
-
-    Ties in distance keep the input order (stable sort), so callers pass entities in a stable order.
-    """
-    types, distances = list(types), list(distances)
-    rank = sorted(range(len(types)), key=lambda i: distances[i])
-    out = [""] * len(types)
-    for r, i in enumerate(rank, start=1):
-        out[i] = f"{types[i].lower()}{r}"
-    return out
 
 
 def frame_rows(
@@ -44,25 +32,32 @@ def frame_rows(
     ego: Mapping[str, Any],
     others: list[Mapping[str, Any]],
     frame_id: str | None = None,
+    names: SceneNames | None = None,
 ) -> list[dict[str, Any]]:
     """Rows of one frame. ego / others are dicts with track_id, type, category, x, y, heading, length, width
-    already in the ego frame, and speed (m/s or None); ids are assigned here, by distance to ego."""
+    already in the ego frame, and speed (m/s or None). Ids come from `names`, the scene's numbering so far
+    (extractors.naming: one id per track across a scene); without it, the frame is numbered on its own."""
     fid = frame_id or f"{scene_name}/{frame_index}"
-    ids = entity_ids([o["type"] for o in others], [math.hypot(o["x"], o["y"]) for o in others])
+    names = names if names is not None else SceneNames()
+    tracks = [str(o.get("track_id", i)) for i, o in enumerate(others)]
+    distances = [math.hypot(o["x"], o["y"]) for o in others]
+    ids = names.name(scene_name, tracks, [o["type"] for o in others], distances)
     rows = []
-    for eid, o, is_ego in [(EGO_ID, ego, True)] + [(i, o, False) for i, o in zip(ids, others)]:
+    for eid, o, track, is_ego in [(EGO_ID, ego, str(ego.get("track_id", EGO_ID)), True)] + [
+            (i, o, t, False) for i, o, t in zip(ids, others, tracks)]:
         rows.append(
             {
                 "frame_id": fid, "source": source, "scene": scene_name, "frame_index": frame_index,
-                "timestamp_us": timestamp_us, "entity_id": eid, "track_id": str(o.get("track_id", eid)),
+                "timestamp_us": timestamp_us, "entity_id": eid, "track_id": track,
                 "type": o["type"], "category": str(o.get("category", o["type"])),
                 "x": float(o["x"]), "y": float(o["y"]), "heading": float(o["heading"]) % 360.0,
                 "length": o.get("length"), "width": o.get("width"), "is_ego": is_ego,
                 "speed": known_speed(o.get("speed")),
             }
         )
-    # Rows in id order of distance: ego first, then by rank.
-    rows[1:] = sorted(rows[1:], key=lambda r: int("".join(ch for ch in r["entity_id"] if ch.isdigit())))
+    # Ego first, then by distance to ego (ties by track id), the order ids are given in within a frame.
+    order = sorted(range(len(others)), key=lambda i: (distances[i], tracks[i]))
+    rows[1:] = [rows[1 + i] for i in order]
     return rows
 
 
@@ -184,7 +179,6 @@ __all__ = [
     "FRAMES_COLUMNS",
     "FRAMES_SCHEMA",
     "FramesError",
-    "entity_ids",
     "frame_rows",
     "frame_to_scene",
     "iter_scenes",

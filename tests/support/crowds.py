@@ -21,7 +21,8 @@ thirty of `crowd_scenes` take the search more than a thousand nodes (bench/resul
 Sizes are real: (length, width) pairs drawn from nuScenes-mini annotations of the type (the quartiles of the
 242 shipped keyframes, data/nuscenes-mini-keyframes, per type). Positions keep boxes from overlapping (people
 keep a personal distance, barriers touch end to end at most), everything within 50 m of ego, as the extractors
-keep it. Ids follow the extractors' convention: type and rank by distance to ego (`pedestrian1` nearest).
+keep it. Ids are type and rank by distance to ego over all types (`pedestrian1` nearest), as the extractors
+numbered a frame before ids became stable across a scene; the crowd pins keep them.
 
 Not product code: test and benchmark data (tests/synth/test_crowds.py, bench/bench_synth.py).
 """

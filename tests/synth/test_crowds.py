@@ -1,5 +1,5 @@
 """The crowd frames of the synthesis benchmark (tests/support/crowds.py): deterministic, real sizes, laid out as a
-recording would be (no overlapping boxes, within the extractors' radius, ids ranked by distance)."""
+recording would be (no overlapping boxes, within the extractors' radius, ids ranked by distance to ego)."""
 
 from __future__ import annotations
 
