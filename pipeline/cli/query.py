@@ -2,7 +2,8 @@
 
 PATTERN is a DSL program whose names are variables (types may be `Vehicle` or `Object`; Ranges of any width);
 a match is an injective binding of its names to a frame's non-ego entities under which every statement holds by
-the semantics `r2s check` uses. One row per matching frame (or per binding with --all); a summary line on stdout.
+the semantics `r2s check` uses. One row per matching frame (or per binding with --all, or per event with --events:
+a maximal run of consecutive frames of a scene binding the same tracks); a summary line on stdout.
 """
 
 from __future__ import annotations
@@ -20,6 +21,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="F", help="matches Parquet file (written atomically)")
     p.add_argument("--all", action="store_true", dest="all_bindings",
                    help="one row per binding instead of one per frame (with the first binding)")
+    p.add_argument("--events", action="store_true",
+                   help="one row per event instead: a maximal run of consecutive frames of a scene in which the same "
+                        "binding (the same tracks) matches, with its first and last frame and its duration")
+    p.add_argument("--min-duration", type=float, metavar="S",
+                   help="with --events: only events at least S seconds long (last timestamp minus first)")
     add_config_option(p, ": the tolerances delta1, delta2; motion v_stop, dv")
     p.add_argument("--threads", type=int, metavar="N", help="DuckDB threads (default: every core)")
     p.add_argument("--memory-limit", type=int, metavar="MB",
@@ -38,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     pattern = read_pattern(args.pattern)
     summary = query_frames(args.frames, pattern, args.out, all_bindings=args.all_bindings, config=config,
-                           threads=args.threads, memory_limit_mb=args.memory_limit)
+                           threads=args.threads, memory_limit_mb=args.memory_limit, events=args.events,
+                           min_duration_s=args.min_duration)
     print(f"r2s query: {summary.line()} -> {args.out}")
     return 0

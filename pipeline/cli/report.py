@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-table-rows", type=int, default=40, metavar="N",
                    help="frames shown in the side-by-side (Table 3) table; more are sampled evenly over N (default 40)")
     p.add_argument("--query", metavar="PATTERN", help="a section on the frames that match this pattern file (as "
-                   "`r2s query` reads it; needs --frames): the match count and the frames with the most bindings")
+                   "`r2s query` reads it; needs --frames): the match count, the frames with the most bindings and the longest events")
     p.add_argument("--query-top", type=int, default=10, metavar="N",
                    help="matching frames listed with their programs (default 10)")
 

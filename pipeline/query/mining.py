@@ -31,7 +31,18 @@ from tqdm import tqdm
 
 from extractors.frames import FramesError
 from extractors.frames_dataset import FramesDataset
-from pipeline.query.sql import EXACT_UDF, MACROS, ROW_COLUMNS, ROWS, WILD_HEADING, WILD_XY, compile_pattern
+from pipeline.errors import UserError
+from pipeline.query.events import events_select
+from pipeline.query.sql import (
+    EXACT_UDF,
+    MACROS,
+    ROW_COLUMNS,
+    ROWS,
+    WILD_HEADING,
+    WILD_XY,
+    bindings_query,
+    compile_pattern,
+)
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
@@ -48,8 +59,11 @@ class QuerySummary:
     bindings: int
     checked_exactly: int  # candidate bindings near a boundary, decided by synth.semantics in Python
     seconds: float
+    events: int | None = None  # with events: the events written (frames_matched and bindings are then 0)
 
     def line(self) -> str:
+        if self.events is not None:
+            return f"{self.frames_scanned} frames scanned, {self.events} events, {self.seconds:.2f} s"
         return (f"{self.frames_scanned} frames scanned, {self.frames_matched} matched ({self.bindings} bindings), "
                 f"{self.seconds:.2f} s")
 
@@ -69,7 +83,8 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     # ord, the row ordinal (file number, then row in the file), orders frames and bindings deterministically.
     # speed is optional (frames of sources without velocities lack it): unknown is NULL, as in a file that has it.
     con.execute(
-        f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, timestamp_us, entity_id, type, "
+        f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, frame_index, timestamp_us, "
+        f"entity_id, track_id, type, "
         f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, is_ego, "
         f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
         f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild FROM {source}")
@@ -90,6 +105,16 @@ def _write_matches(reader, path: Path) -> tuple[int, int]:
                 if fid != last:
                     frames_matched, bindings, last = frames_matched + 1, bindings + n, fid
     return frames_matched, bindings
+
+
+def _write_rows(reader, path: Path) -> int:
+    """Stream the query's batches into Parquet; returns the rows written."""
+    rows = 0
+    with pq.ParquetWriter(path, reader.schema, compression="zstd") as writer:
+        for batch in reader:
+            writer.write_batch(batch)
+            rows += batch.num_rows
+    return rows
 
 
 class _ExactCheck:
@@ -143,8 +168,11 @@ class _Progress:
 
 def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.PathLike, *, all_bindings: bool = False,
                  config: SynthConfig | None = None, threads: int | None = None, memory_limit_mb: int | None = None,
+                 events: bool = False, min_duration_s: float | None = None,
                  log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
-    """Write matches.parquet (atomically) for `pattern` over a frames file or dataset; bad input is a FramesError."""
+    """Write matches.parquet (atomically) for `pattern` over a frames file or dataset, or with events one row per
+    event (pipeline.query.events; min_duration_s keeps the events at least that long, and needs every frame's
+    timestamp); bad input is a FramesError."""
     t0 = time.monotonic()
     config = config or SynthConfig()
     dataset = FramesDataset.open(frames)
@@ -155,7 +183,12 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
         raise FramesError(f"{frames} has no speed column: the pattern's motion clauses need one")
     # The frames contract, as every verb checks it (one streaming pass; the same one-line messages).
     n_frames, _ = dataset.check()
-    sql = compile_pattern(pattern, config, all_bindings)
+    if min_duration_s is not None and not events:
+        raise UserError("--min-duration is a length of events: it needs --events")
+    if events and all_bindings:
+        raise UserError("--events and --all are two outputs: choose one")
+    sql = bindings_query(pattern, config) + events_select(min_duration_s) if events else \
+        compile_pattern(pattern, config, all_bindings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     check = _ExactCheck(pattern, config)
@@ -163,10 +196,23 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
         con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill)
         try:
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
+            if min_duration_s is not None:
+                _require_timestamps(con, frames, "--min-duration")
             with _Progress(con, log), atomic_path(out) as tmp:
-                matched, bindings = _write_matches(con.sql(sql).to_arrow_reader(BATCH_ROWS), tmp)
+                reader = con.sql(sql).to_arrow_reader(BATCH_ROWS)
+                if events:
+                    n_events, matched, bindings = _write_rows(reader, tmp), 0, 0
+                else:
+                    n_events, (matched, bindings) = None, _write_matches(reader, tmp)
         except duckdb.IOException as exc:  # the rows were checked, so this is a file that changed or broke since
             raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
         finally:
             con.close()
-    return QuerySummary(n_frames, matched, bindings, check.calls, time.monotonic() - t0)
+    return QuerySummary(n_frames, matched, bindings, check.calls, time.monotonic() - t0, n_events)
+
+
+def _require_timestamps(con, frames, what: str) -> None:
+    missing = con.execute(f"SELECT any_value(frame_id), count(*) FROM {ROWS} WHERE is_ego AND timestamp_us IS NULL").fetchall()[0]
+    if missing[1]:
+        raise FramesError(f"{frames}: {what} needs timestamps, and {missing[1]} frame(s) have none "
+                          f"(e.g. {missing[0]!r})")

@@ -243,12 +243,29 @@ def clauses(st: Statement) -> tuple:
 def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -> str:
     """The query: one row per matching frame (frame_id, scene, timestamp_us, n_matches, binding = the first
     binding), or with all_bindings one row per binding; frames in input order, bindings in lexicographic order of
-    their entities' input rows. It calls r2s_exact(numbers, types) on the candidates that are not sure: numbers are
-    ego's x, y, heading, speed, then the same per name; types one per name."""
+    their entities' input rows."""
+    if all_bindings:
+        select = ("SELECT frame_id, scene, timestamp_us, count(*) OVER (PARTITION BY frame_ord) AS n_matches, binding "
+                  "FROM m ORDER BY frame_ord, key")
+    else:
+        select = ("SELECT frame_id, any_value(scene) AS scene, any_value(timestamp_us) AS timestamp_us, "
+                  "count(*) AS n_matches, arg_min(binding, key) AS binding FROM m GROUP BY frame_ord, frame_id "
+                  "ORDER BY frame_ord")
+    return bindings_query(pattern, config) + "\n" + select
+
+
+def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
+    """`WITH ..., m AS (...)`: CTEs whose last, m, has one row per binding of the pattern in a frame: frame_id,
+    frame_ord (the frame's order in the input), frame_pos (its position in its scene by frame index, from 1),
+    scene, timestamp_us, key (the bound rows' ordinals), binding (name -> entity id), tracks (name -> track id).
+    It calls r2s_exact(numbers, types) on the candidates that are not sure: numbers are ego's x, y, heading, speed,
+    then the same per name; types one per name."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.type, f.x, f.y, f.heading, f.speed, f.c, f.s, f.wild"
-    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, scene, timestamp_us, x, y, heading, speed, c, s, wild "
+    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, f.s, f.wild"
+    # frame_pos: consecutive frames of a scene have consecutive positions (what events are runs of).
+    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
+            f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild "
             f"FROM {ROWS} WHERE is_ego)"]
     first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
@@ -281,21 +298,16 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
     types = [f"{alias[n]}.type" for n in names]
     key = "[" + ", ".join(f"{alias[n]}.ord" for n in names) + "]"
     binding = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.entity_id" for n in names) + ")"
+    tracks = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.track_id" for n in names) + ")"
     ctes.append(
-        f"m AS (SELECT g.frame_id, g.frame_ord, g.scene, g.timestamp_us, {key} AS key, {binding} AS binding "
+        f"m AS (SELECT g.frame_id, g.frame_ord, g.frame_pos, g.scene, g.timestamp_us, {key} AS key, "
+        f"{binding} AS binding, {tracks} AS tracks "
         f"FROM {first} {' '.join(joins)} JOIN ego g ON {_same_frame(first, 'g')} "
         # CASE, not OR: DuckDB reorders a filter's conjuncts adaptively, and the exact check must only ever see
         # candidates that are not sure.
         f"WHERE CASE WHEN {' AND '.join(sure_parts)} THEN TRUE WHEN {' AND '.join(candidate_parts) or 'TRUE'} "
         f"THEN {EXACT_UDF}([{', '.join(numbers)}], [{', '.join(types)}]) ELSE FALSE END)")
-    if all_bindings:
-        select = ("SELECT frame_id, scene, timestamp_us, count(*) OVER (PARTITION BY frame_ord) AS n_matches, binding "
-                  "FROM m ORDER BY frame_ord, key")
-    else:
-        select = ("SELECT frame_id, any_value(scene) AS scene, any_value(timestamp_us) AS timestamp_us, "
-                  "count(*) AS n_matches, arg_min(binding, key) AS binding FROM m GROUP BY frame_ord, frame_id "
-                  "ORDER BY frame_ord")
-    return "WITH " + ",\n".join(ctes) + "\n" + select
+    return "WITH " + ",\n".join(ctes)
 
 
 def _same_frame(a: str, b: str) -> str:

@@ -34,15 +34,38 @@ def top_matches(matches: Path, top: int) -> list[MatchedFrame]:
     return [MatchedFrame(rows[i]["frame_id"], rows[i]["n_matches"], rows[i]["binding"]) for i in ranked]
 
 
+def longest_events(events: Path, top: int) -> list[dict]:
+    """The events with the most frames (ties in the file's order: by first frame), from an events.parquet."""
+    rows = pq.read_table(events).to_pylist()
+    return [rows[i] for i in sorted(range(len(rows)), key=lambda i: (-rows[i]["n_frames"], i))[:top]]
+
+
 def query_section(pattern: Pattern, pattern_name: str, frames: str, top: int = 10,
                   config: SynthConfig | None = None) -> SectionBuilder:
     def build(ctx: ReportContext) -> Section:
         with tempfile.TemporaryDirectory(prefix="r2s-report-query-") as tmp:
             summary = query_frames(frames, pattern, Path(tmp) / "matches.parquet", config=config, log=lambda _: None)
             best = top_matches(Path(tmp) / "matches.parquet", top)
-        return matches_section(ctx, pattern, pattern_name, frames, summary, best)
+            events = query_frames(frames, pattern, Path(tmp) / "events.parquet", config=config, events=True,
+                                  log=lambda _: None)
+            longest = longest_events(Path(tmp) / "events.parquet", top)
+        section = matches_section(ctx, pattern, pattern_name, frames, summary, best)
+        return Section(section.title, section.blocks + events_blocks(events.events, longest))
 
     return build
+
+
+def events_blocks(n_events: int, longest: list[dict]) -> tuple:
+    """The events paragraph and the table of the longest (`r2s query --events`)."""
+    text = (f"{n_events} event(s): maximal runs of consecutive frames of a scene in which the same binding (the same "
+            "tracks) matches" + (f". The {len(longest)} with the most frames:" if longest else "."))
+    if not longest:
+        return (text,)
+    rows = tuple(
+        (e["scene"], ", ".join(f"{n} = {i} (track {e['tracks'][n]})" for n, i in e["binding"].items()),
+         e["first_frame"], e["last_frame"], MISSING if e["duration_s"] is None else f"{e['duration_s']:g}",
+         str(e["n_frames"])) for e in longest)
+    return (text, Table(("Scene", "Binding", "First frame", "Last frame", "Duration (s)", "Frames"), rows, "llllrr"))
 
 
 def matches_section(ctx: ReportContext, pattern: Pattern, pattern_name: str, frames: str, summary,

@@ -64,8 +64,7 @@ def test_count_and_top_frames_are_the_brute_force_s(section, real_frames, inputs
     assert f"{len(found)} of {len(real_frames)} frames match, with {total} binding(s)" in section
     # Most bindings first, ties in input order (a stable sort of the input order).
     expected = sorted(found, key=lambda fb: -len(fb[1]))[:TOP]
-    rows = [[c.strip() for c in ln.strip("|").split(" | ")] for ln in section.splitlines()
-            if ln.startswith("| ") and not ln.startswith("| Frame")]
+    rows = table_rows(section.split(" event(s): ", 1)[0], "| Frame")
     assert [r[0] for r in rows] == [fid for fid, _ in expected]
     programs = {r["frame_id"]: r for r in pq.read_table(inputs[1]).to_pylist()}
     frames, programs_path = inputs
@@ -78,6 +77,27 @@ def test_count_and_top_frames_are_the_brute_force_s(section, real_frames, inputs
         # The frame's program, whole, in its folded block.
         block = section.split(f"<summary>{fid} (auto, optimal, cost {programs[fid]['cost']})</summary>", 1)[1]
         assert block.split("```\n", 1)[1].split("\n```", 1)[0] == programs[fid]["program"].rstrip("\n")
+
+
+def table_rows(text: str, header: str) -> list[list[str]]:
+    return [[c.strip() for c in ln.strip("|").split(" | ")] for ln in text.splitlines()
+            if ln.startswith("| ") and not ln.startswith(header)]
+
+
+def test_events_are_the_brute_force_s(section, inputs):
+    from extractors.frames import read_frames
+    from tests.support.events_bruteforce import brute_events
+
+    events = brute_events(read_frames(inputs[0]), parse_pattern(FOLLOWING))
+    assert f"{len(events)} event(s): maximal runs of consecutive frames" in section
+    longest = sorted(events, key=lambda e: -e["n_frames"])[:TOP]  # stable: ties in the events' order
+    rows = table_rows(section.split(" event(s): ", 1)[1], "| Scene")
+    assert len(rows) == len(longest) == TOP
+    for row, e in zip(rows, longest):
+        names = parse_pattern(FOLLOWING).names
+        assert row == [e["scene"], ", ".join(f"{n} = {i} (track {t})" for n, i, t in zip(names, e["binding"], e["tracks"])),
+                       e["first_frame"], e["last_frame"], "—" if e["duration_s"] is None else f"{e['duration_s']:g}",
+                       str(e["n_frames"])]
 
 
 def test_the_render_command_draws_the_frame(section, tmp_path):
