@@ -44,12 +44,13 @@ def read_program(path: str):
 
 
 def read_pattern(path: str):
-    """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables."""
+    """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables, or a temporal
+    pattern (steps, durations, behaviours: synth.temporal)."""
     from synth.dsl import DslError
-    from synth.pattern import parse_pattern
+    from synth.temporal import parse_query_pattern
 
     try:
-        return parse_pattern(read_text_file(path, "pattern"))
+        return parse_query_pattern(read_text_file(path, "pattern"))
     except DslError as exc:
         raise UserError(f"{path}: {exc}") from None
 

@@ -17,7 +17,8 @@ from pipeline.errors import UserError
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("frames", help="frames Parquet file or dataset directory (from r2s extract)")
-    p.add_argument("pattern", help="pattern file: DSL statements whose names are variables")
+    p.add_argument("pattern", help="pattern file: DSL statements whose names are variables, or steps over time "
+                                   "(then [within T s], for at least T s, braking, ...: docs/dsl.md)")
     p.add_argument("--out", required=True, metavar="F", help="matches Parquet file (written atomically)")
     p.add_argument("--all", action="store_true", dest="all_bindings",
                    help="one row per binding instead of one per frame (with the first binding)")

@@ -41,12 +41,14 @@ from pipeline.query.sql import (
     WILD_HEADING,
     WILD_XY,
     bindings_query,
-    compile_pattern,
+    matches_select,
 )
+from pipeline.query.temporal import prepare
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
 from synth.scene import EGO_ID, Entity
+from synth.temporal import TemporalPattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -166,7 +168,7 @@ class _Progress:
         bar.close()
 
 
-def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.PathLike, *, all_bindings: bool = False,
+def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, out: str | os.PathLike, *, all_bindings: bool = False,
                  config: SynthConfig | None = None, threads: int | None = None, memory_limit_mb: int | None = None,
                  events: bool = False, min_duration_s: float | None = None,
                  log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
@@ -180,26 +182,35 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern, out: str | os.Path
         raise FramesError(f"{frames}: r2s query reads frames on a local filesystem (copy them here first)")
     has_speed = any("speed" in part.optional for part in dataset.parts)
     if pattern.uses_motion and not has_speed:
-        raise FramesError(f"{frames} has no speed column: the pattern's motion clauses need one")
+        raise FramesError(f"{frames} has no speed column: the pattern's motion clauses (or behaviours) need one")
     # The frames contract, as every verb checks it (one streaming pass; the same one-line messages).
     n_frames, _ = dataset.check()
     if min_duration_s is not None and not events:
         raise UserError("--min-duration is a length of events: it needs --events")
     if events and all_bindings:
         raise UserError("--events and --all are two outputs: choose one")
-    sql = bindings_query(pattern, config) + events_select(min_duration_s) if events else \
-        compile_pattern(pattern, config, all_bindings)
+    temporal = isinstance(pattern, TemporalPattern)  # the one place the two kinds of pattern part ways
+    select = events_select(min_duration_s) if events else matches_select(all_bindings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    check = _ExactCheck(pattern, config)
+    check = _ExactCheck(pattern.steps[0].pattern if isinstance(pattern, TemporalPattern) else pattern, config)
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
         con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill)
         try:
-            con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             if min_duration_s is not None:
                 _require_timestamps(con, frames, "--min-duration")
+            if temporal and pattern.needs_timestamps:
+                _require_timestamps(con, frames, "the pattern (its durations or behaviours)")
             with _Progress(con, log), atomic_path(out) as tmp:
-                reader = con.sql(sql).to_arrow_reader(BATCH_ROWS)
+                if temporal:
+                    def register(step_pattern):
+                        check.pattern = step_pattern  # each step's query runs alone, re-checked by its own statements
+                    con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
+                    bindings = prepare(con, pattern, config, register)
+                else:
+                    con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
+                    bindings = bindings_query(pattern, config)
+                reader = con.sql(bindings + "\n" + select).to_arrow_reader(BATCH_ROWS)
                 if events:
                     n_events, matched, bindings = _write_rows(reader, tmp), 0, 0
                 else:

@@ -240,10 +240,10 @@ def clauses(st: Statement) -> tuple:
     return tuple(clause for _, clause in st.clauses())
 
 
-def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -> str:
-    """The query: one row per matching frame (frame_id, scene, timestamp_us, n_matches, binding = the first
-    binding), or with all_bindings one row per binding; frames in input order, bindings in lexicographic order of
-    their entities' input rows."""
+def matches_select(all_bindings: bool) -> str:
+    """The SELECT over the bindings relation m (bindings_query) that gives the matches file's rows: one per matching
+    frame (frame_id, scene, timestamp_us, n_matches, binding = the first binding), or with all_bindings one per
+    binding; frames in input order, bindings in lexicographic order of their entities' input rows."""
     if all_bindings:
         select = ("SELECT frame_id, scene, timestamp_us, count(*) OVER (PARTITION BY frame_ord) AS n_matches, binding "
                   "FROM m ORDER BY frame_ord, key")
@@ -251,7 +251,7 @@ def compile_pattern(pattern: Pattern, config: SynthConfig, all_bindings: bool) -
         select = ("SELECT frame_id, any_value(scene) AS scene, any_value(timestamp_us) AS timestamp_us, "
                   "count(*) AS n_matches, arg_min(binding, key) AS binding FROM m GROUP BY frame_ord, frame_id "
                   "ORDER BY frame_ord")
-    return bindings_query(pattern, config) + "\n" + select
+    return select
 
 
 def bindings_query(pattern: Pattern, config: SynthConfig) -> str:

@@ -50,8 +50,9 @@ def test_shipped_inputs_give_one_id_per_track(source, path):
     assert_stable(frames)
 
 
-def test_shipped_frames_file_has_stable_ids():
-    assert_stable(read_frames(ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"))
+@pytest.mark.parametrize("name", ["nuscenes-mini-keyframes", "argoverse2-log-excerpt"])
+def test_shipped_frames_files_have_stable_ids(name):
+    assert_stable(read_frames(ROOT / "data" / name / "frames.parquet"))
 
 
 @pytest.mark.parametrize("source,path", SHARED_INPUTS, ids=[s for s, _ in SHARED_INPUTS])

@@ -16,11 +16,12 @@ from hypothesis import strategies as st
 from extractors.frames import read_frames, write_frames
 from pipeline.query.mining import query_frames
 from synth.pattern import parse_pattern
+from synth.temporal import is_temporal
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.events_bruteforce import brute_events
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
-PATTERNS = [p.read_text() for p in sorted((ROOT / "data" / "patterns").glob("*.dsl"))] + [
+PATTERNS = [t for p in sorted((ROOT / "data" / "patterns").glob("*.dsl")) if not is_temporal(t := p.read_text())] + [
     "car = new Vehicle behind ego by Range(0, 25), facing toward ego\n",
 ]
 

@@ -1,0 +1,153 @@
+"""Temporal patterns over a frames dataset (synth.temporal; the definition is docs/dsl.md, "Temporal patterns"),
+as DuckDB statements run one after another in the query's session.
+
+1. Each step is a one-frame pattern: its bindings in every frame come from the one-frame query
+   (pipeline.query.sql.bindings_query, with its exact re-check of near-boundary candidates), keyed by the tracks
+   they bind; behaviours filter them (per track and frame, computed with windows over the track's timestamps).
+2. The candidate bindings of the whole pattern: the steps' track tuples joined on their shared variables, every
+   variable a different track.
+3. The steps are chained per (scene, binding) over frame positions with window functions: a step's *feasible
+   ends* are the frames p where the step holds, inside a run of consecutive frames where it holds that contains
+   a feasible *start* a <= p with t(p) - t(a) >= its `for at least`; a start is a frame where the step holds after
+   a feasible end q < p of the previous step (with `within T`: t(p) - t(q) <= T). The pattern matches at the last
+   step's feasible ends.
+The result is the relation m of sql.bindings_query (one row per binding and frame), so per-frame matches and
+events are the same selects as for one-frame patterns. Every table is DuckDB's: it spills under its memory limit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from pipeline.query.sql import ROWS, bindings_query
+from synth.config import SynthConfig
+from synth.parts.motion import SPEED_EPS
+from synth.pattern import Pattern
+from synth.temporal import (
+    MOVING_SPEED,
+    SPEED_CHANGE,
+    SPEED_CHANGE_WINDOW_US,
+    STOP_WINDOW_US,
+    TemporalPattern,
+)
+
+POSITIONS = "r2s_fpos"
+BEHAVIOUR_TABLE = "r2s_behaviour"
+IDS = "r2s_ids"
+CANDIDATES = "r2s_candidates"
+
+
+def _var(name: str) -> str:
+    return f'"v_{name}"'  # a variable's track column (prefixed: a variable may be called scene)
+
+
+def _lit(v: float) -> str:
+    return f"'{float(v)!r}'::DOUBLE"
+
+
+def behaviour_sql(config: SynthConfig) -> str:
+    """One row per (scene, frame, track) of a non-ego entity: is it accelerating, braking, stopping there?
+    A track's earlier frames are those of the same scene whose timestamp is within the window before (RANGE
+    over the integer timestamps); rows without a speed take part in none. Exact: the extreme speed of the window
+    decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff some v' has `v - v' >= A`."""
+    change = (f"PARTITION BY scene, track_id ORDER BY timestamp_us RANGE BETWEEN {SPEED_CHANGE_WINDOW_US} PRECEDING "
+              "AND 1 PRECEDING")
+    stop = f"PARTITION BY scene, track_id ORDER BY timestamp_us RANGE BETWEEN {STOP_WINDOW_US} PRECEDING AND 1 PRECEDING"
+    return (
+        f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT scene, frame_id, track_id, "
+        f"bool_or(coalesce(accelerating, FALSE)) AS accelerating, bool_or(coalesce(braking, FALSE)) AS braking, "
+        f"bool_or(coalesce(stopping, FALSE)) AS stopping FROM ("
+        f"SELECT scene, frame_id, track_id, speed - min(speed) OVER ({change}) >= {_lit(SPEED_CHANGE)} AS accelerating, "
+        f"max(speed) OVER ({change}) - speed >= {_lit(SPEED_CHANGE)} AS braking, "
+        f"speed <= {_lit(config.v_stop + SPEED_EPS)} AND max(speed) OVER ({stop}) >= {_lit(MOVING_SPEED)} AS stopping "
+        f"FROM {ROWS} WHERE NOT is_ego) GROUP BY scene, frame_id, track_id"
+    )
+
+
+def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], config: SynthConfig) -> str:
+    """The frames (scene, position, timestamp) and track tuples at which step k holds."""
+    names = pattern.names
+    cols = ", ".join(f'm.tracks."{n}" AS {_var(n)}' for n in names)
+    joins = "".join(
+        f" JOIN {BEHAVIOUR_TABLE} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = m.tracks.\"{n}\" "
+        f"AND b{j}.{b}" for j, (n, b) in enumerate(behaviours))
+    return (f"CREATE TEMP TABLE r2s_step{k} AS {bindings_query(pattern, config)}\n"
+            f"SELECT DISTINCT m.scene, m.frame_pos, m.timestamp_us, {cols} FROM m{joins}")
+
+
+def candidates_sql(pattern: TemporalPattern) -> str:
+    """Every binding of the pattern's variables to distinct tracks that each step binds somewhere in the scene."""
+    parts = []
+    for k, step in enumerate(pattern.steps):
+        cols = ", ".join(_var(n) for n in step.names)
+        parts.append(f"(SELECT DISTINCT scene, {cols} FROM r2s_step{k}) s{k}")
+    sql = parts[0]
+    seen = set(pattern.steps[0].names)
+    for k, step in enumerate(pattern.steps[1:], start=1):
+        shared = ["scene"] + [_var(n) for n in step.names if n in seen]
+        sql += f" JOIN {parts[k]} USING ({', '.join(shared)})"
+        seen |= set(step.names)
+    names = pattern.names
+    distinct = [f"{_var(a)} <> {_var(b)}" for i, a in enumerate(names) for b in names[i + 1:]]
+    where = f" WHERE {' AND '.join(distinct)}" if distinct else ""
+    return f"CREATE TEMP TABLE {CANDIDATES} AS SELECT scene, {', '.join(_var(n) for n in names)} FROM {sql}{where}"
+
+
+def ends_sql(k: int, pattern: TemporalPattern) -> str:
+    """r2s_ends{k}: (scene, binding, position, timestamp) where step k can end a chain of steps 0..k."""
+    step = pattern.steps[k]
+    allv = ", ".join(_var(n) for n in pattern.names)
+    using = ", ".join(["scene"] + [_var(n) for n in step.names])
+    held = (f"SELECT h.scene, {', '.join('c.' + _var(n) for n in pattern.names)}, h.frame_pos, h.timestamp_us "
+            f"FROM r2s_step{k} h JOIN {CANDIDATES} c USING ({using})")
+    part = f"PARTITION BY scene, {allv}"
+    if k == 0:
+        starts = f"s AS (SELECT *, TRUE AS ok FROM ({held}))"
+    else:
+        # The previous step's ends before each frame: E rows sort after step rows at the same position, so the
+        # frames strictly before p are exactly the rows preceding p's.
+        within = "TRUE" if step.within_us is None else f"timestamp_us - prev_t <= {step.within_us}"
+        starts = (
+            f"u AS (SELECT *, 0 AS kind FROM ({held}) UNION ALL "
+            f"SELECT scene, {allv}, frame_pos, timestamp_us, 1 AS kind FROM r2s_ends{k - 1}), "
+            f"w AS (SELECT *, max(CASE WHEN kind = 1 THEN timestamp_us END) OVER prior AS prev_t, "
+            f"bool_or(kind = 1) OVER prior AS has_prev FROM u "
+            f"WINDOW prior AS ({part} ORDER BY frame_pos, kind ROWS BETWEEN UNBOUNDED PRECEDING AND 1 PRECEDING)), "
+            f"s AS (SELECT scene, {allv}, frame_pos, timestamp_us, coalesce(has_prev, FALSE) AND ({within}) AS ok "
+            f"FROM w WHERE kind = 0)")
+    lasts = "TRUE" if not step.for_at_least_us else f"timestamp_us - a_t >= {step.for_at_least_us}"
+    return (
+        f"CREATE TEMP TABLE r2s_ends{k} AS WITH {starts}, "
+        f"i AS (SELECT *, frame_pos - row_number() OVER ({part} ORDER BY frame_pos) AS run FROM s), "
+        f"a AS (SELECT *, bool_or(ok) OVER upto AS started, min(CASE WHEN ok THEN timestamp_us END) OVER upto AS a_t "
+        f"FROM i WINDOW upto AS ({part}, run ORDER BY frame_pos ROWS BETWEEN UNBOUNDED PRECEDING AND CURRENT ROW)) "
+        f"SELECT scene, {allv}, frame_pos, timestamp_us FROM a WHERE started AND ({lasts})"
+    )
+
+
+def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Callable[[Pattern], None]) -> str:
+    """Run the statements that build the pattern's tables in `con` (whose ROWS view exists); returns the
+    `WITH m AS (...)` that the matches and events selects read. exact_check(pattern) registers the exact re-check
+    UDF of a step before its query runs."""
+    con.execute(f"CREATE TEMP TABLE {POSITIONS} AS SELECT scene, frame_id, ord AS frame_ord, row_number() OVER "
+                f"(PARTITION BY scene ORDER BY frame_index, ord) AS frame_pos, timestamp_us FROM {ROWS} WHERE is_ego")
+    con.execute(f"CREATE TEMP TABLE {IDS} AS SELECT scene, track_id, min(entity_id) AS entity_id FROM {ROWS} "
+                "WHERE NOT is_ego GROUP BY scene, track_id")
+    if any(s.behaviours for s in pattern.steps):
+        con.execute(behaviour_sql(config))
+    for k, step in enumerate(pattern.steps):
+        exact_check(step.pattern)
+        con.execute(step_sql(k, step.pattern, step.behaviours, config))
+    con.execute(candidates_sql(pattern))
+    for k in range(len(pattern.steps)):
+        con.execute(ends_sql(k, pattern))
+    names = pattern.names
+    last = len(pattern.steps) - 1
+    joins = " ".join(f"JOIN {IDS} i{j} ON i{j}.scene = e.scene AND i{j}.track_id = e.{_var(n)}"
+                     for j, n in enumerate(names))
+    binding = ", ".join(f'"{n}" := i{j}.entity_id' for j, n in enumerate(names))
+    tracks = ", ".join(f'"{n}" := e.{_var(n)}' for n in names)
+    key = ", ".join(f"i{j}.entity_id" for j in range(len(names)))
+    return (f"WITH m AS (SELECT f.frame_id, f.frame_ord, f.frame_pos, f.scene, f.timestamp_us, [{key}] AS key, "
+            f"struct_pack({binding}) AS binding, struct_pack({tracks}) AS tracks "
+            f"FROM r2s_ends{last} e JOIN {POSITIONS} f ON f.scene = e.scene AND f.frame_pos = e.frame_pos {joins})")

@@ -1,0 +1,177 @@
+"""Temporal patterns: a sequence of steps over the same variables, matched over the frames of a scene (docs/dsl.md,
+"Temporal patterns").
+
+A step is one-frame pattern statements (synth.pattern), optionally with behaviour clauses at the end of a
+statement (`, braking`); steps are separated by `then` or `then within T s`, and a step may end with
+`for at least T s`. A variable binds one track for the whole pattern. This module is the syntax and the
+constants of the definitions; pipeline.query.temporal is the engine over a frames dataset, which must agree with
+the definition in docs/dsl.md exactly (tests hold it to a plain loop over frames).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from synth.dsl import DslError
+from synth.pattern import Pattern, parse_pattern
+
+# Behaviours of a track over time, read from its own frames (speeds in m/s, timestamps in microseconds).
+SPEED_CHANGE = 1.0  # accelerating / braking: a speed change of at least this, m/s ...
+SPEED_CHANGE_WINDOW_US = 1_000_000  # ... from a frame at most this long before
+MOVING_SPEED = 1.0  # stopping: moving (at least this, m/s) at a frame at most STOP_WINDOW_US before, stationary now
+STOP_WINDOW_US = 3_000_000
+BEHAVIOURS = ("accelerating", "braking", "stopping")
+NOT_YET = {"turning": "turning needs each frame's ego heading in the world, which frames do not carry yet",
+           "changing": "changing lanes needs lane columns in the frames, which they do not carry yet"}
+
+_THEN = re.compile(r"then(?:\s+within\s+(?P<t>\S+)\s+s)?\Z")
+_FOR = re.compile(r"for\s+at\s+least\s+(?P<t>\S+)\s+s\Z")
+_BEHAVIOUR = re.compile(r",\s*(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step: its statements (a one-frame pattern), the behaviours its variables show in the same frames,
+    the longest gap from the previous step's last frame to this step's first (None: any; microseconds), and the
+    least time it lasts (microseconds, from its first frame to its last)."""
+
+    pattern: Pattern
+    behaviours: tuple[tuple[str, str], ...] = ()  # (variable, behaviour), in the order written
+    within_us: int | None = None
+    for_at_least_us: int = 0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.pattern.names
+
+
+@dataclass(frozen=True)
+class TemporalPattern:
+    steps: tuple[Step, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every variable, in order of first declaration."""
+        return tuple(dict.fromkeys(n for s in self.steps for n in s.names))
+
+    @property
+    def uses_motion(self) -> bool:
+        return any(s.pattern.uses_motion or s.behaviours for s in self.steps)
+
+    @property
+    def needs_timestamps(self) -> bool:
+        return any(s.behaviours or s.within_us is not None or s.for_at_least_us for s in self.steps)
+
+    def __str__(self) -> str:
+        out = []
+        for k, s in enumerate(self.steps):
+            if k:
+                out.append("then" if s.within_us is None else f"then within {_seconds(s.within_us)} s")
+            behaviours = {}
+            for name, b in s.behaviours:
+                behaviours.setdefault(name, []).append(b)
+            out += [f"{st}" + "".join(f", {b}" for b in behaviours.get(st.id, [])) for st in s.pattern.statements]
+            if s.for_at_least_us:
+                out.append(f"for at least {_seconds(s.for_at_least_us)} s")
+        return "".join(f"{line}\n" for line in out)
+
+
+def _seconds(us: int) -> str:
+    return f"{us / 1e6:g}"
+
+
+def duration_us(text: str, where: str) -> int:
+    """T of `within T s` / `for at least T s`: a finite number of seconds >= 0, in whole microseconds (rounded to
+    the nearest), so that the engine and the definition compare integers."""
+    try:
+        t = float(text)
+    except ValueError:
+        raise DslError(f"{where}: expected a number of seconds, found {text!r}") from None
+    if not (math.isfinite(t) and t >= 0):
+        raise DslError(f"{where}: a duration is a finite number of seconds >= 0, found {text}")
+    return round(t * 1e6)
+
+
+def _strip_behaviours(line: str, lineno: int) -> tuple[str, tuple[str, ...]]:
+    found: list[str] = []
+    while (m := _BEHAVIOUR.search(line)) is not None:
+        word = m.group("b")
+        first = word.split()[0]
+        if word in BEHAVIOURS:
+            found.insert(0, word)
+        elif first in NOT_YET:
+            raise DslError(f"line {lineno} column {m.start('b') + 1}: {NOT_YET[first]}")
+        else:
+            break  # a DSL clause (stationary, ...): the statement parser reads it
+        line = line[:m.start()]
+    return line, tuple(found)
+
+
+def is_temporal(text: str) -> bool:
+    """Does the text use any temporal syntax (then, for at least, a behaviour)?"""
+    for raw in text.splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if _THEN.match(line) or _FOR.match(line) or line.startswith(("then ", "for ")) or line == "then":
+            return True
+        if (m := _BEHAVIOUR.search(line)) and m.group("b").split()[0] in set(BEHAVIOURS) | set(NOT_YET):
+            return True
+    return False
+
+
+def parse_temporal(text: str) -> TemporalPattern:
+    """A temporal pattern; errors (DslError) carry the line (and column where there is one)."""
+    lines = text.splitlines()
+    blocks: list[dict] = [{"lines": {}, "behaviours": [], "within": None, "for": 0, "for_line": None}]
+    for lineno, raw in enumerate(lines, start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        if (m := _THEN.match(line)) is not None:
+            if not blocks[-1]["lines"]:
+                raise DslError(f"line {lineno}: `then` follows no step (a step is one or more statements)")
+            within = duration_us(m.group("t"), f"line {lineno}") if m.group("t") is not None else None
+            blocks.append({"lines": {}, "behaviours": [], "within": within, "for": 0, "for_line": None})
+            continue
+        if (m := _FOR.match(line)) is not None:
+            if not blocks[-1]["lines"] or blocks[-1]["for_line"] is not None:
+                raise DslError(f"line {lineno}: `for at least` ends a step, once, after its statements")
+            blocks[-1]["for"], blocks[-1]["for_line"] = duration_us(m.group("t"), f"line {lineno}"), lineno
+            continue
+        if line.startswith(("then", "for ")):
+            raise DslError(f"line {lineno}: expected `then`, `then within T s` or `for at least T s`, found {line!r}")
+        if blocks[-1]["for_line"] is not None:
+            raise DslError(f"line {lineno}: a statement after `for at least` (line {blocks[-1]['for_line']}): "
+                           "start the next step with `then`")
+        statement, behaviours = _strip_behaviours(raw.split("#", 1)[0], lineno)
+        blocks[-1]["lines"][lineno] = statement
+        blocks[-1]["behaviours"].append((lineno, behaviours))
+    if not blocks[-1]["lines"]:
+        raise DslError(f"line {len(lines)}: the pattern ends with `then` and no step after it")
+    steps = []
+    for block in blocks:
+        # The step's statements at their own line numbers, so a DSL error names the line of the file.
+        step_text = "\n".join(block["lines"].get(n, "") for n in range(1, max(block["lines"]) + 1))
+        pattern = parse_pattern(step_text)
+        names = {ln: st.id for ln, st in zip(sorted(block["lines"]), pattern.statements)}
+        behaviours = tuple((names[ln], b) for ln, bs in block["behaviours"] for b in bs)
+        steps.append(Step(pattern, behaviours, block["within"], block["for"]))
+    pattern = TemporalPattern(tuple(steps))
+    if len(steps) > 1:
+        for name in pattern.names:
+            where = [k for k, s in enumerate(steps) if name in s.names]
+            if len(where) == 1:
+                line = next(ln for ln, n in _declared_lines(blocks[where[0]], steps[where[0]]) if n == name)
+                raise DslError(f"line {line}: {name!r} is mentioned in one step only; a variable binds one track "
+                               "across the steps, so declare it in another step too (or drop it)")
+    return pattern
+
+
+def _declared_lines(block: dict, step: Step):
+    return zip(sorted(block["lines"]), step.names)
+
+
+def parse_query_pattern(text: str) -> Pattern | TemporalPattern:
+    """What `r2s query` reads: a one-frame pattern (synth.pattern), or a temporal one if it uses their syntax."""
+    return parse_temporal(text) if is_temporal(text) else parse_pattern(text)
