@@ -227,3 +227,32 @@ def _require_timestamps(con, frames, what: str) -> None:
     if missing[1]:
         raise FramesError(f"{frames}: {what} needs timestamps, and {missing[1]} frame(s) have none "
                           f"(e.g. {missing[0]!r})")
+
+
+def query(frames, pattern, *, events: bool = False, min_duration_s: float | None = None, all_bindings: bool = False,
+          config: SynthConfig | dict | None = None, threads: int | None = None,
+          memory_limit_mb: int | None = None):
+    """The Python API of `r2s query` (docs/api.md): frames (a frames file or dataset path, or a table of frames rows:
+    a pandas DataFrame or a pyarrow Table, validated as a file is) and a pattern (text, or a parsed Pattern /
+    TemporalPattern) in; the matches (one row per frame, per binding with all_bindings) or the events, as a pandas
+    DataFrame with the columns of the file `r2s query` writes (docs/formats.md). Bad input raises an InputError."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from extractors.frames import write_frames
+    from synth.temporal import parse_query_pattern
+
+    if isinstance(pattern, str):
+        pattern = parse_query_pattern(pattern)
+    if isinstance(config, dict):
+        config = SynthConfig(**config)
+    with tempfile.TemporaryDirectory(prefix="r2s-query-") as tmp:
+        if isinstance(frames, (pd.DataFrame, pa.Table)):
+            path = Path(tmp) / "frames.parquet"
+            write_frames(frames if isinstance(frames, pd.DataFrame) else frames.to_pandas(), path)
+            frames = path
+        out = Path(tmp) / "out.parquet"
+        query_frames(frames, pattern, out, all_bindings=all_bindings, config=config, threads=threads,
+                     memory_limit_mb=memory_limit_mb, events=events, min_duration_s=min_duration_s, log=lambda _: None)
+        return pq.read_table(out).to_pandas()
