@@ -23,8 +23,8 @@ sys.path.insert(0, str(HERE))
 from common import RESULTS, machine  # noqa: E402
 
 ORDER = ("bench_synth.py", "bench_extract.py", "bench_scenic.py", "bench_variants.py", "bench_robust.py",
-         "bench_motion.py", "bench_pipeline.py", "bench_scale.py", "bench_query.py", "bench_ablation.py",
-         "bench_costs.py")
+         "bench_motion.py", "bench_pipeline.py", "bench_scale.py", "bench_query.py", "bench_temporal.py",
+         "bench_ablation.py", "bench_costs.py")
 
 
 def scripts(only: list[str] | None, skip: list[str]) -> list[Path]:
