@@ -25,11 +25,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import duckdb
+import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-from extractors.frames import FramesError
+from extractors.frames import FramesError, write_frames
 from extractors.frames_dataset import FramesDataset
 from pipeline.errors import UserError
 from pipeline.query.events import events_select
@@ -48,7 +49,7 @@ from storage.atomic import atomic_path
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds
 from synth.scene import EGO_ID, Entity
-from synth.temporal import TemporalPattern
+from synth.temporal import TemporalPattern, parse_query_pattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -236,13 +237,6 @@ def query(frames, pattern, *, events: bool = False, min_duration_s: float | None
     a pandas DataFrame or a pyarrow Table, validated as a file is) and a pattern (text, or a parsed Pattern /
     TemporalPattern) in; the matches (one row per frame, per binding with all_bindings) or the events, as a pandas
     DataFrame with the columns of the file `r2s query` writes (docs/formats.md). Bad input raises an InputError."""
-    import pandas as pd
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from extractors.frames import write_frames
-    from synth.temporal import parse_query_pattern
-
     if isinstance(pattern, str):
         pattern = parse_query_pattern(pattern)
     if isinstance(config, dict):

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from extractors.base import ExtractOptions, FrameBuilder, RecordedObject
 from extractors.categories import ALL
 from extractors.frames import read_frames
+from extractors.nuscenes import TAXONOMY as NUSCENES
 from tests.support.extract import EXCERPT, frames_of
 from tests.support.stable_ids import expected_ids
 
@@ -33,9 +34,9 @@ def assert_stable(frames: pd.DataFrame) -> None:
 
 
 def _extracted(source: str, path: Path) -> pd.DataFrame:
-    from extractors.registry import source_module
+    from extractors.registry import source as source_of
 
-    return frames_of(source_module(source).extract, path, categories=ALL)
+    return frames_of(source_of(source).extract, path, categories=ALL)
 
 
 SHIPPED = [("scenarionet", EXCERPT / "scenarionet"), ("argoverse2", ROOT / "tests" / "data" / "argoverse2")]
@@ -63,7 +64,7 @@ def test_shared_data_gives_one_id_per_track(source, path):
 
 
 def test_a_track_keeps_its_first_id_when_it_leaves_and_comes_back():
-    b = FrameBuilder("test", "nuscenes", ExtractOptions(categories=ALL, radius=50.0))
+    b = FrameBuilder("test", NUSCENES, ExtractOptions(categories=ALL, radius=50.0))
     ego = RecordedObject("ego", "vehicle.car", 0, 0, 0)
     near, far = RecordedObject("a", "vehicle.car", 0, 5, 0), RecordedObject("b", "vehicle.car", 0, 10, 0)
     f0 = b.frame("s", 0, 0, ego, [far])
@@ -86,7 +87,7 @@ _box = st.tuples(st.sampled_from("abcdefg"), st.sampled_from(["vehicle.car", "hu
                 min_size=1, max_size=3))
 def test_random_scenes_follow_the_rule(scenes):
     """Random tracks that come and go (and change class: the first class names the track), ties in distance."""
-    b = FrameBuilder("test", "nuscenes", ExtractOptions(categories=ALL, radius=100.0))
+    b = FrameBuilder("test", NUSCENES, ExtractOptions(categories=ALL, radius=100.0))
     ego = RecordedObject("ego", "vehicle.car", 0, 0, 0)
     rows = []
     for k, frames in enumerate(scenes):

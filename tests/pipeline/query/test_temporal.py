@@ -64,13 +64,13 @@ def _real_inputs():
 @pytest.fixture(scope="module")
 def real_frames(tmp_path_factory):
     from extractors.categories import ALL
-    from extractors.registry import source_module
+    from extractors.registry import source as source_of
 
     out = {"av2-log": ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"}  # shipped: 156 frames at 10 Hz
     for name, source, path in _real_inputs():
         if not path.exists():
             continue
-        frames = frames_of(source_module(source).extract, path, categories=ALL)
+        frames = frames_of(source_of(source).extract, path, categories=ALL)
         target = tmp_path_factory.mktemp(name) / "frames.parquet"
         write_frames(frames, target)
         out[name] = target
