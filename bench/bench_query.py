@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -26,7 +25,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from common import machine, write_results  # noqa: E402
+from common import machine, peak_rss_mb, run_child, write_results  # noqa: E402
 
 from synth.temporal import is_temporal  # noqa: E402
 
@@ -77,8 +76,7 @@ def one(frames: str, pattern: str, threads: int | None, memory_mb: int | None) -
     with tempfile.TemporaryDirectory(prefix="r2s-bench-query-out-") as tmp:
         s = query_frames(frames, parse_pattern(Path(pattern).read_text()), Path(tmp) / "matches.parquet",
                          threads=threads, memory_limit_mb=memory_mb, log=lambda m: None)
-    # VmHWM, not ru_maxrss: Linux carries ru_maxrss over from the forking parent.
-    rss = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM")) / 1024
+    rss = peak_rss_mb()
     print(json.dumps({"frames": s.frames_scanned, "matched": s.frames_matched, "bindings": s.bindings,
                       "checked_exactly": s.checked_exactly, "query_s": s.seconds, "peak_rss_mb": rss}))
 
@@ -87,13 +85,9 @@ def run_query(frames: Path, pattern: Path, threads: int | None = None, memory_mb
     cmd = [sys.executable, str(Path(__file__).resolve()), "--one", str(frames), str(pattern)]
     cmd += ["--threads", str(threads)] if threads else []
     cmd += ["--memory-limit", str(memory_mb)] if memory_mb else []
-    t = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    wall = time.perf_counter() - t
-    if proc.returncode != 0:
-        raise SystemExit(f"bench_query: {' '.join(cmd[2:])} failed: {proc.stderr.strip()[-500:]}")
-    rec = json.loads(proc.stdout.strip().splitlines()[-1])
-    rec.update(wall_s=wall, pattern=pattern.name, threads=threads, memory_limit_mb=memory_mb)
+    rec = run_child("bench_query", cmd, ROOT)
+    wall = rec["wall_s"]
+    rec.update(pattern=pattern.name, threads=threads, memory_limit_mb=memory_mb)
     print(f"  {pattern.name} on {rec['frames']:,} frames: {wall:.1f} s wall ({rec['query_s']:.1f} s in query), "
           f"{rec['matched']:,} frames matched, {rec['bindings']:,} bindings, {rec['checked_exactly']} checked "
           f"exactly, peak RSS {rec['peak_rss_mb']:.0f} MB", flush=True)

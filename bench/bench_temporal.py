@@ -1,5 +1,6 @@
-"""Temporal patterns and events benchmark (issue 25): `r2s query` with the shipped temporal patterns, and `--events`
-of a one-frame pattern, over 1,000,000 frames.
+"""Temporal patterns and events benchmark (issue 25): `r2s query` with three shipped temporal patterns (one of each
+kind: a sequence with `within`, a behaviour, `for at least` then a step), and `--events` of a one-frame pattern,
+over 1,000,000 frames.
 
 The shipped Argoverse 2 log (data/argoverse2-log-excerpt: 156 frames at 10 Hz, ~42 rows a frame, speeds and
 timestamps) is replicated under distinct scene ids (copy r's scene is `<scene>~r`, its frame ids
@@ -16,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -26,13 +26,13 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from common import machine, write_results  # noqa: E402
+from common import machine, peak_rss_mb, run_child, write_results  # noqa: E402
 
 LOG = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
 PATTERNS = ROOT / "data" / "patterns"
-TEMPORAL = ("cut-in-from-right.dsl", "vehicle-following-ego.dsl", "vehicle-braking-ahead.dsl",
-            "stopped-vehicle-starts-moving.dsl", "pedestrian-crossing-ahead.dsl", "cut-in-from-left.dsl")
-EVENTS_OF = "pedestrian-ahead.dsl"  # a one-frame pattern, grouped into events
+# A sequence with `within`, a step with a behaviour, a step `for at least` then another: one of each kind.
+TEMPORAL = ("cut-in-from-right.dsl", "vehicle-braking-ahead.dsl", "stopped-vehicle-starts-moving.dsl")
+EVENTS_OF = "queue-of-three.dsl"  # a one-frame pattern (three names), grouped into events
 TARGET_S, TARGET_MB = 60.0, 4096
 
 
@@ -72,7 +72,7 @@ def one(frames: str, pattern: str, events: bool, memory_mb: int | None) -> None:
     with tempfile.TemporaryDirectory(prefix="r2s-bench-temporal-out-") as tmp:
         s = query_frames(frames, parse_query_pattern(Path(pattern).read_text()), Path(tmp) / "out.parquet",
                          events=events, memory_limit_mb=memory_mb, log=lambda m: None)
-    rss = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM")) / 1024
+    rss = peak_rss_mb()
     print(json.dumps({"frames": s.frames_scanned, "matched": s.frames_matched, "events": s.events,
                       "query_s": s.seconds, "peak_rss_mb": rss}))
 
@@ -81,13 +81,9 @@ def run_query(frames: Path, pattern: str, events: bool, memory_mb: int | None = 
     cmd = [sys.executable, str(Path(__file__).resolve()), "--one", str(frames), str(PATTERNS / pattern)]
     cmd += ["--events"] if events else []
     cmd += ["--memory-limit", str(memory_mb)] if memory_mb else []
-    t = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    wall = time.perf_counter() - t
-    if proc.returncode != 0:
-        raise SystemExit(f"bench_temporal: {' '.join(cmd[2:])} failed: {proc.stderr.strip()[-500:]}")
-    rec = json.loads(proc.stdout.strip().splitlines()[-1])
-    rec.update(wall_s=wall, pattern=pattern, output="events" if events else "matches", memory_limit_mb=memory_mb)
+    rec = run_child("bench_temporal", cmd, ROOT)
+    wall = rec["wall_s"]
+    rec.update(pattern=pattern, output="events" if events else "matches", memory_limit_mb=memory_mb)
     found = rec["events"] if events else rec["matched"]
     print(f"  {pattern} ({rec['output']}) on {rec['frames']:,} frames: {wall:.1f} s wall, {found:,} "
           f"{rec['output'] if events else 'frames matched'}, peak RSS {rec['peak_rss_mb']:.0f} MB", flush=True)

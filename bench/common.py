@@ -35,3 +35,19 @@ def write_results(name: str, payload: dict, markdown: str) -> None:
     write_text_atomic(RESULTS / f"{name}.json", json.dumps(payload, indent=1, default=float) + "\n")
     write_text_atomic(RESULTS / f"{name}.md", markdown)
     print(f"wrote {RESULTS / (name + '.json')} and {name}.md")
+
+
+def run_child(script: str, cmd: list[str], cwd: Path) -> dict:
+    """Run a benchmark's child process (a fresh interpreter: its own peak RSS) that prints one JSON line last;
+    returns that record with `wall_s`, the child's wall clock. A failure stops the benchmark with its stderr."""
+    t = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
+    wall = time.perf_counter() - t
+    if proc.returncode != 0:
+        raise SystemExit(f"{script}: {' '.join(cmd[2:])} failed: {proc.stderr.strip()[-500:]}")
+    return {**json.loads(proc.stdout.strip().splitlines()[-1]), "wall_s": wall}
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory (VmHWM, not ru_maxrss: Linux carries that over from a forking parent)."""
+    return next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM")) / 1024
