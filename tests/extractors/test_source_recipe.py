@@ -53,19 +53,23 @@ def toy(tmp_path, monkeypatch):
 
 
 def expected(scale: float, keep: set[str]) -> pd.DataFrame:
-    """The frames by hand from the log lines: ego first, then the kept objects ranked by distance, ids by type."""
+    """The frames by hand from the log lines: ego first, then the kept objects by distance; ids stable across the
+    scene (docs/formats.md: per type by first appearance, ties by distance then track)."""
     rows = []
     for scene, lines in sorted(LOGS.items()):
         frames: dict[int, list[list[str]]] = {}
         for line in lines:
             f, *rest = line.split()
             frames.setdefault(int(f), []).append(rest)
+        ids: dict[str, str] = {}
         for f, objects in sorted(frames.items()):
             rows.append((f"{scene}/{f}", "ego", "Car", 0.0, 0.0, 0.0))
-            kept = [(CLASSES.get(cat, "Object"), float(x) * scale, float(y) * scale, float(h))
-                    for _, cat, x, y, h in objects if CLASSES.get(cat, "Object") in keep]
-            ranked = sorted(kept, key=lambda o: math.hypot(o[1], o[2]))
-            rows += [(f"{scene}/{f}", f"{t.lower()}{r}", t, x, y, h) for r, (t, x, y, h) in enumerate(ranked, 1)]
+            kept = [(track, CLASSES.get(cat, "Object"), float(x) * scale, float(y) * scale, float(h))
+                    for track, cat, x, y, h in objects if CLASSES.get(cat, "Object") in keep]
+            ranked = sorted(kept, key=lambda o: (math.hypot(o[2], o[3]), o[0]))
+            for track, t, *_ in ranked:
+                ids.setdefault(track, f"{t.lower()}{sum(v.startswith(t.lower()) for v in ids.values()) + 1}")
+            rows += [(f"{scene}/{f}", ids[track], t, x, y, h) for track, t, x, y, h in ranked]
     return pd.DataFrame(rows, columns=["frame_id", "entity_id", "type", "x", "y", "heading"])
 
 
