@@ -34,6 +34,7 @@ PATTERNS = ROOT / "data" / "patterns"
 TEMPORAL = ("cut-in-from-right.dsl", "vehicle-braking-ahead.dsl", "stopped-vehicle-starts-moving.dsl")
 EVENTS_OF = "queue-of-three.dsl"  # a one-frame pattern (three names), grouped into events
 TARGET_S, TARGET_MB = 60.0, 4096
+MEMORY_MB = 3072  # DuckDB's limit for the 10^6-frame queries (it spills beyond): the machine is shared
 
 
 def load() -> str:
@@ -113,11 +114,10 @@ def main() -> int:
         print(f"{n:,} frames ({copies:,} copies of the log), {rows:,} rows ({time.perf_counter() - t:.0f} s to write)",
               flush=True)
         for p, e in jobs:
-            rec = run_query(frames, p, e)
+            rec = run_query(frames, p, e, MEMORY_MB)
             key = "events" if e else "matched"
             rec["scales"] = rec[key] == copies * single[(p, e)][key]
             runs.append({"n_frames": n, "rows": rows, "copies": copies, **rec})
-        runs.append({"n_frames": n, "rows": rows, "copies": copies, **run_query(frames, TEMPORAL[0], True, 2048)})
     payload = {"machine": machine(), "load_before": load_before, "load_after": load(), "target_s": TARGET_S,
                "target_mb": TARGET_MB, "runs": runs,
                "single_log": [{"pattern": p, "output": "events" if e else "matches", **r} for (p, e), r in single.items()]}
@@ -132,7 +132,8 @@ def markdown(p: dict) -> str:
         f"Machine: {m['cpu']} ({m['cores']} cores), Python {m['python']}, {m['date']}, commit {m['commit']}. "
         f"Load average (1 / 5 / 15 min) before: {p['load_before']}, after: {p['load_after']}.", "",
         "The shipped Argoverse 2 log (156 frames at 10 Hz) replicated as distinct scenes (ten part files); each query "
-        "in a fresh process, wall clock including validation of the rows and writing the output; all threads. "
+        "in a fresh process, wall clock including validation of the rows and writing the output; all threads; the "
+        f"large queries with `--memory-limit {MEMORY_MB}`. "
         f"Target: under {p['target_s']:.0f} s and {p['target_mb']} MB. `scales`: the count is the copies times the "
         "count on the log alone.", "",
         "| frames | rows | pattern | output | memory limit | wall (s) | found | scales | peak RSS (MB) |",
