@@ -29,8 +29,8 @@ import numpy as np
 
 from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Taxonomy
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
-from storage.regular_files import check_regular
 from extractors.naming import SceneNames
+from storage.regular_files import check_regular
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 if TYPE_CHECKING:
