@@ -21,6 +21,7 @@ import signal
 import sys
 import time
 
+from synth.smt.dreal_backend import load_dreal
 from synth.synthesize import synthesize
 
 
@@ -54,8 +55,6 @@ def _hang():
 
 
 def _break_dreal(how: str) -> None:
-    from synth.smt.dreal_backend import load_dreal
-
     def broken(formula, delta):
         if how == "dreal-crash":
             os.kill(os.getpid(), signal.SIGSEGV)

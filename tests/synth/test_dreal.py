@@ -14,15 +14,24 @@ from pathlib import Path
 
 import pytest
 
+import pipeline.batch.pool as pool
+import synth.smt.dreal_backend as dreal_backend
 from extractors.frames import iter_scenes, read_frames, write_frames
+from pipeline.batch.stage import run_frames
+from pipeline.programs import read_programs
 from synth.config import SynthConfig
+from synth.dsl import Program
+from synth.parts.heading import AbsoluteHeading
 from synth.scene import Scene
 from synth.semantics import check
-from synth.smt import SolverUnavailable
+from synth.smt import SolverUnavailable, make_backend
+from synth.smt.certify import certify
 from synth.smt.dreal_backend import LIBIBEX_MARKER, load_dreal
+from synth.smt.z3_backend import Z3Backend
+from synth.syntax import Range
 from synth.synthesize import synthesize
-from tests.support import ROOT
-from tests.support.faults import fault
+from tests.support import ROOT, assert_one_line_error
+from tests.support.faults import fault, r2s_with_fault
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 MAX_ENTITIES = 16
@@ -86,14 +95,6 @@ def test_pure_smt_with_dreal_gives_z3s_optimum_on_the_shipped_keyframes(dreal_ca
 
 
 def test_dreal_certifies_with_one_z3_backend_per_frame_that_counts_into_its_stats(dreal, monkeypatch):
-    import synth.smt.dreal_backend as dreal_backend
-    from synth.dsl import Program
-    from synth.parts.heading import AbsoluteHeading
-    from synth.smt import make_backend
-    from synth.smt.certify import certify
-    from synth.smt.z3_backend import Z3Backend
-    from synth.syntax import Range
-
     made = []
 
     class CountedZ3(Z3Backend):
@@ -173,7 +174,6 @@ def test_an_unloadable_libibex_is_one_clear_line(monkeypatch, tmp_path):
 
 
 def test_r2s_with_a_vanished_libibex_says_so_in_one_line(tmp_path):
-    from tests.support import assert_one_line_error
 
     # r2s in a venv whose marker names a library since removed (sys.prefix is where load_dreal looks).
     (tmp_path / LIBIBEX_MARKER).write_text(str(tmp_path / "gone" / "libibex.so") + "\n")
@@ -197,8 +197,6 @@ def four_frames(tmp_path_factory) -> tuple[Path, list[str]]:
 
 
 def test_a_dreal_crash_in_a_worker_is_the_frames_status_not_a_dead_run(dreal, four_frames, tmp_path):
-    from pipeline.programs import read_programs
-    from tests.support.faults import r2s_with_fault
 
     frames, order = four_frames
     victim = order[1]
@@ -214,9 +212,6 @@ def test_a_dreal_crash_in_a_worker_is_the_frames_status_not_a_dead_run(dreal, fo
 
 
 def test_a_hung_dreal_call_is_a_timeout_row(dreal, four_frames, tmp_path, monkeypatch):
-    import pipeline.batch.pool as pool
-    from pipeline.batch.stage import run_frames
-    from pipeline.programs import read_programs
 
     frames, order = four_frames
     victim = order[2]
