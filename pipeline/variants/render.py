@@ -14,7 +14,6 @@ from pathlib import Path
 from storage.atomic import atomic_path
 from synth.dsl import Program
 from synth.geometry import heading_vector, normalize, to_local
-from synth.parts import CLAUSE_KINDS
 from synth.scene import Scene
 
 FORMATS = ("png", "svg", "pdf")
@@ -125,17 +124,12 @@ class Mark:
     kind: str  # a key of MARK_KINDS
 
 
-# Every clause of the DSL by what it draws (synth.parts.CLAUSE_KINDS): an arrow from its reference, or a mark on
-# the entity.
-_KINDS = {k.clause: k.drawn_as for k in CLAUSE_KINDS}
-
-
 def references(program: Program) -> tuple[tuple[Reference, ...], tuple[Mark, ...]]:
     """(arrows from reference to entity, marks of the clauses without a reference), in statement order."""
     arrows, marks = [], []
     for st in program.statements:
         for _, clause in st.clauses():
-            kind = _KINDS[type(clause)]
+            kind = clause.drawn_as  # an arrow from its reference, or a mark on the entity (Clause.drawn_as)
             if kind in MARK_KINDS:
                 marks.append(Mark(st.id, kind))
             else:

@@ -51,10 +51,9 @@ def test_every_documented_form_is_one_clause_kind_with_the_documented_cost():
 
 def test_the_report_costs_and_the_pictures_kinds_are_the_classification():
     from pipeline.report.plots import KIND_COST
-    from pipeline.variants.render import _KINDS, MARK_KINDS, RELATION_KINDS
+    from pipeline.variants.render import MARK_KINDS, RELATION_KINDS
 
     assert KIND_COST == {k.label: k.clause.cost for k in CLAUSE_KINDS}
-    assert set(_KINDS) == {k.clause for k in CLAUSE_KINDS}
     # A clause without a reference is marked on its entity, one with a reference is an arrow from it.
     for kind in CLAUSE_KINDS:
         assert kind.drawn_as in (RELATION_KINDS if "ref" in kind.clause.__dataclass_fields__ else MARK_KINDS)

@@ -119,6 +119,9 @@ def test_the_toy_part_in_scenic_and_in_the_samplers_draws(pace):
     text = render_scenic(program, scene, SynthConfig())
     assert "with speed Range(0, 2), with name 'car1'" in text
     assert "with speed Range(6.75, 7.75), with name 'car2'" in text
+    from pipeline.variants.render import references
+
+    assert [(m.entity, m.kind) for m in references(program)[1]] == [("car1", "stationary"), ("car2", "absolute_speed")]
     params = parameterise(program, scene, SynthConfig())
     speeds = [row[-1] for row in params.draws[1:]]
     assert [(d.writes, d.lo, d.hi) for d in speeds] == [(SPEED, (0.0,), (2.0,)), (SPEED, (6.75,), (7.75,))]
