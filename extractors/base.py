@@ -5,8 +5,10 @@ of trajdata's dataset adapters: a Source subclass and `SOURCE`, its instance, th
 dataset: its name, the Taxonomy of its raw categories, its options (an ExtractOptions subclass that adds its
 own `r2s extract` options), how it cuts an input into pieces for `--jobs` (`units`), how it recognises its input
 (`look_at_file`, `look_at_entry`: extractors.sniff asks every source), and `extract(input_path, options,
-tally=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built with `FrameBuilder.frame(...)`
-so that the ego-frame transform, category selection, radius and entity cap are the same for all sources. What a
+tally=None, maps=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built with
+`FrameBuilder.frame(...)` so that the ego-frame transform, category selection, radius, entity cap and lane facts
+are the same for all sources. A source whose recordings carry a map hands each scenario's RoadMap to `maps` (a
+callable; extractors.maps writes them) before that scenario's frames, which name it. What a
 run leaves out (a duplicate scenario, an object of a type no map knows) is counted in the ExtractTally, whose
 summary is the last line of `r2s extract`. Problems with the input raise ExtractError (a FramesError: one line,
 exit 2). docs/layout.md has the recipe for a new source.
@@ -31,7 +33,12 @@ from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Ta
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from extractors.naming import SceneNames
 from storage.regular_files import check_regular
+from synth.lane_facts import RoadIndex
+from synth.roadmap import RoadMap
 from synth.scene import DEFAULT_MAX_ENTITIES
+
+# Where a source hands the map of each scenario it reads (before that scenario's frames).
+MapSink = Callable[[RoadMap], None]
 
 if TYPE_CHECKING:
     from extractors.sniff import Look
@@ -86,8 +93,10 @@ class Source(ABC):
 
     @abstractmethod
     def extract(self, input_path: str, options: ExtractOptions,
-                tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
-        """The frames of INPUT, one list of rows (FrameBuilder.frame) per frame, streamed."""
+                tally: ExtractTally | None = None, maps: MapSink | None = None) -> Iterator[list[dict[str, Any]]]:
+        """The frames of INPUT, one list of rows (FrameBuilder.frame) per frame, streamed; with `maps`, the map of
+        each scenario / log goes to it before that scenario's frames, whose rows then carry their lane facts (a
+        source whose recordings carry no map never calls it)."""
 
     def units(self, input_path: str) -> list[str]:
         """The independent pieces of INPUT, for `r2s extract --jobs`, in the order extract reads them. Each piece
@@ -115,7 +124,9 @@ class RecordedObject:
     `fallback` is a coarser type to classify by when the taxonomy does not know `category` (ScenarioNet tracks
     carry a dataset's own type in metadata.type and MetaDrive's VEHICLE / PEDESTRIAN / ... in type).
     `speed` is the magnitude of the ground velocity in m/s, as the source gives or its positions imply
-    (extractors.speed); None where it is not known."""
+    (extractors.speed); None where it is not known. `world` is the centre and yaw (x, y, radians CCW from +x) in
+    the frame of the scenario's map, where the source knows them: the lane facts are decided there, on the
+    source's own values."""
 
     track_id: str
     category: str
@@ -126,6 +137,7 @@ class RecordedObject:
     width: float | None = None
     fallback: str | None = None
     speed: float | None = None
+    world: tuple[float, float, float] | None = None
 
 
 def _stderr_line(message: str) -> None:
@@ -251,7 +263,10 @@ class FrameBuilder:
         ego: RecordedObject,
         others: Iterable[RecordedObject],
         frame_id: str | None = None,
+        road: RoadIndex | None = None,
     ) -> list[dict[str, Any]]:
+        """The rows of one frame; with the `road` of the scenario's map, every row names the map and carries the
+        lane facts of its entity (null for an entity whose world position the source does not give)."""
         opts = self.options
         fid = frame_id or f"{scene}/{frame_index}"
         kept = []
@@ -262,15 +277,30 @@ class FrameBuilder:
                 continue
             cls = self.classify(b)
             if cls is not None:
-                kept.append(_as_entity(b, cls))
+                kept.append((b, _as_entity(b, cls)))
         if len(kept) + 1 > opts.max_entities:
             raise ExtractError(
                 f"frame {fid} has {len(kept) + 1} entities, more than the cap of {opts.max_entities} "
                 "(raise --max-entities, or lower --radius)"
             )
         self.tally.frame_of(scene)
-        return frame_rows(self.source, scene, frame_index, timestamp_us, _as_entity(ego, "Car"), kept, fid,
+        ego_entity = _as_entity(ego, "Car")
+        if road is not None:
+            road_facts(road, [(ego, ego_entity)] + kept)
+        return frame_rows(self.source, scene, frame_index, timestamp_us, ego_entity, [e for _, e in kept], fid,
                           self.names)
+
+
+def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
+    """Name the map in every entity and add the lane facts of those the source places in the map's frame."""
+    placed = [(b, e) for b, e in entities if b.world is not None]
+    facts = road.facts([b.world[0] for b, _ in placed], [b.world[1] for b, _ in placed],
+                       [math.degrees(b.world[2]) for b, _ in placed]) if placed else []
+    for _, e in entities:
+        e["map_id"] = road.road.map_id
+    for (_, e), f in zip(placed, facts):
+        e.update(lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
+                 off_road=f.off_road)
 
 
 def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:

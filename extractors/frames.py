@@ -18,7 +18,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from extractors.frames_dataset import FramesDataset, check_table
-from extractors.frames_schema import EXTRACTED_SCHEMA, FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from extractors.frames_schema import (
+    EXTRACTED_SCHEMA,
+    FRAMES_COLUMNS,
+    FRAMES_SCHEMA,
+    OPTIONAL_COLUMNS,
+    ROAD_COLUMNS,
+    FramesError,
+)
 from extractors.naming import SceneNames
 from storage.atomic import atomic_path
 from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
@@ -35,8 +42,9 @@ def frame_rows(
     names: SceneNames | None = None,
 ) -> list[dict[str, Any]]:
     """Rows of one frame. ego / others are dicts with track_id, type, category, x, y, heading, length, width
-    already in the ego frame, and speed (m/s or None). Ids come from `names`, the scene's numbering so far
-    (extractors.naming: one id per track across a scene); without it, the frame is numbered on its own."""
+    already in the ego frame, and speed (m/s or None), and the road columns where known. Ids come from `names`,
+    the scene's numbering so far (extractors.naming: one id per track across a scene); without it, the frame is
+    numbered on its own."""
     fid = frame_id or f"{scene_name}/{frame_index}"
     names = names if names is not None else SceneNames()
     tracks = [str(o.get("track_id", i)) for i, o in enumerate(others)]
@@ -53,6 +61,7 @@ def frame_rows(
                 "x": float(o["x"]), "y": float(o["y"]), "heading": float(o["heading"]) % 360.0,
                 "length": o.get("length"), "width": o.get("width"), "is_ego": is_ego,
                 "speed": known_speed(o.get("speed")),
+                **{c: o[c] for c in ROAD_COLUMNS if c in o},
             }
         )
     # Ego first, then by distance to ego (ties by track id), the order ids are given in within a frame.
@@ -72,12 +81,13 @@ def known_speed(v: Any) -> float | None:
 def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
     """Rows as a table of exactly FRAMES_SCHEMA (plus optional columns present), validated."""
     if not isinstance(rows, pd.DataFrame):
-        optional = [c for c in OPTIONAL_COLUMNS if any(c in r for r in rows)]
+        optional = [c for c in {**OPTIONAL_COLUMNS, **ROAD_COLUMNS} if any(c in r for r in rows)]
         rows = pd.DataFrame(rows, columns=list(FRAMES_COLUMNS) + optional)
     df = rows
     validate_frames(df)
-    extra = [c for c in OPTIONAL_COLUMNS if c in df.columns]
-    schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in extra])
+    types = {**OPTIONAL_COLUMNS, **ROAD_COLUMNS}
+    extra = [c for c in types if c in df.columns]
+    schema = pa.schema(list(FRAMES_SCHEMA) + [(c, types[c]) for c in extra])
     return pa.Table.from_pandas(df[list(FRAMES_COLUMNS) + extra], schema=schema, preserve_index=False)
 
 
@@ -178,6 +188,7 @@ __all__ = [
     "EXTRACTED_SCHEMA",
     "FRAMES_COLUMNS",
     "FRAMES_SCHEMA",
+    "ROAD_COLUMNS",
     "FramesError",
     "frame_rows",
     "frame_to_scene",

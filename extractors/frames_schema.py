@@ -32,8 +32,17 @@ FRAMES_COLUMNS = tuple(FRAMES_SCHEMA.names)
 # it) and measurement uncertainty (robust synthesis). Readers accept files without them.
 OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_sigma": pa.float64(),
                     "speed_sigma": pa.float64()}
-# What extractors write: every column of the schema and each entity's speed (null where the source cannot say).
-EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])])
+# The folder of a frames dataset that holds its maps (extractors.maps). Its leading "_" makes every reader of the
+# dataset skip it (ours, pandas / pyarrow.dataset, Spark), so the frames still read as one table.
+MAPS_DIR = "_maps"
+# Where each entity is on its scenario's map (docs/formats.md, "Lane facts"): the map the frame names (a map_id
+# of the maps written beside the frames) and the entity's lane facts (synth.lane_facts); null without a map.
+ROAD_COLUMNS = {"map_id": pa.string(), "lanes": pa.list_(pa.string()), "lane": pa.string(),
+                "in_intersection": pa.bool_(), "on_crosswalk": pa.bool_(), "off_road": pa.bool_()}
+# What extractors write: every column of the schema, each entity's speed (null where the source cannot say) and
+# the road columns.
+EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])]
+                             + list(ROAD_COLUMNS.items()))
 
 
 class FramesError(InputError, ValueError):

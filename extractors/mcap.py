@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractTally, Source, files_with_suffix, require_path
+from extractors.base import ExtractError, ExtractTally, MapSink, Source, files_with_suffix, require_path
 from extractors.messages import (
     LogOptions,
     PoseTrack,
@@ -118,7 +118,9 @@ def _messages(path: Path, topics: list[str], schema_of: dict[str, str]) -> Itera
         raise ExtractError(f"{path}: cannot decode its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None,
+            maps: MapSink | None = None) -> Iterator[list[dict[str, Any]]]:
+    """Frames without maps (this source's recordings carry none): `maps` is never called."""
     for f in files_with_suffix(require_path(input_path, "MCAP input"), [".mcap"], "MCAP files"):
         topics = check_mcap(f, options.max_chunk_bytes)
         wanted = choose_annotation_topics(topics, options, str(f))

@@ -26,6 +26,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    MapSink,
     RecordedObject,
     Source,
     comma_list,
@@ -131,7 +132,9 @@ def load(dataroot: Path, version: str) -> Any:
         devkit.MapMask = original
 
 
-def extract(input_path: str, options: NuScenesOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: NuScenesOptions, tally: ExtractTally | None = None,
+            maps: MapSink | None = None) -> Iterator[list[dict[str, Any]]]:
+    """Frames without maps (this source's recordings carry none): `maps` is never called."""
     nusc = load(require_path(input_path, "nuScenes dataroot"), options.version)
     scenes = list(nusc.scene)
     if options.scenes:

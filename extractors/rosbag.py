@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractTally, Source, require_path
+from extractors.base import ExtractError, ExtractTally, MapSink, Source, require_path
 from extractors.mcap import check_mcap
 from extractors.messages import (
     LogOptions,
@@ -134,7 +134,9 @@ def _messages(reader: Any, bag: Path, topics: list[str]) -> Iterator[tuple[str, 
         raise ExtractError(f"{bag}: cannot read its messages ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
-def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: LogOptions, tally: ExtractTally | None = None,
+            maps: MapSink | None = None) -> Iterator[list[dict[str, Any]]]:
+    """Frames without maps (this source's recordings carry none): `maps` is never called."""
     for bag, ros1 in bag_paths(require_path(input_path, "bag")):
         try:
             reader = _open(bag, ros1, options)

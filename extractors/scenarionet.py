@@ -15,6 +15,7 @@ from __future__ import annotations
 import errno
 import os
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    MapSink,
     RecordedObject,
     Source,
     global_to_ego,
@@ -34,6 +36,19 @@ from extractors.base import (
 from extractors.categories import Taxonomy
 from extractors.safe_pickle import load_pickle
 from extractors.sniff import Look
+from synth.lane_facts import RoadIndex
+from synth.lane_geometry import lane_polygons, neighbours
+from synth.roadmap import (
+    CROSSWALK,
+    LANE,
+    ROAD_LINE,
+    MapError,
+    MapFeature,
+    RoadMap,
+    links_within,
+    open_ring,
+    points,
+)
 
 DESCRIPTION = "ScenarioNet database directory or .pkl scenario files (nuScenes, Waymo, nuPlan, Lyft, Argoverse)"
 # What ScenarioNet's converters (metadriverse/scenarionet, converter/*/utils.py and type.py) write: MetaDrive
@@ -131,10 +146,13 @@ def database_files(db: Path) -> list[Path]:
     return files
 
 
-def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None) -> Iterator[list[dict[str, Any]]]:
+def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None = None,
+            maps: MapSink | None = None) -> Iterator[list[dict[str, Any]]]:
     """Every scenario's frames, in the database's order. A scenario id met again (ScenarioNet's merge only warns
     about repeats; the same scene converted twice, under two versions, has two files) is skipped with a warning
-    naming both files, since its frame ids would clash with the first one's."""
+    naming both files, since its frame ids would clash with the first one's. With `maps`, a scenario's map
+    (`scenario_map`; map id = the scenario id) goes to it before the scenario's frames, which carry their lane
+    facts."""
     tally = tally if tally is not None else ExtractTally()
     files = scenario_files(require_path(input_path, "ScenarioNet input"))
     first: dict[str, int] = {}  # scenario id -> index in files of the file that gave it
@@ -146,8 +164,11 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
                        f"r2s extract: skipping {f}: scenario {scene!r} was already read from {files[first[scene]]}")
             continue
         first[scene] = i
+        road = scenario_road(f, sd, scene) if maps is not None else None
+        if road is not None:
+            maps(road.road)
         n = 0
-        for rows in scenario_frames(f, sd, options, tally):
+        for rows in scenario_frames(f, sd, options, tally, road):
             n += 1
             yield rows
         if n == 0:
@@ -235,8 +256,21 @@ def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int 
     return a
 
 
+def scenario_road(path: Path, sd: Any, scene: str) -> RoadIndex | None:
+    """The scenario's map, indexed for lane facts; None when it has none (no or empty map_features)."""
+    features = sd.get("map_features") if isinstance(sd, dict) else None
+    if not features:
+        return None
+    dataset = str((sd.get("metadata") or {}).get("dataset", "")).lower()
+    try:
+        road = scenario_map(scene, features, dataset)
+    except MapError as exc:
+        raise MapError(f"{path}: {exc}") from None
+    return RoadIndex(road) if road is not None else None
+
+
 def scenario_frames(
-    path: Path, sd: Any, options: ExtractOptions, tally: ExtractTally | None = None
+    path: Path, sd: Any, options: ExtractOptions, tally: ExtractTally | None = None, road: RoadIndex | None = None
 ) -> Iterator[list[dict[str, Any]]]:
     scene = scenario_id(path, sd)
     meta = sd["metadata"]
@@ -305,12 +339,15 @@ def scenario_frames(
             x, y, h = global_to_ego(float(ex), float(ey), ego_yaw, pos[others, step, 0], pos[others, step, 1],
                                     yaw[others, step])
         boxes = [RecordedObject(ids[i], cats[i], float(x[k]), float(y[k]), float(h[k]), length[i, step],
-                                width[i, step], coarse[i], speed[i, step]) for k, i in enumerate(others)]
+                                width[i, step], coarse[i], speed[i, step],
+                                (float(pos[i, step, 0]), float(pos[i, step, 1]), float(yaw[i, step])))
+                 for k, i in enumerate(others)]
         # ScenarioNet's nuScenes converter stores the ego car as 1.73 m long and 4.08 m wide; no car is wider
         # than it is long, so the ego's box is read with its sides in order.
         ego_l, ego_w = sorted((length[ego_i, step], width[ego_i, step]), reverse=True)
-        ego = RecordedObject(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w, speed=speed[ego_i, step])
-        yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes)
+        ego = RecordedObject(ids[ego_i], cats[ego_i], 0.0, 0.0, 0.0, ego_l, ego_w, speed=speed[ego_i, step],
+                             world=(float(ex), float(ey), ego_yaw))
+        yield builder.frame(scene, index, _timestamp_us(ts, step), ego, boxes, road=road)
 
 
 def _file_size(path: Path) -> int:
@@ -336,6 +373,123 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
     except (TypeError, ValueError, IndexError, KeyError, OverflowError):
         return None
     return round(t * 1e6) if np.isfinite(t) else None
+
+
+# ------------------------------------------------------------------------------------------------- the map
+# The map of a ScenarioNet scenario (`map_features`: a dict feature id -> feature with a `type`) as a RoadMap.
+#
+# Kinds: LANE_* features are lanes (centre line = `polyline`, polygon = `polygon` where given), ROAD_LINE_* and
+# ROAD_EDGE_* are road lines (`polyline`), CROSSWALK a crosswalk (`polygon`); other types (stop signs, speed bumps,
+# driveways, sidewalks) are not kept. A lane without a polygon gets one from its centre line and the per-vertex
+# `width` (N, 2: left, right; their means) where the converter gives it, else the default width (synth.lane_geometry). A lane is
+# an intersection lane if its type is LANE_SURFACE_UNSTRUCTURE, or, in nuScenes-derived scenarios, if it has no
+# polygon: ScenarioNet's nuScenes converter writes polygons for nuScenes lanes and none for lane connectors, the
+# lanes through intersections. Successors / predecessors are `exit_lanes` / `entry_lanes` (links that leave the
+# converter's crop of the map are dropped); neighbours are the first `feature_id` of `left_neighbor` /
+# `right_neighbor` (a neighbour the map does not hold is a MapError); a map in which no lane has one gets them by
+# the geometric rule.
+
+
+def kind_of(source_type: str) -> str | None:
+    if source_type.startswith("LANE_"):
+        return LANE
+    if source_type.startswith(("ROAD_LINE_", "ROAD_EDGE_")):
+        return ROAD_LINE
+    if source_type == CROSSWALK.upper():
+        return CROSSWALK
+    return None
+
+
+def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None:
+    """The RoadMap of a scenario's map_features; None when it has no feature of a kept kind."""
+    if not isinstance(map_features, dict):
+        raise MapError(f"map {map_id!r}: map_features is not a dict of features")
+    nuscenes = dataset == "nuscenes"
+    features = []
+    widths: dict[str, tuple[float | None, float | None]] = {}  # lanes without polygon: their widths
+    any_neighbour = False
+    for raw_id, feat in map_features.items():
+        fid = str(raw_id)
+        if not isinstance(feat, dict):
+            raise MapError(f"map {map_id!r}: feature {fid!r} is not a dict")
+        source_type = str(feat.get("type", ""))
+        kind = kind_of(source_type)
+        if kind is None:
+            continue
+        line = _xy(map_id, fid, feat.get("polyline"), "polyline") if kind in (LANE, ROAD_LINE) else ()
+        polygon = open_ring(_xy(map_id, fid, feat.get("polygon"), "polygon")) if "polygon" in feat else ()
+        if kind == CROSSWALK and not polygon:
+            raise MapError(f"map {map_id!r}: crosswalk {fid!r} has no polygon")
+        f = MapFeature(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type)
+        if kind == LANE:
+            left, right = _neighbour(map_id, fid, feat, "left_neighbor"), _neighbour(map_id, fid, feat,
+                                                                                   "right_neighbor")
+            any_neighbour = any_neighbour or left is not None or right is not None
+            rule = "source"
+            if not polygon:
+                # built below, for all such lanes at once
+                widths[fid], rule = _widths(map_id, fid, feat, len(line)), "centre line"
+            f = MapFeature(
+                map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
+                successors=_ids(feat.get("exit_lanes")), predecessors=_ids(feat.get("entry_lanes")),
+                is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
+                polygon_rule=rule)
+        features.append(f)
+    if not features:
+        return None
+    if widths:
+        todo = [i for i, f in enumerate(features) if f.feature_id in widths and f.kind == LANE]
+        rings = lane_polygons([features[i].line for i in todo], [widths[features[i].feature_id][0] for i in todo],
+                              [widths[features[i].feature_id][1] for i in todo])
+        for i, ring in zip(todo, rings):
+            features[i] = replace(features[i], polygon=ring)
+    features = links_within(features, neighbours=False)
+    if not any_neighbour:
+        lanes = neighbours(tuple(f for f in features if f.kind == LANE))
+        features = [f for f in features if f.kind != LANE] + list(lanes)
+    return RoadMap.of(map_id, features)
+
+
+def _xy(map_id: str, fid: str, value: Any, what: str):
+    if value is None:
+        return ()
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise MapError(f"map {map_id!r}: feature {fid!r} has a {what} that is not an array of numbers") from None
+    if a.ndim != 2 or a.shape[1] < 2:
+        raise MapError(f"map {map_id!r}: feature {fid!r} has a {what} of shape {a.shape}, not (N, 2) or (N, 3)")
+    return points(a[:, 0], a[:, 1])
+
+
+def _ids(value: Any) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    return tuple(str(v) for v in np.asarray(value, dtype=object).reshape(-1))
+
+
+def _neighbour(map_id: str, fid: str, feat: dict, key: str) -> str | None:
+    """The first neighbour of a lane on one side (Waymo converters: a list of dicts with feature_id)."""
+    value = feat.get(key)
+    if value is None or len(value) == 0:
+        return None
+    first = value[0]
+    ref = first.get("feature_id", first.get("id")) if isinstance(first, dict) else first
+    if ref is None or isinstance(ref, (dict, list, tuple)):
+        raise MapError(f"map {map_id!r}: lane {fid!r} has a {key} that names no feature ({first!r})")
+    return str(ref)
+
+
+def _widths(map_id: str, fid: str, feat: dict, n: int) -> tuple[float | None, float | None]:
+    """The widths to the left and to the right of the centre line: the means of `width` (N, 2: per vertex, the
+    distances to the left and right boundaries), or (None, None) for the default."""
+    if "width" not in feat:
+        return None, None
+    w = np.asarray(feat["width"], dtype=float)
+    if w.ndim != 2 or w.shape != (n, 2) or not np.isfinite(w).all() or (w <= 0).any():
+        raise MapError(f"map {map_id!r}: lane {fid!r} has a width of shape {w.shape} or value out of range "
+                       f"(need ({n}, 2), positive)")
+    return float(w[:, 0].mean()), float(w[:, 1].mean())
 
 
 class ScenarioNet(Source):

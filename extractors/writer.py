@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from extractors.frames import EXTRACTED_SCHEMA, FramesError, to_table
@@ -41,7 +42,12 @@ class FramesWriter:
 
     def flush(self) -> None:
         if self._pending:
-            self._writer.write_table(to_table(self._pending))
+            table = to_table(self._pending)
+            # Columns no row of these frames has (the road columns of a frame without a map) are written null.
+            for f in EXTRACTED_SCHEMA:
+                if f.name not in table.column_names:
+                    table = table.append_column(f, pa.nulls(table.num_rows, f.type))
+            self._writer.write_table(table.select(EXTRACTED_SCHEMA.names))
             self._pending = []
 
 

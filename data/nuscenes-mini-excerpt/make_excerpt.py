@@ -3,7 +3,7 @@
     .venv/bin/python data/nuscenes-mini-excerpt/make_excerpt.py
 
 scenarionet/: the first keyframes of three scenes, cut from the real ScenarioNet pickles (all tracks valid in
-the window, every state value unchanged; map features dropped to keep the files small), with the
+the window, every state value unchanged; map features near the ego kept, see `near`), with the
 dataset_summary.pkl / dataset_mapping.pkl of a ScenarioNet database.
 v1.0-mini/: the 13 nuScenes JSON tables for the same keyframes, built from the same real values (positions,
 yaws, sizes, categories, instance and scene tokens, map names); see NOTICE for the fields that are filled in.
@@ -30,6 +30,7 @@ from extractors.safe_pickle import load_pickle  # noqa: E402
 SHARED = Path(os.environ.get("R2S_SHARED", ROOT.parent / "shared")) / "data" / "nuscenes-mini" / "scenarionet"
 KEEP = {"scene-0103": 4, "scene-0796": 3, "scene-0061": 2}  # scene -> number of leading keyframes
 STEP = 5
+MAP_RADIUS = 60.0  # metres around the ego: r2s extract's default radius (50 m) and a margin
 VERSION = "v1.0-mini"
 
 
@@ -48,7 +49,26 @@ def trim(sd: dict, keyframes: int) -> dict:
     meta["ts"] = np.asarray(meta["ts"])[:steps].copy()
     meta["object_summary"] = {k: v for k, v in meta.get("object_summary", {}).items() if k in tracks}
     meta.pop("number_summary", None)
-    return {**sd, "length": steps, "metadata": meta, "tracks": tracks, "map_features": {}, "dynamic_map_states": {}}
+    ego = np.asarray(sd["tracks"][meta["sdc_id"]]["state"]["position"])[:steps, :2]
+    return {**sd, "length": steps, "metadata": meta, "tracks": tracks, "map_features": near(sd["map_features"], ego),
+            "dynamic_map_states": {}}
+
+
+def near(features: dict, ego: np.ndarray) -> dict:
+    """The map features with a vertex within MAP_RADIUS of an ego position of the window, unchanged, except that
+    a road line keeps only the stretch from the vertex before its first to the vertex after its last within that
+    distance (the converter's road lines are the whole boundary of the drivable area, thousands of points)."""
+    kept = {}
+    for fid, f in features.items():
+        pts = np.asarray(f.get("polygon", f.get("polyline")))[:, :2]
+        close = np.flatnonzero((np.hypot(pts[:, None, 0] - ego[None, :, 0], pts[:, None, 1] - ego[None, :, 1])
+                                <= MAP_RADIUS).any(axis=1))
+        if not len(close):
+            continue
+        if f["type"].startswith("ROAD_LINE") and "polygon" not in f:
+            f = {**f, "polyline": np.asarray(f["polyline"])[max(close[0] - 1, 0):close[-1] + 2].copy()}
+        kept[fid] = f
+    return kept
 
 
 def quat(yaw: float) -> list[float]:

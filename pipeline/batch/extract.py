@@ -1,7 +1,8 @@
 """`r2s extract --jobs N` and dataset outputs: the input's pieces (Source.units) extracted in parallel worker
 processes, each into its own part file, written atomically.
 
-The parts are staged in a hidden directory beside the output and take its place only when every piece is done
+The parts (and the maps of their scenarios, in _maps/: extractors.maps) are staged in a hidden directory beside
+the output and take its place only when every piece is done
 and the whole dataset passed the frames check (a frame id given by two pieces is refused, as one writer would
 refuse it): a failure or a kill leaves the previous output or none, never part of one. Parts are named by the
 piece's position in the input, so the output is the same whatever the order pieces finish in. Memory: each
@@ -25,6 +26,8 @@ from tqdm import tqdm
 
 from extractors.base import ExtractOptions, ExtractTally, Source
 from extractors.frames_dataset import FramesDataset
+from extractors.frames_schema import MAPS_DIR
+from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
 from extractors.writer import frames_writer
 from pipeline.errors import UserError
 from storage.atomic import atomic_path
@@ -44,18 +47,21 @@ class UnitResult:
 
 
 def extract_unit(source: Source, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:
-    """One piece into `stage/part-<index>.parquet` (nothing when it has no frame). The source itself goes to the
-    worker (pickled by its class's name), so a source need only be importable there, not registered."""
+    """One piece into `stage/part-<index>.parquet` and its maps into `stage/_maps/part-<index>.parquet` (nothing
+    when it has no frame or no map). The source itself goes to the worker (pickled by its class's name), so a
+    source need only be importable there, not registered."""
     tally = ExtractTally()
     scenes: list[str] = []
     path = Path(stage) / PART.format(index)
-    with frames_writer(path) as out:
-        for rows in source.extract(unit, options, tally):
+    map_path = Path(stage) / MAPS_DIR / PART.format(index)
+    with frames_writer(path) as out, maps_writer(map_path) as maps:
+        for rows in source.extract(unit, options, tally, maps=maps.add):
             if not scenes or scenes[-1] != rows[0]["scene"]:
                 scenes.append(rows[0]["scene"])
             out.write_frame(rows)
     if out.frames == 0:
         path.unlink(missing_ok=True)
+        map_path.unlink(missing_ok=True)
     return UnitResult(index, out.frames, out.rows, tuple(scenes), tally, frame_hashes(sorted(out.frame_ids)))
 
 
@@ -83,6 +89,7 @@ def extract_parallel(source: Source, input_path: str, out: str, options: Extract
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir()
+    (stage / MAPS_DIR).mkdir()
     try:
         results = []
         bar = tqdm(total=len(units), desc=f"extract {source.name}", unit=" inputs", file=sys.stderr, disable=None,
@@ -96,10 +103,14 @@ def extract_parallel(source: Source, input_path: str, out: str, options: Extract
         if frames == 0:
             raise UserError(f"no frames found in {input_path} (check the source, --categories and --topics)")
         _check(stage, kept)
+        if not any((stage / MAPS_DIR).iterdir()):
+            (stage / MAPS_DIR).rmdir()
         if is_dataset(out):
             _replace(stage, target)
         else:
+            check_maps_target(maps_dir(target))
             _merge(stage, target)
+            replace_maps(stage / MAPS_DIR, maps_dir(target))
         return frames, rows
     finally:
         shutil.rmtree(stage, ignore_errors=True)
@@ -134,6 +145,7 @@ def _keep_first_scenes(results: list[UnitResult], units: list[str], stage: Path,
         clash = next((s for s in r.scenes if s in seen), None)
         if clash is not None:
             (stage / PART.format(r.index)).unlink(missing_ok=True)
+            (stage / MAPS_DIR / PART.format(r.index)).unlink(missing_ok=True)
             tally.skip("duplicate scenario id", f"r2s extract: skipping {units[r.index]}: scenario {clash!r} was "
                        f"already read from {units[seen[clash]]}")
             continue
@@ -155,10 +167,15 @@ def _check(stage: Path, kept: list[UnitResult]) -> None:
 def _check_replaceable(target: Path) -> None:
     if not target.is_dir():
         raise UserError(f"--out {target} exists and is not a directory")
-    foreign = sorted(p.name for p in target.iterdir() if not (p.name.startswith("part-") and p.suffix == ".parquet"))
+    foreign = sorted(p.name for p in target.iterdir() if not (p.name.startswith("part-") and p.suffix == ".parquet")
+                     and not (p.name == MAPS_DIR and p.is_dir() and _only_parts(p)))
     if foreign:
         raise UserError(f"--out {target} holds files that are not frames parts ({', '.join(foreign[:3])}); "
                         "choose an empty or new directory")
+
+
+def _only_parts(folder: Path) -> bool:
+    return all(p.name.startswith("part-") and p.suffix == ".parquet" for p in folder.iterdir())
 
 
 def _replace(stage: Path, target: Path) -> None:

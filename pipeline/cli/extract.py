@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
 import sys
 
 from tqdm import tqdm
@@ -63,19 +65,29 @@ def run(args: argparse.Namespace) -> int:
             raise
         _summary(tally, frames, rows, args.out)
         return 0
-    with frames_writer(args.out) as out:
-        bar = tqdm(src.extract(args.input, options, tally), desc=f"extract {args.source}", unit=" frames",
-                   file=sys.stderr, disable=None, leave=False)
-        try:
-            for rows in bar:
-                out.write_frame(rows)
-            if out.frames == 0:
-                raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
-        except (FramesError, UserError):
-            # a source that found nothing to read may have been given another source's input: say which
-            if out.frames == 0 and (hint := wrong_source_hint(args.source, args.input)):
-                raise UserError(hint) from None
-            raise
+    from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
+
+    # The maps go beside the file (F.maps/), staged until the frames are written.
+    target = maps_dir(args.out)
+    check_maps_target(target)
+    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        with frames_writer(args.out) as out, maps_writer(staged / "part-000000.parquet") as maps:
+            bar = tqdm(src.extract(args.input, options, tally, maps=maps.add), desc=f"extract {args.source}",
+                       unit=" frames", file=sys.stderr, disable=None, leave=False)
+            try:
+                for rows in bar:
+                    out.write_frame(rows)
+                if out.frames == 0:
+                    raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
+            except (FramesError, UserError):
+                # a source that found nothing to read may have been given another source's input: say which
+                if out.frames == 0 and (hint := wrong_source_hint(args.source, args.input)):
+                    raise UserError(hint) from None
+                raise
+        replace_maps(staged, target)
+    finally:
+        shutil.rmtree(staged, ignore_errors=True)
     _summary(tally, out.frames, out.rows, args.out)
     return 0
 

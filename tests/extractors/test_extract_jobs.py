@@ -29,7 +29,14 @@ def test_parallel_extraction_gives_the_frames_of_one_reader(tmp_path):
         got = pd.read_parquet(out)
         pd.testing.assert_frame_equal(got, expected)  # same rows, same order: parts follow the input's order
         assert _leftovers(out) == []
-    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == [f"part-{i:06d}.parquet" for i in range(3)]
+    parts = [f"part-{i:06d}.parquet" for i in range(3)]
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["_maps"] + parts
+    # each scenario's map once, in the part named like its frames' part; a file output keeps them beside it
+    maps = pd.read_parquet(tmp_path / "frames" / "_maps")
+    assert sorted(p.name for p in (tmp_path / "frames" / "_maps").iterdir()) == parts
+    assert list(maps.drop_duplicates("map_id").map_id) == list(expected.drop_duplicates("scene").scene)
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "merged.maps"), maps)
+    pd.testing.assert_frame_equal(pd.read_parquet(one.with_suffix(".maps")), maps)
     # A frames dataset is a run's input as it is.
     proc = run_r2s("scene", str(tmp_path / "frames"), expected["frame_id"].iloc[-1])
     assert proc.returncode == 0 and '"frame_id"' in proc.stdout
@@ -45,7 +52,8 @@ def test_a_scene_given_twice_is_read_once_as_by_one_reader(tmp_path):
     proc = run_r2s("extract", "scenarionet", str(db), "--categories", "all", "--out", str(out), "--jobs", "2")
     assert proc.returncode == 0, proc.stderr
     assert "skipping" in proc.stderr and "b.pkl" in proc.stderr and "already read from" in proc.stderr
-    assert [p.name for p in out.iterdir()] == ["part-000000.parquet"]
+    assert sorted(p.name for p in out.iterdir()) == ["_maps", "part-000000.parquet"]
+    assert [p.name for p in (out / "_maps").iterdir()] == ["part-000000.parquet"]
 
 
 def test_bad_input_writes_nothing_and_an_old_output_stays(tmp_path):
@@ -58,10 +66,11 @@ def test_bad_input_writes_nothing_and_an_old_output_stays(tmp_path):
     assert_one_line_error(proc, 2)
     assert not out.exists() and _leftovers(out) == []
     assert run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(out), "--jobs", "2").returncode == 0
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = {str(p.relative_to(out)): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     proc = run_r2s("extract", "scenarionet", str(db), "--out", str(out), "--jobs", "2")
     assert_one_line_error(proc, 2)
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before and _leftovers(out) == []
+    assert {str(p.relative_to(out)): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert _leftovers(out) == []
     (out / "notes.txt").write_text("mine")
     proc = run_r2s("extract", "scenarionet", str(EXCERPT), "--out", str(out), "--jobs", "2")
     assert_one_line_error(proc, 2, "not frames parts")

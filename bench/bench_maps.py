@@ -1,0 +1,166 @@
+"""Maps benchmark (issue 24): the lane facts of every Argoverse 2 test-log box against av2's own map API, the
+cost of maps at extraction, and the measurement behind the default lane width.
+
+1. agreement: every box (and ego) of the av2-api test log with a map (../shared/data/argoverse2, log adcf7d18),
+   as `r2s extract argoverse2 --categories all` gives its facts, against av2: the log's ArgoverseStaticMap
+   (lane polygons = LaneSegment.polygon_boundary, PedestrianCrossing.polygon, DrivableArea.xyz,
+   lane_is_in_intersection), box centres placed in the city by av2's own poses (read_city_SE3_ego, the full 3D
+   SE3: roll and pitch included, where r2sgen projects on the ground plane) and two containment tests,
+   shapely's covers (closed) and matplotlib's Path.contains_point. Per fact: how many boxes agree.
+2. extraction: frames/s of the extractors with maps (the map read, indexed and every entity's facts) against
+   without (maps=None, the extraction of before), on the six nuScenes-mini ScenarioNet scenarios and the AV2
+   log, best of 3 alternated, `--categories all`. Target: with >= 70% of without.
+3. width: the median width of the nuScenes lanes that have a polygon (twice the distance from the centre line's
+   halfway point to the polygon's boundary), the default width of lanes given without one.
+Writes bench/results/maps.json and maps.md.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))
+
+from common import machine, write_results  # noqa: E402
+from realdata import SHARED  # noqa: E402
+
+LOG = SHARED / "data" / "argoverse2" / "test_data" / "sensor_dataset_logs" / "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
+SCENARIONET = SHARED / "data" / "nuscenes-mini" / "scenarionet"
+
+
+def agreement() -> dict:
+    import pandas as pd
+    import shapely
+    from av2.map.map_api import ArgoverseStaticMap
+    from av2.utils.io import read_city_SE3_ego, read_feather
+    from matplotlib.path import Path as MplPath
+
+    from extractors import argoverse2
+    from extractors.base import ExtractOptions
+    from extractors.categories import ALL
+
+    rows = [r for frame in argoverse2.extract(str(LOG), ExtractOptions(categories=ALL, radius=1e6),
+                                              maps=lambda road: None) for r in frame]
+    frames = pd.DataFrame(rows)
+    static = ArgoverseStaticMap.from_json(next((LOG / "map").glob("log_map_archive_*.json")))
+    lanes = {str(i): s.polygon_boundary[:, :2] for i, s in static.vector_lane_segments.items()}
+    crossings = [c.polygon[:, :2] for c in static.vector_pedestrian_crossings.values()]
+    areas = [a.xyz[:, :2] for a in static.vector_drivable_areas.values()]
+    shp = {k: shapely.Polygon(v) for k, v in lanes.items()}
+    shp_cross, shp_area = [shapely.Polygon(v) for v in crossings], [shapely.Polygon(v) for v in areas]
+    mpl = {k: MplPath(v) for k, v in lanes.items()}
+    mpl_cross, mpl_area = [MplPath(v) for v in crossings], [MplPath(v) for v in areas]
+    poses = read_city_SE3_ego(LOG)
+    boxes = read_feather(LOG / "annotations.feather")
+    stamps = sorted(boxes.timestamp_ns.unique())
+    by_key = {(int(t), u): (x, y, z) for t, u, x, y, z in
+              zip(boxes.timestamp_ns, boxes.track_uuid, boxes.tx_m, boxes.ty_m, boxes.tz_m)}
+    facts = ("lanes", "lane in lanes", "in_intersection", "on_crosswalk", "off_road", "all")
+    counts = {how: dict.fromkeys(facts, 0) for how in ("shapely", "matplotlib")}
+    n = 0
+    for r in frames.itertuples():
+        stamp = int(stamps[r.frame_index])
+        local = np.zeros((1, 3)) if r.is_ego else np.array([by_key[stamp, r.track_id]])
+        x, y = poses[stamp].transform_point_cloud(local)[0, :2]
+        n += 1
+        point = shapely.Point(x, y)
+        for how, inside in (("shapely", lambda poly, p=point: poly.covers(p)),
+                            ("matplotlib", lambda path, p=(x, y): path.contains_point(p))):
+            table = (shp, shp_cross, shp_area) if how == "shapely" else (mpl, mpl_cross, mpl_area)
+            want = sorted(k for k, poly in table[0].items() if inside(poly))
+            inter = any(static.lane_is_in_intersection(int(k)) for k in want)
+            cross = any(inside(p) for p in table[1])
+            off = not want and not any(inside(p) for p in table[2])
+            got = (sorted(r.lanes), r.in_intersection, r.on_crosswalk, r.off_road)
+            c = counts[how]
+            c["lanes"] += got[0] == want
+            c["lane in lanes"] += (r.lane in want) if want else r.lane is None
+            c["in_intersection"] += got[1] == inter
+            c["on_crosswalk"] += got[2] == cross
+            c["off_road"] += got[3] == off
+            c["all"] += got == (want, inter, cross, off)
+    return {"boxes": n, "log": LOG.name, "agree": counts,
+            "share_in_lanes": float(frames.lanes.map(len).gt(0).mean()),
+            "share_off_road": float(frames.off_road.mean())}
+
+
+def rate(extract, path: str, maps: bool) -> float:
+    from extractors.base import ExtractOptions
+    from extractors.categories import ALL
+
+    t = time.perf_counter()
+    frames = sum(1 for _ in extract(path, ExtractOptions(categories=ALL), maps=(lambda road: None) if maps else None))
+    return frames / (time.perf_counter() - t)
+
+
+def extraction() -> dict:
+    from extractors import argoverse2, scenarionet
+
+    out = {}
+    for name, module, path in (("nuScenes-mini ScenarioNet (6 scenarios)", scenarionet, SCENARIONET),
+                               ("Argoverse 2 test log", argoverse2, LOG)):
+        best = {True: 0.0, False: 0.0}
+        for _ in range(3):
+            for maps in (False, True):
+                best[maps] = max(best[maps], rate(module.extract, str(path), maps))
+        out[name] = {"without": best[False], "with": best[True], "ratio": best[True] / best[False]}
+    return out
+
+
+def width() -> dict:
+    from extractors.safe_pickle import load_pickle
+    from extractors.scenarionet import scenario_map
+    from synth.lane_geometry import halfway, width_at
+
+    widths = []
+    for f in sorted(SCENARIONET.glob("*.pkl")):
+        sd = load_pickle(f)
+        road = scenario_map(sd["metadata"]["scenario_id"], sd["map_features"], "nuscenes")
+        widths += [width_at(lane, *halfway(lane.line)[:2]) for lane in road.lanes if lane.polygon_rule == "source"]
+    return {"lanes": len(widths), "median_m": float(np.median(widths)),
+            "p10_m": float(np.percentile(widths, 10)), "p90_m": float(np.percentile(widths, 90))}
+
+
+def main() -> None:
+    if not (LOG.is_dir() and SCENARIONET.is_dir()):
+        sys.exit(f"bench_maps needs {LOG} and {SCENARIONET}")
+    load_before = os.getloadavg()[0]
+    result = {"machine": machine(), "agreement": agreement(), "extraction": extraction(), "width": width()}
+    result["load"] = [load_before, os.getloadavg()[0]]
+    a, e, w = result["agreement"], result["extraction"], result["width"]
+    lines = [
+        "# Maps: lane facts against av2, extraction with maps, lane width (bench/bench_maps.py)", "",
+        f"Machine: {result['machine']['cpu']}, {result['machine']['cores']} cores; commit "
+        f"{result['machine']['commit']}; {result['machine']['date']}; load average {load_before:.1f} -> "
+        f"{result['load'][1]:.1f} (shared machine).", "",
+        f"## 1. Lane facts of every box of the Argoverse 2 test log ({a['boxes']} boxes and egos, log {a['log']})",
+        "",
+        "r2sgen's facts (ground-plane placement, exact containment, its own polygons) against av2's map API "
+        "(its polygons, its 3D poses) with two containment tests. Agreement, boxes:", "",
+        "| fact | av2 + shapely covers | av2 + matplotlib contains_point |", "|---|---|---|"]
+    for fact in a["agree"]["shapely"]:
+        s, m = a["agree"]["shapely"][fact], a["agree"]["matplotlib"][fact]
+        lines.append(f"| {fact} | {s} / {a['boxes']} ({100 * s / a['boxes']:.2f}%) | {m} / {a['boxes']} "
+                     f"({100 * m / a['boxes']:.2f}%) |")
+    lines += ["", f"Share of boxes in a lane: {100 * a['share_in_lanes']:.1f}%; off road: "
+                  f"{100 * a['share_off_road']:.1f}%.", "",
+              "## 2. Extraction frames/s with maps against without (best of 3, alternated; target >= 70%)", "",
+              "| input | without maps | with maps | ratio |", "|---|---|---|---|"]
+    for name, r in e.items():
+        lines.append(f"| {name} | {r['without']:.0f} | {r['with']:.0f} | {100 * r['ratio']:.0f}% |")
+    lines += ["", "## 3. Width of the nuScenes lanes that have a polygon", "",
+              f"{w['lanes']} lanes of the six nuScenes-mini scenarios: median {w['median_m']:.2f} m (10th / 90th "
+              f"percentile {w['p10_m']:.2f} / {w['p90_m']:.2f} m): the default width of a lane given without "
+              "polygon or width (synth.lane_geometry.DEFAULT_LANE_WIDTH).", ""]
+    write_results("maps", result, "\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

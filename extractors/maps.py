@@ -1,0 +1,142 @@
+"""Maps Parquet (docs/formats.md, "Maps Parquet"): one row per map feature, the maps of a frames output.
+
+`r2s extract --out DIR` writes the maps of its scenarios / logs to DIR/_maps/ (`--out F.parquet`: F.maps/ beside
+it), one part per input piece, named like the frames part it goes with (part-000000.parquet, ...); each map is
+written once, however many frames name it. Rows <-> RoadMap is one conversion each way (`map_rows`,
+`read_maps`), so a map read back is the map written.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from extractors.frames_schema import MAPS_DIR, FramesError
+from storage.atomic import atomic_path
+from synth.roadmap import MapError, MapFeature, RoadMap, points
+
+_COORDS = pa.list_(pa.float64())
+MAPS_SCHEMA = pa.schema([
+    ("map_id", pa.string()),
+    ("feature_id", pa.string()),
+    ("kind", pa.string()),
+    ("source_type", pa.string()),
+    ("polygon_x", _COORDS), ("polygon_y", _COORDS),
+    ("line_x", _COORDS), ("line_y", _COORDS),
+    ("left_neighbour", pa.string()),
+    ("right_neighbour", pa.string()),
+    ("successors", pa.list_(pa.string())),
+    ("predecessors", pa.list_(pa.string())),
+    ("is_intersection", pa.bool_()),
+    ("direction", pa.float64()),
+    ("polygon_rule", pa.string()),
+    ("neighbour_rule", pa.string()),
+])
+
+
+def maps_dir(out: str | os.PathLike) -> Path:
+    """Where the maps of a frames output go: DIR/_maps for a dataset directory, F.maps beside a file F.parquet."""
+    p = Path(out)
+    return p.with_suffix(".maps") if p.suffix == ".parquet" else p / MAPS_DIR
+
+
+def map_rows(road: RoadMap) -> list[dict]:
+    rows = []
+    for f in road.features:
+        rows.append({
+            "map_id": f.map_id, "feature_id": f.feature_id, "kind": f.kind, "source_type": f.source_type,
+            "polygon_x": [p[0] for p in f.polygon], "polygon_y": [p[1] for p in f.polygon],
+            "line_x": [p[0] for p in f.line], "line_y": [p[1] for p in f.line],
+            "left_neighbour": f.left, "right_neighbour": f.right, "successors": list(f.successors),
+            "predecessors": list(f.predecessors), "is_intersection": f.is_intersection, "direction": f.direction,
+            "polygon_rule": f.polygon_rule, "neighbour_rule": f.neighbour_rule,
+        })
+    return rows
+
+
+def feature_of(row: dict) -> MapFeature:
+    return MapFeature(
+        map_id=row["map_id"], feature_id=row["feature_id"], kind=row["kind"], source_type=row["source_type"] or "",
+        polygon=points(row["polygon_x"] or (), row["polygon_y"] or ()), line=points(row["line_x"] or (),
+                                                                                   row["line_y"] or ()),
+        left=row["left_neighbour"], right=row["right_neighbour"], successors=tuple(row["successors"] or ()),
+        predecessors=tuple(row["predecessors"] or ()), is_intersection=bool(row["is_intersection"]),
+        polygon_rule=row["polygon_rule"] or "source", neighbour_rule=row["neighbour_rule"] or "source")
+
+
+class MapsWriter:
+    """The maps of one output part, a map at a time (each map is one row group)."""
+
+    def __init__(self, writer: pq.ParquetWriter) -> None:
+        self._writer = writer
+        self.map_ids: list[str] = []
+
+    def add(self, road: RoadMap) -> None:
+        if road.map_id in self.map_ids:
+            return
+        self.map_ids.append(road.map_id)
+        self._writer.write_table(pa.Table.from_pylist(map_rows(road), schema=MAPS_SCHEMA))
+
+
+@contextmanager
+def maps_writer(path: str | os.PathLike) -> Iterator[MapsWriter]:
+    """Write maps to `path` atomically; no file is left when no map was added."""
+    with atomic_path(path) as tmp:
+        with pq.ParquetWriter(tmp, MAPS_SCHEMA, compression="zstd") as pw:
+            w = MapsWriter(pw)
+            yield w
+    if not w.map_ids:
+        Path(path).unlink(missing_ok=True)
+
+
+def check_maps_target(target: Path) -> None:
+    """Refuse to replace a `target` maps folder that holds anything but maps parts (it is not ours)."""
+    if target.exists() and (not target.is_dir() or any(
+            not (p.name.startswith("part-") and p.suffix == ".parquet") for p in target.iterdir())):
+        raise FramesError(f"{target} exists and is not a maps folder written by r2s extract; move it away")
+
+
+def replace_maps(staged: Path, target: Path) -> None:
+    """Put a staged maps folder (absent: no map) in place of the maps of a frames file, `target` (F.maps),
+    removing maps an earlier extraction left there; a target that holds anything but maps parts is refused."""
+    import shutil
+
+    check_maps_target(target)
+    if target.exists():
+        retired = target.with_name(f".{target.name}.{os.getpid()}.old")
+        os.replace(target, retired)
+        shutil.rmtree(retired, ignore_errors=True)
+    if staged.is_dir() and any(staged.iterdir()):
+        os.replace(staged, target)
+
+
+def read_maps(path: str | os.PathLike, map_ids: set[str] | None = None) -> Iterator[RoadMap]:
+    """The maps of a maps directory or file (those named in map_ids, or all), validated again: a map file may
+    come from anyone."""
+    p = Path(path)
+    files = sorted(f for f in p.rglob("*.parquet") if not f.name.startswith((".", "_"))) if p.is_dir() else [p]
+    for f in files:
+        try:
+            pf = pq.ParquetFile(f)
+            missing = [c for c in MAPS_SCHEMA.names if c not in pf.schema_arrow.names]
+            if missing:
+                raise FramesError(f"{f} is not a maps file: it lacks column(s) {', '.join(missing)}")
+            table = pf.read(columns=MAPS_SCHEMA.names)
+        except (pa.ArrowException, OSError) as exc:
+            raise FramesError(f"{f} is not a readable maps Parquet file ({str(exc)[:100]})") from None
+        by_map: dict[str, list[MapFeature]] = {}
+        try:
+            for row in table.to_pylist():
+                if map_ids is None or row["map_id"] in map_ids:
+                    by_map.setdefault(row["map_id"], []).append(feature_of(row))
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, MapError):
+                raise
+            raise FramesError(f"{f}: a row is not a map feature ({str(exc)[:100]})") from None
+        for map_id, features in by_map.items():
+            yield RoadMap.of(map_id, features)

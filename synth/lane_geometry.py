@@ -1,0 +1,131 @@
+"""The two documented rules that complete a source's lanes (docs/formats.md, "Maps Parquet"):
+
+- **A lane without a polygon** (Waymo-converted scenarios give a centre line and widths; nuScenes lane
+  connectors come with a centre line only) gets the polygon of its centre line widened to each side by its half
+  widths (the mean of the source's per-vertex widths on each side where it gives them, else half of
+  DEFAULT_LANE_WIDTH): see `lane_polygon`.
+- **A lane without neighbours in its source** (nuScenes via ScenarioNet) gets them by probing: from the point
+  halfway along its centre line (by length), one lane width to the left and to the right, square to the
+  centre-line segment there; the width is the lane's there, twice the distance to its polygon's boundary. The neighbour on a side is the lane containing the probe
+  point whose direction there (its nearest centre-line segment) is within NEIGHBOUR_ANGLE of the lane's own,
+  the nearest to the probe by centre line if several (then the smaller id); intersection lanes neither have nor
+  are neighbours. None is found where no such lane contains the probe (the edge of the road, or a lane of
+  opposite direction: that is the oncoming lane, never a neighbour).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from synth.lane_facts import PolygonIndex, Segments
+from synth.roadmap import LANE, MapFeature, Points
+
+# The width of a nuScenes lane connector, which the converter gives without polygon or width: the median width
+# (twice the distance from the centre line's halfway point to the polygon's boundary) of the nuScenes lanes that
+# have a polygon in the six nuScenes-mini scenes of ../shared/data, 3.4 m (bench/results/maps.md).
+DEFAULT_LANE_WIDTH = 3.4
+NEIGHBOUR_ANGLE = 30.0  # degrees
+
+
+def dedup(line: Points) -> Points:
+    return tuple(p for i, p in enumerate(line) if i == 0 or p != line[i - 1])
+
+
+def lane_polygon(line: Points, left: float | None = None, right: float | None = None) -> Points:
+    """The polygon of a centre line widened by `left` / `right` metres to each side (None: half of
+    DEFAULT_LANE_WIDTH); empty for a line of fewer than two distinct points.
+
+    The set of points within those distances of the line, cut square at its ends: GEOS's buffer of the line
+    (flat caps, bevel joins; one single-sided buffer per side when the sides differ), its outer ring kept. Unlike
+    offsetting the vertices, a buffer never folds over itself where the line turns tighter than its width (a
+    third of the nuScenes lane connectors do, at the joints of their arcs)."""
+    return lane_polygons([line], [left], [right])[0]
+
+
+def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[float | None]) -> list[Points]:
+    """`lane_polygon` of many lines, in a few vectorised GEOS calls (a map has hundreds of such lanes)."""
+    import shapely
+
+    half = DEFAULT_LANE_WIDTH / 2
+    out: list[Points] = [()] * len(lines)
+    todo = [i for i, line in enumerate(lines) if len(dedup(line)) >= 2]
+    if not todo:
+        return out
+    geoms = np.array([shapely.LineString(dedup(lines[i])) for i in todo])
+    left = np.array([half if lefts[i] is None else lefts[i] for i in todo], dtype=float)
+    right = np.array([half if rights[i] is None else rights[i] for i in todo], dtype=float)
+    areas = shapely.buffer(geoms, left, cap_style="flat", join_style="bevel")
+    sided = left != right
+    if sided.any():
+        areas[sided] = shapely.union(
+            shapely.buffer(geoms[sided], left[sided], cap_style="flat", join_style="bevel", single_sided=True),
+            shapely.buffer(geoms[sided], -right[sided], cap_style="flat", join_style="bevel", single_sided=True))
+    for k, area in zip(todo, areas):
+        if area.geom_type != "Polygon":  # parts that meet only at a point: keep the largest
+            area = max(area.geoms, key=lambda g: g.area)
+        out[k] = tuple(map(tuple, shapely.get_coordinates(area.exterior)[:-1].tolist()))
+    return out
+
+
+def width_at(f: MapFeature, x: float, y: float) -> float:
+    """A lane's width at a point of its centre line: twice the distance from the point to its polygon's boundary."""
+    ring = np.asarray(f.polygon, dtype=float).reshape(-1, 2)
+    seg = Segments.of(np.concatenate([ring, ring[:1]])) if len(ring) >= 3 else None
+    return 2.0 * seg.nearest(x, y)[1] if seg is not None else 0.0
+
+
+def halfway(line: Points) -> tuple[float, float, float, float] | None:
+    """(x, y, ux, uy): the point halfway along a line by arc length and the unit direction of its segment."""
+    p = np.asarray(dedup(line), dtype=float).reshape(-1, 2)
+    if len(p) < 2:
+        return None
+    seg = np.diff(p, axis=0)
+    lengths = np.hypot(seg[:, 0], seg[:, 1])
+    target = lengths.sum() / 2
+    k = int(min(np.searchsorted(np.cumsum(lengths), target), len(seg) - 1))
+    before = float(lengths[:k].sum())
+    t = (target - before) / lengths[k]
+    ux, uy = seg[k] / lengths[k]
+    return (float(p[k, 0] + t * seg[k, 0]), float(p[k, 1] + t * seg[k, 1]), float(ux), float(uy))
+
+
+def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
+    """The lanes with left / right neighbours found by the probing rule (neighbour_rule "geometric")."""
+    candidates = tuple(f for f in lanes if f.kind == LANE and not f.is_intersection)
+    segments = [Segments.of(f.line) for f in candidates]
+    cos_limit = math.cos(math.radians(NEIGHBOUR_ANGLE))
+    # every probe point of every lane, tested in one call: (lane, side, x, y, ux, uy)
+    probes = []
+    for i, f in enumerate(candidates):
+        mid = halfway(f.line)
+        w = width_at(f, mid[0], mid[1]) if mid is not None else 0.0
+        if mid is None or w <= 0:
+            continue
+        x, y, ux, uy = mid
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            probes.append((i, side, x - sign * w * uy, y + sign * w * ux, ux, uy))
+    found = PolygonIndex(candidates).containing(np.array([p[2] for p in probes]), np.array([p[3] for p in probes]))
+    sides: dict[tuple[int, str], str] = {}
+    for (i, side, qx, qy, ux, uy), hits in zip(probes, found):
+        best = None
+        for k in hits:
+            if k == i or segments[k] is None:
+                continue
+            j, gap = segments[k].nearest(qx, qy)
+            dx, dy = segments[k].d[j] / math.sqrt(segments[k].length2[j])
+            if dx * ux + dy * uy < cos_limit:
+                continue
+            if best is None or (gap, candidates[k].feature_id) < best:
+                best = (gap, candidates[k].feature_id)
+        if best is not None:
+            sides[i, side] = best[1]
+    index = {f.feature_id: i for i, f in enumerate(candidates)}
+    out = []
+    for f in lanes:
+        i = index.get(f.feature_id) if f.kind == LANE and not f.is_intersection else None
+        out.append(replace(f, left=sides.get((i, "left")), right=sides.get((i, "right")), neighbour_rule="geometric")
+                   if i is not None else replace(f, neighbour_rule="geometric"))
+    return tuple(out)

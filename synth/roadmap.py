@@ -1,0 +1,228 @@
+"""The recorded road as data: a map is a set of map features (docs/formats.md, "Maps Parquet").
+
+A map belongs to one scenario or log (its `map_id`), in that scenario's world frame (metres; the frame its
+tracks are in). Each feature is one row: a lane, road line, crosswalk, intersection or drivable area, with its
+polygon (lanes, crosswalks, intersections, drivable areas) and its line (a lane's centre line, a road line), and
+for lanes the lane graph: left / right neighbour, successors, predecessors, whether it is an intersection lane,
+and its direction of travel (the centre line runs from its first to its last point).
+
+`RoadMap.of` validates a map once, so that everything downstream may trust it: finite coordinates, polygons of
+at least three distinct vertices that do not cross themselves, lane-graph references that name lanes of the
+map. A map that breaks a rule is a MapError: one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from synth.errors import InputError
+
+LANE, ROAD_LINE, CROSSWALK, INTERSECTION, DRIVABLE_AREA = "lane", "road_line", "crosswalk", "intersection", \
+    "drivable_area"
+KINDS = (LANE, ROAD_LINE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)
+# The kinds whose features are areas (a polygon is required) and the kinds that are lines.
+AREA_KINDS = (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)
+LINE_KINDS = (LANE, ROAD_LINE)
+
+Points = tuple[tuple[float, float], ...]
+
+
+class MapError(InputError, ValueError):
+    """A map that is not what the map format says (NaN, a self-crossing polygon, a dangling lane id). One line."""
+
+
+@dataclass(frozen=True)
+class MapFeature:
+    """One map feature in its map's world frame.
+
+    polygon: the outer ring, without the closing repeat of its first vertex (empty for road lines).
+    line: a lane's centre line in its direction of travel, or a road line's points (empty for the other kinds).
+    source_type: the source's own type (LANE_SURFACE_STREET, ROAD_LINE_SOLID_SINGLE_WHITE, VEHICLE, ...).
+    polygon_rule: "source" (given by the source) or "centre line" (built from the centre line and its width by
+    synth.lane_geometry.lane_polygon); neighbour_rule: "source" or "geometric" (synth.lane_geometry.neighbours).
+    """
+
+    map_id: str
+    feature_id: str
+    kind: str
+    polygon: Points = ()
+    line: Points = ()
+    source_type: str = ""
+    left: str | None = None
+    right: str | None = None
+    successors: tuple[str, ...] = ()
+    predecessors: tuple[str, ...] = ()
+    is_intersection: bool = False
+    polygon_rule: str = "source"
+    neighbour_rule: str = "source"
+
+    @property
+    def direction(self) -> float | None:
+        """A lane's direction of travel: the heading (degrees CCW from +x, in the map's frame, in [0, 360)) of
+        the chord from its centre line's first point to its last; None for other kinds or a degenerate line."""
+        if self.kind != LANE or len(self.line) < 2:
+            return None
+        (x0, y0), (x1, y1) = self.line[0], self.line[-1]
+        if x0 == x1 and y0 == y1:
+            return None
+        return math.degrees(math.atan2(y1 - y0, x1 - x0)) % 360.0
+
+
+@dataclass(frozen=True)
+class RoadMap:
+    """A validated map: its features in a stable order (by kind, then feature id)."""
+
+    map_id: str
+    features: tuple[MapFeature, ...]
+    _by_id: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def of(cls, map_id: str, features: Iterable[MapFeature]) -> RoadMap:
+        """Validate and order the features of one map. A lane-graph reference to a lane the map does not hold is
+        a MapError (a source whose maps are crops of a larger map drops links out of the crop before: see
+        `links_within`)."""
+        feats = sorted(features, key=lambda f: (KINDS.index(f.kind) if f.kind in KINDS else len(KINDS),
+                                                f.feature_id))
+        seen: dict[str, MapFeature] = {}
+        for f in feats:
+            if f.map_id != map_id:
+                raise MapError(f"map {map_id!r}: feature {f.feature_id!r} belongs to map {f.map_id!r}")
+            if f.feature_id in seen:
+                raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
+            check_feature(f)
+            seen[f.feature_id] = f
+        check_simple(feats)
+        lanes = {fid for fid, f in seen.items() if f.kind == LANE}
+        out = []
+        for f in feats:
+            if f.kind == LANE:
+                f = _resolve_links(map_id, f, lanes)
+            out.append(f)
+        road = cls(map_id, tuple(out))
+        road._by_id.update((f.feature_id, f) for f in out)
+        return road
+
+    def __getitem__(self, feature_id: str) -> MapFeature:
+        return self._by_id[feature_id]
+
+    def __contains__(self, feature_id: object) -> bool:
+        return feature_id in self._by_id
+
+    def of_kind(self, *kinds: str) -> tuple[MapFeature, ...]:
+        return tuple(f for f in self.features if f.kind in kinds)
+
+    @property
+    def lanes(self) -> tuple[MapFeature, ...]:
+        return self.of_kind(LANE)
+
+
+def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
+    def kept(ref: str | None, what: str) -> str | None:
+        if ref is None:
+            return None
+        if ref == f.feature_id:
+            raise MapError(f"map {map_id!r}: lane {f.feature_id!r} names itself as its {what}")
+        if ref in lanes:
+            return ref
+        raise MapError(f"map {map_id!r}: lane {f.feature_id!r} has {what} {ref!r}, which is not a lane of the map")
+
+    def kept_all(refs: Sequence[str], what: str) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(r for r in (kept(x, what) for x in refs) if r is not None))
+
+    return replace(f, left=kept(f.left, "left neighbour"), right=kept(f.right, "right neighbour"),
+                   successors=kept_all(f.successors, "successor"), predecessors=kept_all(f.predecessors,
+                                                                                         "predecessor"))
+
+
+def check_feature(f: MapFeature) -> None:
+    """The rules of one feature but simplicity (`check_simple` takes a map's polygons at once): a known kind,
+    finite coordinates, a polygon of at least three distinct vertices where the kind is an area, a line of two
+    points or more where the kind has one."""
+    where = f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r}"
+    if f.kind not in KINDS:
+        raise MapError(f"map {f.map_id!r}: feature {f.feature_id!r} has unknown kind {f.kind!r} "
+                       f"(kinds: {', '.join(KINDS)})")
+    for name, pts in (("line", f.line), ("polygon", f.polygon)):
+        if not pts:
+            continue
+        try:
+            a = np.asarray(pts, dtype=float)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.ndim != 2 or a.shape[1] != 2 or not np.isfinite(a).all():
+            bad = next((p for p in pts if a is None or len(p) != 2 or not all(_finite(v) for v in p)), pts[0])
+            raise MapError(f"{where} has a {name} point that is not two finite numbers ({bad!r})")
+    if f.kind in AREA_KINDS and len(set(f.polygon)) < 3:
+        raise MapError(f"{where} has no polygon of three distinct vertices")
+    if f.kind in LINE_KINDS and len(f.line) < 2:
+        raise MapError(f"{where} has no line of two points or more")
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def check_simple(features: Sequence[MapFeature]) -> None:
+    """Every polygon of these features does not cross or touch itself (consecutive repeated vertices allowed),
+    as GEOS decides it (robust predicates), all in one call; the first that does is a MapError."""
+    import shapely
+
+    areas = [f for f in features if f.kind in AREA_KINDS]
+    if not areas:
+        return
+    rings = [_clean_ring(f.polygon) for f in areas]
+    coords = np.concatenate(rings)
+    index = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
+    simple = shapely.is_simple(shapely.linearrings(coords, indices=index))
+    if not simple.all():
+        f = areas[int(np.flatnonzero(~simple)[0])]
+        raise MapError(f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r} has a self-intersecting "
+                       "polygon")
+
+
+def _clean_ring(ring: Points) -> np.ndarray:
+    a = np.asarray(ring, dtype=float)
+    keep = np.ones(len(a), dtype=bool)
+    keep[1:] = (a[1:] != a[:-1]).any(axis=1)
+    a = a[keep]
+    return a[:-1] if len(a) > 1 and (a[0] == a[-1]).all() else a
+
+
+def ring_is_simple(ring: Points) -> bool:
+    """Whether one closed ring does not cross or touch itself (`check_simple` for one polygon)."""
+    import shapely
+
+    return bool(shapely.is_simple(shapely.LinearRing(_clean_ring(ring))))
+
+
+def points(xs: Iterable[float], ys: Iterable[float]) -> Points:
+    """Coordinates as the frozen points of a feature (Python floats)."""
+    xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
+    if len(xs) != len(ys):
+        raise ValueError(f"{len(xs)} x coordinates but {len(ys)} y coordinates")
+    return tuple(zip(xs.tolist(), ys.tolist()))
+
+
+def open_ring(pts: Points) -> Points:
+    """A ring without its closing repeat of the first vertex (sources write rings both ways)."""
+    return pts[:-1] if len(pts) > 1 and pts[0] == pts[-1] else pts
+
+
+def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[MapFeature]:
+    """The features with successors and predecessors (and, if `neighbours`, left / right neighbours) that name no
+    lane among them dropped: for sources whose maps are crops of a larger map, where a link may lead out of the
+    crop (docs/formats.md says which)."""
+    lanes = {f.feature_id for f in features if f.kind == LANE}
+    out = []
+    for f in features:
+        if f.kind == LANE:
+            f = replace(f, successors=tuple(s for s in f.successors if s in lanes),
+                        predecessors=tuple(s for s in f.predecessors if s in lanes))
+            if neighbours:
+                f = replace(f, left=f.left if f.left in lanes else None, right=f.right if f.right in lanes else None)
+        out.append(f)
+    return out
