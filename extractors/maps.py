@@ -17,7 +17,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from extractors.frames_schema import MAPS_DIR, FramesError
-from storage.atomic import atomic_path
+from storage.atomic import parquet_writer
 from synth.roadmap import MapError, MapFeature, RoadMap, points
 
 _COORDS = pa.list_(pa.float64())
@@ -86,10 +86,9 @@ class MapsWriter:
 @contextmanager
 def maps_writer(path: str | os.PathLike) -> Iterator[MapsWriter]:
     """Write maps to `path` atomically; no file is left when no map was added."""
-    with atomic_path(path) as tmp:
-        with pq.ParquetWriter(tmp, MAPS_SCHEMA, compression="zstd") as pw:
-            w = MapsWriter(pw)
-            yield w
+    with parquet_writer(path, MAPS_SCHEMA) as pw:
+        w = MapsWriter(pw)
+        yield w
     if not w.map_ids:
         Path(path).unlink(missing_ok=True)
 

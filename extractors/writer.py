@@ -12,7 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from extractors.frames import EXTRACTED_SCHEMA, FramesError, to_table
-from storage.atomic import atomic_path
+from storage.atomic import parquet_writer
 
 ROW_GROUP_ROWS = 64_000
 
@@ -53,8 +53,7 @@ class FramesWriter:
 
 @contextmanager
 def frames_writer(path: str | os.PathLike) -> Iterator[FramesWriter]:
-    with atomic_path(path) as tmp:
-        with pq.ParquetWriter(tmp, EXTRACTED_SCHEMA, compression="zstd") as pw:
-            w = FramesWriter(pw)
-            yield w
-            w.flush()
+    with parquet_writer(path, EXTRACTED_SCHEMA) as pw:
+        w = FramesWriter(pw)
+        yield w
+        w.flush()

@@ -36,3 +36,12 @@ def _umask() -> int:
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
     with atomic_path(target) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+@contextmanager
+def parquet_writer(target: str | os.PathLike, schema) -> Iterator:
+    """A pyarrow ParquetWriter (zstd) into a temporary file that becomes `target` when the block succeeds."""
+    import pyarrow.parquet as pq
+
+    with atomic_path(target) as tmp, pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
+        yield writer

@@ -54,7 +54,9 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
     todo = [i for i, line in enumerate(lines) if len(dedup(line)) >= 2]
     if not todo:
         return out
-    geoms = np.array([shapely.LineString(dedup(lines[i])) for i in todo])
+    coords = [np.asarray(dedup(lines[i]), dtype=float) for i in todo]
+    geoms = shapely.linestrings(np.concatenate(coords), indices=np.repeat(np.arange(len(todo)),
+                                                                          [len(c) for c in coords]))
     left = np.array([half if lefts[i] is None else lefts[i] for i in todo], dtype=float)
     right = np.array([half if rights[i] is None else rights[i] for i in todo], dtype=float)
     areas = shapely.buffer(geoms, left, cap_style="flat", join_style="bevel")
@@ -63,10 +65,13 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
         areas[sided] = shapely.union(
             shapely.buffer(geoms[sided], left[sided], cap_style="flat", join_style="bevel", single_sided=True),
             shapely.buffer(geoms[sided], -right[sided], cap_style="flat", join_style="bevel", single_sided=True))
-    for k, area in zip(todo, areas):
-        if area.geom_type != "Polygon":  # parts that meet only at a point: keep the largest
-            area = max(area.geoms, key=lambda g: g.area)
-        out[k] = tuple(map(tuple, shapely.get_coordinates(area.exterior)[:-1].tolist()))
+    multi = shapely.get_type_id(areas) != 3
+    for k in np.flatnonzero(multi):  # parts that meet only at a point: keep the largest
+        areas[k] = max(areas[k].geoms, key=lambda g: g.area)
+    ring, which = shapely.get_coordinates(shapely.get_exterior_ring(areas), return_index=True)
+    starts = np.searchsorted(which, np.arange(len(todo) + 1))
+    for k, i in enumerate(todo):
+        out[i] = tuple(map(tuple, ring[starts[k]:starts[k + 1] - 1].tolist()))  # the closing repeat dropped
     return out
 
 

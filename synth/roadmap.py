@@ -133,9 +133,9 @@ def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
     def kept_all(refs: Sequence[str], what: str) -> tuple[str, ...]:
         return tuple(dict.fromkeys(r for r in (kept(x, what) for x in refs) if r is not None))
 
-    return replace(f, left=kept(f.left, "left neighbour"), right=kept(f.right, "right neighbour"),
-                   successors=kept_all(f.successors, "successor"), predecessors=kept_all(f.predecessors,
-                                                                                         "predecessor"))
+    links = dict(left=kept(f.left, "left neighbour"), right=kept(f.right, "right neighbour"),
+                 successors=kept_all(f.successors, "successor"), predecessors=kept_all(f.predecessors, "predecessor"))
+    return f if all(getattr(f, k) == v for k, v in links.items()) else replace(f, **links)
 
 
 def check_feature(f: MapFeature) -> None:
@@ -220,9 +220,11 @@ def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[Ma
     out = []
     for f in features:
         if f.kind == LANE:
-            f = replace(f, successors=tuple(s for s in f.successors if s in lanes),
-                        predecessors=tuple(s for s in f.predecessors if s in lanes))
+            links = dict(successors=tuple(s for s in f.successors if s in lanes),
+                         predecessors=tuple(s for s in f.predecessors if s in lanes))
             if neighbours:
-                f = replace(f, left=f.left if f.left in lanes else None, right=f.right if f.right in lanes else None)
+                links.update(left=f.left if f.left in lanes else None, right=f.right if f.right in lanes else None)
+            if any(getattr(f, k) != v for k, v in links.items()):
+                f = replace(f, **links)
         out.append(f)
     return out
