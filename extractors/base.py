@@ -295,11 +295,12 @@ def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, A
     """Name the map in every entity and add the lane facts of those the source places in the map's frame."""
     placed = [(b, e) for b, e in entities if b.world is not None]
     facts = road.facts([b.world[0] for b, _ in placed], [b.world[1] for b, _ in placed],
-                       [math.degrees(b.world[2]) for b, _ in placed]) if placed else []
+                       [math.degrees(b.world[2]) % 360.0 for b, _ in placed]) if placed else []
     for _, e in entities:
         e["map_id"] = road.road.map_id
-    for (_, e), f in zip(placed, facts):
-        e.update(lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
+    for (b, e), f in zip(placed, facts):
+        e.update(map_x=b.world[0], map_y=b.world[1], map_heading=math.degrees(b.world[2]) % 360.0,
+                 lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
                  off_road=f.off_road)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator, Mapping
+from dataclasses import replace
 from typing import Any
 
 import pandas as pd
@@ -22,12 +23,14 @@ from extractors.frames_schema import (
     EXTRACTED_SCHEMA,
     FRAMES_COLUMNS,
     FRAMES_SCHEMA,
+    LANE_FACT_COLUMNS,
     OPTIONAL_COLUMNS,
     ROAD_COLUMNS,
     FramesError,
 )
 from extractors.naming import SceneNames
 from storage.atomic import atomic_path
+from synth.roadmap import RoadMap
 from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
 
 
@@ -140,8 +143,9 @@ def _given(v: Any) -> float | None:
     return None if v is None or pd.isna(v) else float(v)
 
 
-def frame_to_scene(rows: pd.DataFrame) -> Scene:
-    """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone)."""
+def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
+    """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone), with
+    each entity's lane facts where the rows have them, and `road` (in the frame's ego frame) as its road."""
     fid = str(rows["frame_id"].iloc[0])
     entities = []
     for r in rows.itertuples(index=False):
@@ -153,11 +157,19 @@ def frame_to_scene(rows: pd.DataFrame) -> Scene:
         for key in OPTIONAL_COLUMNS:
             if (v := _given(getattr(r, key, None))) is not None:
                 d[key] = v
+        lanes = getattr(r, "lanes", None)
+        if lanes is not None and not (isinstance(lanes, float) and math.isnan(lanes)):
+            d["lanes"] = [str(x) for x in lanes]
+            for key in LANE_FACT_COLUMNS[1:]:
+                v = getattr(r, key, None)
+                if v is not None and not (isinstance(v, float) and math.isnan(v)):
+                    d[key] = v if key == "lane" else bool(v)
         entities.append(d)
     try:
-        return scene_from_dict({"frame_id": fid, "entities": entities})
+        scene = scene_from_dict({"frame_id": fid, "entities": entities})
     except SceneError as exc:
         raise FramesError(f"frame {fid!r}: {exc}") from None
+    return scene if road is None else replace(scene, road=road)
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
@@ -168,7 +180,7 @@ def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
 
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
     """A Scene back as frames rows (ids kept as they are; speeds and measurement sigmas as their optional columns,
-    if any entity has one)."""
+    if any entity has one; lane facts and the road's map id as the road columns)."""
     optional = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
     rows = []
     for e in scene.entities:
@@ -179,6 +191,9 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
                 "type": e.type, "category": e.type, "x": e.x, "y": e.y, "heading": e.heading,
                 "length": e.length, "width": e.width, "is_ego": e.is_ego,
                 **{c: getattr(e, c) for c in optional},
+                **({c: list(e.lanes) if c == "lanes" else getattr(e, c) for c in LANE_FACT_COLUMNS}
+                   if e.lanes is not None else {}),
+                **({"map_id": scene.road.map_id} if scene.road is not None else {}),
             }
         )
     return rows

@@ -24,7 +24,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as ds
 
-from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, FramesError
+from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, ROAD_COLUMNS, FramesError
 from storage.frame_index import FrameIndex, frame_hashes
 from storage.parquet import check_column_types, dataset_files, filesystem, footer, open_file
 from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
@@ -155,10 +155,11 @@ class FramesDataset:
         return pa.concat_tables(tables)
 
     def find(self, frame_id: str) -> pa.Table | None:
-        """The rows of one frame (row-group statistics skip most of a large dataset), or None."""
+        """The rows of one frame (row-group statistics skip most of a large dataset), with their road columns, or
+        None."""
         pafs, _ = filesystem(self.source)
         dataset = ds.dataset([p.path for p in self.parts], format="parquet", filesystem=pafs)
-        columns = list(FRAMES_COLUMNS) + [c for c in OPTIONAL_COLUMNS if c in dataset.schema.names]
+        columns = list(FRAMES_COLUMNS) + [c for c in (*OPTIONAL_COLUMNS, *ROAD_COLUMNS) if c in dataset.schema.names]
         table = dataset.to_table(columns=columns, filter=ds.field("frame_id") == frame_id)
         return table if table.num_rows else None
 

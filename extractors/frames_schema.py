@@ -37,8 +37,13 @@ OPTIONAL_COLUMNS = {"speed": pa.float64(), "pos_sigma": pa.float64(), "heading_s
 MAPS_DIR = "_maps"
 # Where each entity is on its scenario's map (docs/formats.md, "Lane facts"): the map the frame names (a map_id
 # of the maps written beside the frames) and the entity's lane facts (synth.lane_facts); null without a map.
-ROAD_COLUMNS = {"map_id": pa.string(), "lanes": pa.list_(pa.string()), "lane": pa.string(),
-                "in_intersection": pa.bool_(), "on_crosswalk": pa.bool_(), "off_road": pa.bool_()}
+# map_x, map_y, map_heading: the entity's place in its map's frame (metres; degrees CCW from +x), as the source
+# gives it: where the facts were decided, and how the map is brought into a frame's ego frame (r2s scene).
+ROAD_COLUMNS = {"map_id": pa.string(), "map_x": pa.float64(), "map_y": pa.float64(), "map_heading": pa.float64(),
+                "lanes": pa.list_(pa.string()), "lane": pa.string(), "in_intersection": pa.bool_(),
+                "on_crosswalk": pa.bool_(), "off_road": pa.bool_()}
+# The lane facts among them, which a scene's entities carry (synth.scene.Entity, scene JSON keys of these names).
+LANE_FACT_COLUMNS = ("lanes", "lane", "in_intersection", "on_crosswalk", "off_road")
 # What extractors write: every column of the schema, each entity's speed (null where the source cannot say) and
 # the road columns.
 EXTRACTED_SCHEMA = pa.schema(list(FRAMES_SCHEMA) + [("speed", OPTIONAL_COLUMNS["speed"])]

@@ -228,3 +228,95 @@ def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[Ma
                 f = replace(f, **links)
         out.append(f)
     return out
+
+
+def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: float) -> RoadMap:
+    """The features of a map that come within `radius` of a pose (x, y, heading degrees CCW from +x, in the map's
+    frame), in that pose's ego frame (+x right, +y forward, as frames and scenes are): the road of one scene.
+    Links to lanes left out are dropped. Near is decided by GEOS's distance, in float: which features a scene
+    shows is a matter of display, not of the lane facts (those are the extraction's, exact)."""
+    import shapely
+
+    kept = []
+    origin = shapely.Point(x, y)
+    for f in road.features:
+        geom = shapely.Polygon(f.polygon) if f.polygon else shapely.LineString(f.line)
+        if geom.distance(origin) <= radius:
+            kept.append(f)
+    yaw = math.radians(heading)
+    c, s = math.cos(yaw), math.sin(yaw)
+
+    def move(pts: Points) -> Points:
+        if not pts:
+            return ()
+        a = np.asarray(pts, dtype=float) - (x, y)
+        # the offset rotated by (90 deg - heading): the pose's forward axis becomes +y (extractors.base.global_to_ego)
+        return points(a[:, 0] * s - a[:, 1] * c, a[:, 0] * c + a[:, 1] * s)
+
+    moved = [replace(f, polygon=move(f.polygon), line=move(f.line)) for f in kept]
+    return RoadMap.of(road.map_id, links_within(moved, neighbours=True))
+
+
+# Scene JSON's "road" (docs/formats.md): the map id and one object per feature.
+ROAD_KEYS = ("map_id", "features")
+FEATURE_KEYS = ("id", "kind", "polygon", "line", "left", "right", "successors", "predecessors", "is_intersection")
+MAX_FEATURES = 100_000
+
+
+def road_to_dict(road: RoadMap) -> dict:
+    out = []
+    for f in road.features:
+        d: dict = {"id": f.feature_id, "kind": f.kind}
+        if f.polygon:
+            d["polygon"] = [list(p) for p in f.polygon]
+        if f.line:
+            d["line"] = [list(p) for p in f.line]
+        if f.kind == LANE:
+            d.update(left=f.left, right=f.right, successors=list(f.successors), predecessors=list(f.predecessors),
+                     is_intersection=f.is_intersection)
+        out.append(d)
+    return {"map_id": road.map_id, "features": out}
+
+
+def road_from_dict(raw: object) -> RoadMap:
+    """A scene's road as scene JSON gives it, validated as every map is (MapError: one line)."""
+    if not isinstance(raw, dict) or not isinstance(raw.get("map_id"), str) or not isinstance(raw.get("features"), list):
+        raise MapError("road must be an object with map_id (a string) and features (a list)")
+    unknown = sorted(set(raw) - set(ROAD_KEYS))
+    if unknown:
+        raise MapError(f"road has unknown key {unknown[0]!r} (keys: {', '.join(ROAD_KEYS)})")
+    map_id, feats = raw["map_id"], raw["features"]
+    if len(feats) > MAX_FEATURES:
+        raise MapError(f"road has {len(feats)} features, more than {MAX_FEATURES}")
+    out = []
+    for i, d in enumerate(feats):
+        if not isinstance(d, dict) or not isinstance(d.get("id"), str) or not isinstance(d.get("kind"), str):
+            raise MapError(f"road feature {i} must be an object with an id and a kind (strings)")
+        unknown = sorted(set(d) - set(FEATURE_KEYS))
+        if unknown:
+            raise MapError(f"road feature {d['id']!r} has unknown key {unknown[0]!r} (keys: {', '.join(FEATURE_KEYS)})")
+        where = f"road feature {d['id']!r}"
+        refs = {k: d.get(k) for k in ("left", "right")}
+        lists = {k: d.get(k) or [] for k in ("successors", "predecessors")}
+        if any(v is not None and not isinstance(v, str) for v in refs.values()) or any(
+                not isinstance(v, list) or not all(isinstance(r, str) for r in v) for v in lists.values()):
+            raise MapError(f"{where}: left / right must be ids (strings) or null, successors / predecessors lists "
+                           "of ids")
+        inter = d.get("is_intersection", False)
+        if not isinstance(inter, bool):
+            raise MapError(f"{where}: is_intersection must be true or false")
+        out.append(MapFeature(map_id, d["id"], d["kind"], polygon=_coords(d.get("polygon"), where),
+                              line=_coords(d.get("line"), where), left=refs["left"], right=refs["right"],
+                              successors=tuple(lists["successors"]), predecessors=tuple(lists["predecessors"]),
+                              is_intersection=inter))
+    return RoadMap.of(map_id, out)
+
+
+def _coords(value: object, where: str) -> Points:
+    if value is None:
+        return ()
+    if not isinstance(value, list) or not all(
+            isinstance(p, list) and len(p) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                        for v in p) for p in value):
+        raise MapError(f"{where}: coordinates must be a list of [x, y] number pairs")
+    return tuple((float(p[0]), float(p[1])) for p in value)

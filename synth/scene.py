@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from synth.errors import InputError
+from synth.roadmap import MapError, RoadMap, road_from_dict, road_to_dict
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
 ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
@@ -113,6 +114,13 @@ class Entity:
     # Magnitude of the ground velocity (m/s, >= 0); None where the source does not know it (motion needs it).
     speed: float | None = None
     speed_sigma: float | None = None  # m/s, each side (robust synthesis with motion)
+    # Where it is on the recorded road (docs/formats.md, "Lane facts"; synth.lane_facts), as extraction decided
+    # exactly in the map's frame; None where the scene has no map or the source did not place this entity.
+    lanes: tuple[str, ...] | None = None
+    lane: str | None = None
+    in_intersection: bool | None = None
+    on_crosswalk: bool | None = None
+    off_road: bool | None = None
 
     @property
     def is_ego(self) -> bool:
@@ -131,6 +139,8 @@ class Scene:
 
     frame_id: str
     entities: tuple[Entity, ...]
+    # The recorded road around ego, in the scene's (ego) frame: the map features within the extraction radius.
+    road: RoadMap | None = None
 
     def __post_init__(self) -> None:
         ids = [e.id for e in self.entities]
@@ -165,8 +175,14 @@ class Scene:
             for key in SIGMA_CAPS:
                 if (v := getattr(e, key)) is not None:
                     d[key] = v
+            for key in LANE_FACT_KEYS:
+                if (v := getattr(e, key)) is not None:
+                    d[key] = list(v) if key == "lanes" else v
             out.append(d)
-        return {"frame_id": self.frame_id, "entities": out}
+        doc: dict[str, Any] = {"frame_id": self.frame_id, "entities": out}
+        if self.road is not None:
+            doc["road"] = road_to_dict(self.road)
+        return doc
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=1) + "\n"
@@ -174,9 +190,10 @@ class Scene:
 
 # Every key scene JSON may hold (docs/formats.md). Anything else is refused: a misspelt optional key would
 # otherwise be silently dropped (`pos_sgima` turning robust synthesis off, `hedding` leaving a default).
-SCENE_KEYS = ("frame_id", "entities")
+SCENE_KEYS = ("frame_id", "entities", "road")
 REQUIRED_ENTITY_KEYS = ("id", "type", "x", "y", "heading")
-ENTITY_KEYS = (*REQUIRED_ENTITY_KEYS, "length", "width", "speed", *SIGMA_CAPS)
+LANE_FACT_KEYS = ("lanes", "lane", "in_intersection", "on_crosswalk", "off_road")
+ENTITY_KEYS = (*REQUIRED_ENTITY_KEYS, "length", "width", "speed", *SIGMA_CAPS, *LANE_FACT_KEYS)
 
 
 def _misspelt(key: Any, known: Iterable[str]) -> str | None:
@@ -247,6 +264,7 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         speed = _finite(speed, f"entity {eid!r} speed")
         if not 0.0 <= speed <= MAX_SPEED:
             raise SceneError(f"entity {eid!r} speed must be in [0, {MAX_SPEED:g}] m/s, got {raw['speed']!r}")
+    facts = _lane_facts(raw, eid)
     return Entity(
         id=eid,
         type=etype,
@@ -259,7 +277,31 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
         heading_sigma=sigmas[1],
         speed=speed,
         speed_sigma=sigmas[2],
+        **facts,
     )
+
+
+def _lane_facts(raw: Mapping, eid: str) -> dict[str, Any]:
+    """An entity's lane facts as scene JSON gives them (each optional): lanes a list of feature ids (strings),
+    lane one of them, the three flags true / false."""
+    out: dict[str, Any] = {}
+    lanes = raw.get("lanes")
+    if lanes is not None:
+        if not isinstance(lanes, list) or not all(isinstance(x, str) and x for x in lanes):
+            raise SceneError(f"entity {eid!r} lanes must be a list of lane ids (strings)")
+        out["lanes"] = tuple(sorted(set(lanes)))
+    lane = raw.get("lane")
+    if lane is not None:
+        if not isinstance(lane, str) or lane not in out.get("lanes", ()):
+            raise SceneError(f"entity {eid!r} lane must be one of its lanes, got {lane!r}")
+        out["lane"] = lane
+    for key in LANE_FACT_KEYS[2:]:
+        v = raw.get(key)
+        if v is not None:
+            if not isinstance(v, bool):
+                raise SceneError(f"entity {eid!r} {key} must be true or false, got {v!r}")
+            out[key] = v
+    return out
 
 
 def as_scene(value: Scene | Mapping[str, Any]) -> Scene:
@@ -288,16 +330,23 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
         raise SceneError("'entities' must be a list")
     if len(ents) > max_entities:
         raise SceneError(f"scene has {len(ents)} entities, more than the cap of {max_entities}")
-    return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)))
+    road = None
+    if raw.get("road") is not None:
+        try:
+            road = road_from_dict(raw["road"])
+        except MapError as exc:
+            raise SceneError(str(exc)) from None
+    return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)), road)
 
 
-def make_scene(frame_id: str, entities: Iterable[Entity]) -> Scene:
+def make_scene(frame_id: str, entities: Iterable[Entity], road: RoadMap | None = None) -> Scene:
     """A scene from entities, with headings normalised so equal directions print equal."""
     from synth.geometry import normalize
 
     return Scene(
         frame_id=frame_id,
         entities=tuple(replace(e, heading=normalize(e.heading)) for e in entities),
+        road=road,
     )
 
 

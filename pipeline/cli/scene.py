@@ -1,6 +1,9 @@
 """`r2s scene FRAMES FRAME_ID`: one frame of a frames file or dataset as scene JSON (the input of `r2s synth`).
 
-Only the frame's own rows are read (row-group statistics skip the rest of a large dataset) and checked."""
+Only the frame's own rows are read (row-group statistics skip the rest of a large dataset) and checked. A frame
+that names a map gets its road: the map features within --radius of ego, from the maps beside the frames
+(extractors.maps), brought into the frame's ego frame by the ego's place in the map (its map_x, map_y,
+map_heading), and each entity its lane facts."""
 
 from __future__ import annotations
 
@@ -17,6 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("frames", help="frames Parquet file or directory (from r2s extract)")
     p.add_argument("frame_id", help="frame id, e.g. scene-0061/3")
     p.add_argument("--out", metavar="F", help="write the JSON to this file (atomically) instead of stdout")
+    p.add_argument("--radius", type=float, default=50.0, metavar="M",
+                   help="the road: map features within M metres of ego (default 50, r2s extract's radius)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,14 +33,36 @@ def run(args: argparse.Namespace) -> int:
     table = dataset.find(args.frame_id)
     if table is None:
         raise UserError(f"{args.frames} has no frame {args.frame_id!r}{_hint(dataset, args.frame_id)}")
+    if not args.radius > 0:
+        raise UserError(f"--radius must be positive, got {args.radius}")
     rows = table.to_pandas()
     validate_frames(rows)
-    text = frame_to_scene(rows).to_json()
+    text = frame_to_scene(rows, _road(args.frames, rows, args.radius)).to_json()
     if args.out:
         write_text_atomic(args.out, text)
     else:
         sys.stdout.write(text)
     return 0
+
+
+def _road(frames: str, rows, radius: float):
+    """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
+    from extractors.maps import maps_dir, read_maps
+    from synth.roadmap import in_ego_frame
+
+    if "map_id" not in rows.columns:
+        return None
+    ego = rows[rows["is_ego"]].iloc[0]
+    if ego["map_id"] is None or not all(v == v and v is not None for v in (ego["map_x"], ego["map_y"],
+                                                                           ego["map_heading"])):
+        return None
+    where = maps_dir(frames)
+    found = list(read_maps(where, {ego["map_id"]})) if where.exists() else []
+    if not found:
+        sys.stderr.write(f"r2s scene: warning: the frame names map {ego['map_id']!r}, which is not in {where}; "
+                         "the scene has no road\n")
+        return None
+    return in_ego_frame(found[0], float(ego["map_x"]), float(ego["map_y"]), float(ego["map_heading"]), radius)
 
 
 def _hint(dataset, frame_id: str) -> str:

@@ -56,9 +56,19 @@ def test_r2s_synth_refuses_a_typo_with_exit_2(tmp_path):
 def test_every_key_written_is_read_back():
     """The writer (Scene.to_dict: r2s scene, r2s sample) with every optional field set reads back equal."""
     full = {**CAR, "length": 4.5, "width": 1.8, "speed": 3.0, "pos_sigma": 0.5, "heading_sigma": 2.0,
-            "speed_sigma": 0.2}
+            "speed_sigma": 0.2, "lanes": ["l1", "l2"], "lane": "l2", "in_intersection": True,
+            "on_crosswalk": False, "off_road": False}
     assert set(full) == set(ENTITY_KEYS)
-    scene = scene_from_dict({"frame_id": "f", "entities": [EGO, full]})
+    road = {"map_id": "m", "features": [
+        {"id": "l1", "kind": "lane", "polygon": [[0.0, 0.0], [3.5, 0.0], [3.5, 20.0], [0.0, 20.0]],
+         "line": [[1.75, 0.0], [1.75, 20.0]], "left": "l2", "right": None, "successors": [], "predecessors": [],
+         "is_intersection": True},
+        {"id": "l2", "kind": "lane", "polygon": [[-3.5, 0.0], [0.0, 0.0], [0.0, 20.0], [-3.5, 20.0]],
+         "line": [[-1.75, 0.0], [-1.75, 20.0]], "left": None, "right": "l1", "successors": [], "predecessors": [],
+         "is_intersection": False},
+        {"id": "w", "kind": "crosswalk", "polygon": [[-3.5, 5.0], [3.5, 5.0], [3.5, 8.0], [-3.5, 8.0]]}]}
+    scene = scene_from_dict({"frame_id": "f", "entities": [EGO, full], "road": road})
+    assert scene.to_dict()["road"] == road
     assert scene_from_json(scene.to_json()) == scene
     assert set(scene.to_dict()) == set(SCENE_KEYS)
 
