@@ -1,6 +1,7 @@
 """Bird's-eye view of a scene: oriented boxes, the program's references, and sampled variants.
 
-Geometry first (pure: the ego frame, box corners, which reference places which entity how), drawing after
+Geometry first (pure: the ego frame, box corners, the recorded road, which reference places which entity how),
+drawing after
 (matplotlib's Agg canvas, imported lazily and without pyplot, so no global figure state). Everything is drawn
 in ego's frame (metres, +x right of ego, +y ahead of it, equal aspect), whatever frame the scene came in.
 """
@@ -70,6 +71,50 @@ FAMILIES: dict[str, Family] = {
                             ("Barrier", "TrafficCone", "PushableObject", "Debris", "BicycleRack", "Object")),
 }
 EGO_FILL, EGO_EDGE = "#e31a1c", "#67000d"
+
+
+@dataclass(frozen=True)
+class RoadStyle:
+    label: str
+    face: str  # "none": drawn as a line
+    edge: str
+    zorder: float
+
+
+# The recorded road (the scene's `road`), under everything else: areas faint, lanes outlined with their centre
+# line, road lines dark.
+ROAD_STYLES: dict[str, RoadStyle] = {
+    "drivable_area": RoadStyle("drivable area", "#f2f2f2", "none", 0.1),
+    "lane": RoadStyle("lane (centre line dotted)", "#e8eef7", "#9db3cf", 0.2),
+    "intersection": RoadStyle("intersection / intersection lane", "#fbe7d3", "#e0a872", 0.3),
+    "crosswalk": RoadStyle("crosswalk", "#fff7bc", "#c9a400", 0.4),
+    "road_line": RoadStyle("road line", "none", "#7f7f7f", 0.5),
+}
+
+
+@dataclass(frozen=True)
+class RoadShape:
+    """One map feature as drawn: its polygon and line in ego's frame, and its style (a key of ROAD_STYLES)."""
+
+    style: str
+    polygon: tuple[tuple[float, float], ...]
+    line: tuple[tuple[float, float], ...]
+
+
+def road_shapes(scene: Scene) -> tuple[RoadShape, ...]:
+    """The scene's road in ego's frame (as ego_frame places the boxes), areas first so lines lie on top."""
+    if scene.road is None:
+        return ()
+    ego = scene.ego
+
+    def local(pts):
+        return tuple(to_local(x - ego.x, y - ego.y, ego.heading) for x, y in pts)
+
+    shapes = []
+    for f in scene.road.features:
+        style = "intersection" if f.kind == "lane" and f.is_intersection else f.kind
+        shapes.append(RoadShape(style, local(f.polygon), local(f.line)))
+    return tuple(sorted(shapes, key=lambda r: ROAD_STYLES[r.style].zorder))
 
 
 def family_of(etype: str) -> str:
@@ -170,6 +215,15 @@ def draw(view: View):
     n = len(boxes)
     font = 7.0 if n <= 25 else 5.5 if n <= 70 else 4.5
 
+    road = road_shapes(view.scene)
+    for r in road:
+        st = ROAD_STYLES[r.style]
+        if r.polygon:
+            ax.add_patch(Polygon(r.polygon, closed=True, facecolor=st.face, edgecolor=st.edge, linewidth=0.5,
+                                 zorder=st.zorder))
+        if r.line:
+            ax.plot(*zip(*r.line), color=st.edge if st.face == "none" else "#b7c6da", linewidth=0.8,
+                    linestyle="-" if st.face == "none" else ":", zorder=st.zorder + 0.05)
     # Dense enough that where variants pile up reads as likely, sparse enough that single ones still show.
     alpha = max(0.06, min(0.3, 2.0 / max(1, len(view.samples))))
     for b in sample_boxes:
@@ -192,6 +246,9 @@ def draw(view: View):
     present = {family_of(b.type) for b in boxes.values() if b.id != "ego"}
     handles += [Patch(facecolor=f.fill, edgecolor="#303030", label=name) for name, f in FAMILIES.items()
                 if name in present]
+    drawn = {r.style for r in road}
+    handles += [Patch(facecolor=st.face, edgecolor=st.edge, label=st.label) if st.face != "none" else
+                Line2D([], [], color=st.edge, label=st.label) for name, st in ROAD_STYLES.items() if name in drawn]
     if view.samples:
         handles.append(Patch(facecolor=FAMILIES["vehicle"].variant, alpha=0.3,
                              label=f"{len(view.samples)} sampled variants\n(translucent)"))

@@ -158,3 +158,36 @@ def test_motion_references_are_drawn(tmp_path):
     assert any("relative to\n(motion" in t for t in labels) and any("absolute speed" in t for t in labels)
     save(fig, tmp_path / "m.png")
     assert (tmp_path / "m.png").stat().st_size > 10_000
+
+
+def test_the_road_is_drawn_in_ego_s_frame_under_the_boxes(tmp_path):
+    from pipeline.variants.render import ROAD_STYLES, road_shapes
+
+    # a scene whose ego stands at (10, 5) facing 90 deg (towards -x): its lane runs along x, and car1 is in it
+    lane = {"id": "L", "kind": "lane", "polygon": [[-20.0, 3.0], [20.0, 3.0], [20.0, 7.0], [-20.0, 7.0]],
+            "line": [[20.0, 5.0], [-20.0, 5.0]], "left": None, "right": None, "successors": [], "predecessors": [],
+            "is_intersection": False}
+    cross = {"id": "W", "kind": "crosswalk", "polygon": [[0.0, 0.0], [2.0, 0.0], [2.0, 10.0], [0.0, 10.0]]}
+    scene = scene_from_dict({"frame_id": "f", "entities": [
+        {"id": "ego", "type": "Car", "x": 10.0, "y": 5.0, "heading": 90.0},
+        {"id": "car1", "type": "Car", "x": -5.0, "y": 5.5, "heading": 90.0}],
+        "road": {"map_id": "m", "features": [cross, lane]}})
+    shapes = road_shapes(scene)
+    assert [s.style for s in shapes] == ["lane", "crosswalk"]  # areas by their drawing order
+    boxes = ego_frame(scene)
+    lane_shape = shapes[0]
+    # in ego's frame the lane runs straight ahead of ego, 4 m wide, and car1 (15 m ahead) lies in it
+    xs = [p[0] for p in lane_shape.polygon]
+    assert min(xs) == pytest.approx(-2.0) and max(xs) == pytest.approx(2.0)
+    assert lane_shape.line[-1][1] == pytest.approx(30.0) and abs(boxes["car1"].y - 15.0) < 1e-9
+    assert min(xs) <= boxes["car1"].x <= max(xs)
+    assert set(ROAD_STYLES) >= {s.style for s in shapes}
+    path = tmp_path / "scene.json"
+    path.write_text(scene.to_json())
+    with_road, without = tmp_path / "road.png", tmp_path / "plain.png"
+    assert run_r2s("render", str(path), "--out", str(with_road)).returncode == 0
+    plain = scene.to_dict()
+    plain.pop("road")
+    path.write_text(scene_from_dict(plain).to_json())
+    assert run_r2s("render", str(path), "--out", str(without)).returncode == 0
+    assert with_road.read_bytes() != without.read_bytes()
