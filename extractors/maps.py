@@ -9,6 +9,7 @@ written once, however many frames name it. Rows <-> RoadMap is one conversion ea
 from __future__ import annotations
 
 import os
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -103,8 +104,6 @@ def check_maps_target(target: Path) -> None:
 def replace_maps(staged: Path, target: Path) -> None:
     """Put a staged maps folder (absent: no map) in place of the maps of a frames file, `target` (F.maps),
     removing maps an earlier extraction left there; a target that holds anything but maps parts is refused."""
-    import shutil
-
     check_maps_target(target)
     if target.exists():
         retired = target.with_name(f".{target.name}.{os.getpid()}.old")
