@@ -14,10 +14,12 @@ import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from synth.errors import InputError
-from synth.roadmap import MapError, RoadMap, road_from_dict, road_to_dict
+
+if TYPE_CHECKING:
+    from synth.roadmap import RoadMap
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
 ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
@@ -181,6 +183,8 @@ class Scene:
             out.append(d)
         doc: dict[str, Any] = {"frame_id": self.frame_id, "entities": out}
         if self.road is not None:
+            from synth.roadmap import road_to_dict  # numpy: loaded only for a scene with a road
+
             doc["road"] = road_to_dict(self.road)
         return doc
 
@@ -332,6 +336,8 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
         raise SceneError(f"scene has {len(ents)} entities, more than the cap of {max_entities}")
     road = None
     if raw.get("road") is not None:
+        from synth.roadmap import MapError, road_from_dict  # numpy: loaded only for a scene with a road
+
         try:
             road = road_from_dict(raw["road"])
         except MapError as exc:
