@@ -96,23 +96,94 @@ def python_blocks(md: Path) -> list[str]:
     return re.findall(r"^```python\n(.*?)^```", md.read_text(), flags=re.S | re.M)
 
 
+# A ```sh block of the README runs in the tests unless this comment stands on the line before it, with a reason.
+SKIP = re.compile(r"^<!-- not run by tests/test_docs\.py: (.+?) -->$")
+ACTIVATE = ". .venv/bin/activate"
+
+
+def sh_blocks(md: Path) -> list[tuple[str, str | None]]:
+    """(block, reason it is not run, or None) for every ```sh block, in order."""
+    lines = md.read_text().splitlines()
+    out = []
+    for i, line in enumerate(lines):
+        if line == "```sh":
+            end = lines.index("```", i + 1)
+            marker = SKIP.match(lines[i - 1]) if i else None
+            out.append(("\n".join(lines[i + 1:end]) + "\n", marker.group(1) if marker else None))
+    return out
+
+
+def section(md: Path, heading: str) -> str:
+    text = md.read_text()
+    start = text.index(f"\n{heading}\n")
+    level = heading.split()[0]
+    rest = re.search(rf"^#{{1,{len(level)}}} ", text[start + len(heading) + 2:], flags=re.M)
+    return text[start:start + len(heading) + 2 + (rest.start() if rest else len(text))]
+
+
+def as_a_user(tmp_path: Path, script: str, stdin: str | None = None):
+    """Runs `script` in a fresh bash, after the README's own setup line (the venv's activation), from a directory
+    laid out like the repository's root: the shipped data, configs and the venv linked in, nothing else, so
+    whatever the commands write lands in tmp_path and never in the repository."""
+    import os
+    import subprocess
+    import sys
+
+    venv = Path(sys.prefix)
+    if not (venv / "bin" / "activate").exists() or not (venv / "bin" / "r2s").exists():
+        pytest.skip(f"the tests do not run in a venv with r2s installed ({venv}): `make test` runs them in .venv")
+    for name in ("data", "configs"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    (tmp_path / ".venv").symlink_to(venv)
+    # A new shell: the venv's bin off PATH, as before activation.
+    path = os.pathsep.join(d for d in os.environ.get("PATH", "").split(os.pathsep)
+                           if d and Path(d).resolve() != (venv / "bin").resolve())
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH")} | {"PATH": path}
+    before = set(ROOT.iterdir())
+    proc = subprocess.run(["bash", "--noprofile", "--norc", "-c", f"set -eo pipefail\n{ACTIVATE}\n{script}"],
+                          cwd=tmp_path, env=env, input=stdin, capture_output=True, text=True, timeout=600)
+    assert set(ROOT.iterdir()) == before, sorted(map(str, set(ROOT.iterdir()) ^ before))
+    return proc
+
+
+README_SH = sh_blocks(ROOT / "README.md")
+
+
+def test_the_readme_says_where_to_activate_the_venv():
+    """The setup line is in the README (after `make demo`), and every block it does not run says why."""
+    blocks = sh_blocks(ROOT / "README.md")
+    assert any(block.strip().startswith(ACTIVATE) for block, _ in blocks)
+    assert section(ROOT / "README.md", "### Examples").count(ACTIVATE) >= 1
+    assert all(reason is None or reason.strip() for _, reason in blocks)
+    # The Examples are run, never skipped.
+    examples = re.findall(r"^```sh\n(.*?)^```", section(ROOT / "README.md", "### Examples"), flags=re.S | re.M)
+    assert examples and all((b, None) in blocks for b in examples)
+
+
+@pytest.mark.parametrize("k", [k for k, (block, reason) in enumerate(README_SH)
+                               if reason is None and not block.strip().startswith(ACTIVATE)])
+def test_readme_shell_block_runs_as_written(k, tmp_path):
+    """Each ```sh block of the README without a marker, as a user types it into a new shell after the README's
+    setup line."""
+    block = README_SH[k][0]
+    proc = as_a_user(tmp_path, block)
+    assert proc.returncode == 0, f"README sh block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
+
+
 def test_the_readme_has_a_python_quick_start():
     blocks = python_blocks(ROOT / "README.md")
     assert any("from synth import" in b for b in blocks) and any("run_frames" in b for b in blocks)
 
 
-@pytest.mark.parametrize("k", range(len(python_blocks(ROOT / "README.md"))))
-def test_readme_python_block_runs_as_written(k, tmp_path):
-    """Each ```python block of the README, alone, in a fresh interpreter, from a directory that has the shipped
-    data where the repository's root has it (the README says: from the repository's root)."""
-    import subprocess
-    import sys
-
-    (tmp_path / "data").symlink_to(ROOT / "data")
-    (tmp_path / "configs").symlink_to(ROOT / "configs")
-    block = python_blocks(ROOT / "README.md")[k]
-    proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"README python block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
+@pytest.mark.parametrize("page,k", [(page, k) for page in ("README.md", "docs/api.md")
+                                    for k in range(len(python_blocks(ROOT / page)))])
+def test_python_block_runs_as_written(page, k, tmp_path):
+    """Each ```python block of the README and of docs/api.md, alone, in the `python` of a new shell after the
+    README's setup line, from a directory that has the shipped data where the repository's root has it (the README
+    says: from the repository's root)."""
+    block = python_blocks(ROOT / page)[k]
+    proc = as_a_user(tmp_path, "python -", stdin=block)
+    assert proc.returncode == 0, f"{page} python block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
 
 
 def test_the_layout_map_names_every_room_and_module():

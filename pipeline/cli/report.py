@@ -42,8 +42,21 @@ def run(args: argparse.Namespace) -> int:
         with staged_directory(target) as stage:
             write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db,
                          extra=extra)
-    print(target / HTML_NAME)
+        line = summary_line(db)
+    print(f"r2s report: {line} -> {target / HTML_NAME}")
     return 0
+
+
+def summary_line(db) -> str:
+    """What the report is about, in one line, as every verb ends: frames, configs and how each fared."""
+    from pipeline.report.stats import by_config
+
+    overview = db.overview
+    parts = [f"{overview.frames} frames", f"{len(overview.configs)} config{'s' * (len(overview.configs) != 1)}"]
+    for g in by_config(db):
+        median = "" if g.runtime_median is None else f", median {1000 * g.runtime_median:.1f} ms"
+        parts.append(f"{g.config}: {g.optimal_pct:.1f}% optimal{median}")
+    return "; ".join(parts)
 
 
 def _query_sections(args: argparse.Namespace) -> tuple:

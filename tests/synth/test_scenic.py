@@ -200,6 +200,32 @@ def files(synthesized, tmp_path_factory):
     return out
 
 
+def test_the_header_says_how_to_run_the_file_with_scenic_and_its_headless_command_runs(files, tmp_path):
+    """The header's own commands, as written (FILE replaced by the file): the window one names `--2d`; the headless
+    one samples the file with Scenic's `scenic` command without a display and exits 0."""
+    import os
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scenic_file = files["small"][0]
+    header = scenic_file.read_text().split("\nparam ", 1)[0]
+    assert "# Run: scenic FILE --2d (" in header
+    command = re.search(r"headless \(no display\): (scenic FILE --2d [^\n]*?) *\n", header).group(1).split()
+    assert "--gather-stats" in command and "r2s sample FILE" in header
+    scenic = Path(sys.prefix) / "bin" / "scenic"
+    if not scenic.exists():
+        pytest.skip(f"no scenic command in {scenic.parent}")
+    env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
+    args = [str(scenic_file) if a == "FILE" else a for a in command[1:]]
+    proc = subprocess.run([str(scenic), *args, "-s", "1"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    n = int(command[command.index("--gather-stats") + 1])
+    assert f"Sampled {n} scenes" in proc.stdout, proc.stdout[-1000:]
+
+
 @pytest.mark.parametrize("sampler", ["gibbs", "scenic"])
 def test_cli_writes_scene_json_byte_identical_for_a_seed(files, tmp_path, monkeypatch, sampler):
     scenic_file, dsl, scene = files["small"]

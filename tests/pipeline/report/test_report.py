@@ -58,8 +58,23 @@ def report(two_strategies, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("reports") / "report"
     proc = run_r2s("report", str(two_strategies), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout == f"{out / 'report.html'}\n"
+    (out.parent / "stdout.txt").write_text(proc.stdout)
     return out
+
+
+def test_report_ends_with_one_summary_line(two_strategies, report):
+    """Like every verb, one line: frames, configs, and per config its optimal share and median runtime (recomputed
+    here with pandas), then where the report is."""
+    import pandas as pd
+
+    lines = (report.parent / "stdout.txt").read_text().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("r2s report: ") and lines[0].endswith(f" -> {report / 'report.html'}")
+    df = pd.read_parquet(two_strategies)
+    assert f" {df.frame_id.nunique()} frames; 2 configs; " in lines[0]
+    for strategy, group in df.groupby("strategy"):
+        optimal = 100.0 * (group.status == "optimal").mean()
+        median = 1000 * group[group.status != "error"].runtime_s.median()
+        assert f"{strategy}: {optimal:.1f}% optimal, median {median:.1f} ms" in lines[0], (strategy, lines[0])
 
 
 def _table(md: str, heading: str) -> list[list[str]]:
