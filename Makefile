@@ -56,6 +56,7 @@ demo: setup
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
 	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet (and a section of the report)"
 	@echo "           motion (who is parked, who drives with whom): $(DEMO)/motion-programs.parquet, moving-scene.dsl"
+	@echo "next: . $(VENV)/bin/activate   (in each new shell: puts r2s and the venv's python on PATH for the README's examples)"
 
 test: setup
 	$(PY) -m pytest
