@@ -6,12 +6,12 @@ R2S    := $(VENV)/bin/r2s
 STAMP  := $(VENV)/.installed
 JOBS   ?= 2
 
-# make corpus SOURCE=scenarionet INPUT=/data/nuscenes/scenarionet OUT=out/nuscenes [CATEGORIES=all] [TIME_LIMIT=60]
+# make corpus SOURCE=scenarionet INPUT=/data/nuscenes/scenarionet OUT=out/nuscenes [CATEGORIES=vehicles] [TIME_LIMIT=60]
 # On a dask cluster: RUN_ARGS="--backend dask --scheduler tcp://HOST:8786" with OUT on a filesystem every worker sees.
 SOURCE     ?=
 INPUT      ?=
 OUT        ?= out/corpus
-CATEGORIES ?= all
+CATEGORIES ?=
 TIME_LIMIT ?= 60
 MEMORY_LIMIT ?= 4096
 RUN_ARGS   ?=
@@ -75,10 +75,22 @@ bench: setup
 	$(PY) bench/run_all.py $(BENCH_ARGS)
 
 # A whole dataset: frames, programs (resumable: rerun the same command after a stop) and a report.
+# The frames are extracted again whenever what they were extracted with changes: OUT/frames.args records the
+# source, the input's absolute path, the categories (empty: r2s extract's default) and r2s's version, and is
+# written only after a whole extraction. `r2s run` then recomputes only the frames whose rows changed.
+EXTRACT_ARGS = $(SOURCE) $(abspath $(INPUT))$(if $(CATEGORIES), --categories $(CATEGORIES))
 corpus: setup
-	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB] [RUN_ARGS='--backend dask --scheduler tcp://HOST:8786']"; exit 2; }
+	@test -n "$(SOURCE)" -a -n "$(INPUT)" || { echo "usage: make corpus SOURCE=scenarionet|nuscenes|argoverse2|mcap|rosbag INPUT=PATH [OUT=DIR] [CATEGORIES=all|vehicles|LIST] [JOBS=N] [TIME_LIMIT=S] [MEMORY_LIMIT=MB] [RUN_ARGS='--backend dask --scheduler tcp://HOST:8786']"; exit 2; }
 	@mkdir -p $(OUT)
-	test -d $(OUT)/frames || $(R2S) extract $(SOURCE) $(INPUT) --categories $(CATEGORIES) --out $(OUT)/frames --jobs $(JOBS)
+	@stamp="$(EXTRACT_ARGS) ($$($(R2S) --version))"; \
+	if [ -d $(OUT)/frames ] && [ "$$(cat $(OUT)/frames.args 2>/dev/null)" = "$$stamp" ]; then \
+		echo "corpus: $(OUT)/frames is up to date ($$stamp)"; \
+	else \
+		rm -f $(OUT)/frames.args && \
+		echo "$(R2S) extract $(EXTRACT_ARGS) --out $(OUT)/frames --jobs $(JOBS)" && \
+		$(R2S) extract $(EXTRACT_ARGS) --out $(OUT)/frames --jobs $(JOBS) && \
+		printf '%s\n' "$$stamp" > $(OUT)/frames.args.tmp && mv $(OUT)/frames.args.tmp $(OUT)/frames.args; \
+	fi
 	$(R2S) run $(OUT)/frames --out $(OUT)/programs --jobs $(JOBS) --time-limit $(TIME_LIMIT) --memory-limit $(MEMORY_LIMIT) $(RUN_ARGS)
 	$(R2S) report $(OUT)/programs --frames $(OUT)/frames --out $(OUT)/report
 	@echo "corpus done: $(OUT)/programs/ (a Parquet dataset), report at $(OUT)/report/report.html"

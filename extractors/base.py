@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from extractors.categories import UNKNOWN_CLASS, VEHICLES, CategorySelection, Taxonomy
+from extractors.categories import ALL, UNKNOWN_CLASS, CategorySelection, Taxonomy
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from extractors.naming import SceneNames
 from storage.regular_files import check_regular
@@ -54,7 +54,7 @@ class ExtractOptions:
     defaults) and adds them to `r2s extract` in add_options; sources that share options share the subclass."""
 
     radius: float = 50.0
-    categories: CategorySelection = VEHICLES
+    categories: CategorySelection = ALL
     every: int = 1
     max_entities: int = DEFAULT_MAX_ENTITIES
 

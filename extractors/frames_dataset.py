@@ -86,14 +86,23 @@ class FramesDataset:
         for i in range(len(part.row_groups)):
             yield pf.read_row_group(i, columns=list(columns))
 
-    def check(self) -> tuple[int, FrameIndex]:
-        """Validate every row (streaming); return the number of frames and the index of their ids."""
+    def check(self, hasher=None) -> tuple[int, FrameIndex]:
+        """Validate every row (streaming); return the number of frames and the index of their ids. A `hasher`
+        (extractors.frame_hash.FrameHasher) is fed the same row groups, with the columns it hashes, so the
+        content of every frame is hashed in the same pass."""
         checker = FramesCheck()
         for part in self.parts:
+            columns = CHECK_COLUMNS
+            if hasher is not None:
+                columns += tuple(c for c in hasher.columns if c in part.columns and c not in CHECK_COLUMNS)
             try:
-                for table in self.row_groups(part, CHECK_COLUMNS):
+                for table in self.row_groups(part, columns):
                     checker.feed(table)
+                    if hasher is not None:
+                        hasher.feed(table, *_run_starts(_dictionary(table.column("frame_id"))))
                 checker.end_part()
+                if hasher is not None:
+                    hasher.end_part()
             except FramesError as exc:
                 raise FramesError(f"{self.where(part)}: {exc}") from None
             except (pa.ArrowException, OSError) as exc:

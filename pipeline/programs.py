@@ -21,6 +21,9 @@ _ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(),
 # The columns are the result fields (synth.synthesize.RESULT_FIELDS, the one declaration), in their order.
 PROGRAMS_SCHEMA = pa.schema([(f.name, _ARROW_TYPES[f.type]) for f in RESULT_FIELDS])
 PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
+# Columns added after the first release: a file written before them lacks them, and readers take them as null
+# (a row without a frame_hash is recomputed on resume: what it was computed from is unknown).
+LATER_COLUMNS = ("frame_hash",)
 STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
 
 
@@ -28,26 +31,28 @@ class ProgramsError(InputError, ValueError):
     """A programs file that is not what the schema says. One line, fit for a user."""
 
 
-def result_row(result: Any, config_hash: str) -> dict[str, Any]:
-    """A programs row from a synth.synthesize.SynthResult."""
-    return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"}, **_run_fields(None, config_hash)}
+def result_row(result: Any, config_hash: str, frame_hash: str | None = None) -> dict[str, Any]:
+    """A programs row from a synth.synthesize.SynthResult; `frame_hash`: the hash of the frame's rows it was
+    computed from (extractors.frame_hash), None when it did not come from a frames file."""
+    return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"},
+            **_run_fields(None, config_hash, frame_hash)}
 
 
 def failure_row(frame_id: str, status: str, message: str, n_entities: int, config: Any, config_hash: str,
-                runtime_s: float = 0.0, peak_rss_mb: float = 0.0) -> dict[str, Any]:
+                runtime_s: float = 0.0, peak_rss_mb: float = 0.0, frame_hash: str | None = None) -> dict[str, Any]:
     """A row for a frame that produced no program (error, or a worker killed at its memory limit)."""
     if status not in STATUSES:
         raise ValueError(f"unknown status {status!r}")
     row = dict.fromkeys(PROGRAMS_COLUMNS)  # null where there is no program
     row.update({f.name: getattr(config, f.name) for f in RESULT_FIELDS if f.source == "config"})
     row.update(frame_id=frame_id, status=status, n_entities=n_entities, certified=False, runtime_s=runtime_s,
-               peak_rss_mb=peak_rss_mb, **_run_fields(message, config_hash))
+               peak_rss_mb=peak_rss_mb, **_run_fields(message, config_hash, frame_hash))
     return row
 
 
-def _run_fields(error: str | None, config_hash: str) -> dict[str, Any]:
+def _run_fields(error: str | None, config_hash: str, frame_hash: str | None) -> dict[str, Any]:
     """The batch stage's own fields of a row (RESULT_FIELDS' "run" source)."""
-    return {"error": error, "config_hash": config_hash, "version": __version__}
+    return {"error": error, "config_hash": config_hash, "version": __version__, "frame_hash": frame_hash}
 
 
 def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
@@ -56,10 +61,20 @@ def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
 
 def check_programs_schema(schema: pa.Schema, where: str) -> None:
     """Refuse a file that lacks a programs column or has one of another kind (text where a number belongs)."""
-    missing = [c for c in PROGRAMS_COLUMNS if c not in schema.names]
+    missing = [c for c in PROGRAMS_COLUMNS if c not in schema.names and c not in LATER_COLUMNS]
     if missing:
         raise ProgramsError(f"{where} is not a programs file: it lacks column(s) {', '.join(missing)}")
     check_column_types(schema, PROGRAMS_SCHEMA, where, ProgramsError)
+
+
+def as_programs(table: pa.Table | pa.RecordBatch) -> pa.Table | pa.RecordBatch:
+    """A programs table or batch in exactly PROGRAMS_SCHEMA: the columns in order, an older writer's int64
+    where the schema has int32, null for a column added later (LATER_COLUMNS) that the file lacks."""
+    for name in LATER_COLUMNS:
+        if name not in table.schema.names:
+            field = PROGRAMS_SCHEMA.field(name)
+            table = table.append_column(field, pa.nulls(table.num_rows, field.type))
+    return table.select(list(PROGRAMS_COLUMNS)).cast(PROGRAMS_SCHEMA)
 
 
 def check_programs_values(table: pa.Table, where: str) -> None:
@@ -88,7 +103,7 @@ def read_programs_table(path: str | os.PathLike) -> pa.Table:
         try:
             pf = pq.ParquetFile(f)
             check_programs_schema(pf.schema_arrow, where)
-            table = pf.read(columns=list(PROGRAMS_COLUMNS)).select(list(PROGRAMS_COLUMNS)).cast(PROGRAMS_SCHEMA)
+            table = as_programs(pf.read(columns=[c for c in PROGRAMS_COLUMNS if c in pf.schema_arrow.names]))
         except ProgramsError:
             raise
         except (pa.ArrowException, OSError, ValueError) as exc:

@@ -1,13 +1,76 @@
 """Atomic writes for every output (frames, programs, reports): a temporary file beside the target, then
-rename, so a crash or kill never leaves half a file where a reader looks (ScenarioNet's writer discipline)."""
+rename, so a crash or kill never leaves half a file where a reader looks (ScenarioNet's writer discipline).
+
+Temporaries are named `.<target name>.<host>-<pid>.<random>.tmp` (hidden: dataset readers skip names starting
+with "."), so that the next write of the same target can tell its own kind of leftovers from a live writer's:
+one of this host whose process is gone was left by a crash or a kill -9, and is removed (`remove_stale`).
+"""
 
 from __future__ import annotations
 
+import hashlib
 import os
+import re
+import shutil
+import socket
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+HOST_TAG = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # a pid means something on its host only
+
+
+def temp_prefix(target: str | os.PathLike) -> str:
+    """The start of the name of this process's temporaries for `target`."""
+    return f".{Path(target).name}.{HOST_TAG}-{os.getpid()}."
+
+
+def remove_stale(target: str | os.PathLike) -> list[Path]:
+    """Remove the temporaries of `target` (files or directories, named by temp_prefix, ending in .tmp or
+    .tmp.old) that a process of this host left when it died; a live writer's, or another host's, stay."""
+    target = Path(target)
+    try:
+        siblings = list(target.parent.iterdir())
+    except OSError:
+        return []
+    pattern = re.compile(re.escape(f".{target.name}.") + r"([0-9a-f]{8})-(\d+)\..*\.tmp(\.old)?")
+    removed = []
+    for p in siblings:
+        m = pattern.fullmatch(p.name)
+        if m is None or m.group(1) != HOST_TAG or _alive(int(m.group(2))):
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, someone else's
+        return True
+    return True
+
+
+def temp_directory(target: str | os.PathLike) -> Path:
+    """A new empty directory beside `target`, named as this process's temporaries of it (the stale ones of
+    crashed processes removed first). mkdir, not mkdtemp (0700): an output gets the user's usual permissions."""
+    import secrets
+
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale(target)
+    stage = target.parent / f"{temp_prefix(target)}{secrets.token_hex(4)}.tmp"
+    stage.mkdir()
+    return stage
 
 
 @contextmanager
@@ -15,7 +78,8 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path in the target's directory; on success rename it over the target."""
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    remove_stale(target)
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=".tmp", dir=target.parent)
     os.close(fd)
     try:
         yield Path(tmp)

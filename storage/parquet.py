@@ -102,7 +102,9 @@ def footer(pafs, path: str, where: str, error: type[ValueError]) -> pq.FileMetaD
 
 
 # Per process: open files and the row groups read last. Workers take neighbouring chunks one after another,
-# so a row group (64,000 rows) is decoded about once per worker, not once per chunk.
+# so a row group (64,000 rows) is decoded about once per worker, not once per chunk. Keyed by the file's identity
+# (size, modification time and inode, besides its path): a worker lives on between runs of one Python process,
+# and a file rewritten in between must be read again, never served from the cache of its former contents.
 _FILES: OrderedDict = OrderedDict()
 _GROUPS: OrderedDict = OrderedDict()
 _CACHED_FILES, _CACHED_GROUPS = 8, 4
@@ -113,15 +115,17 @@ def open_file(url: str, path: str, dictionary: tuple[str, ...] = ()) -> pq.Parqu
     return _open_with_bounds(url, path, dictionary)[0]
 
 
-def _open_with_bounds(url: str, path: str, dictionary: tuple[str, ...] = ()) -> tuple[pq.ParquetFile, np.ndarray]:
-    """An open file and the first row of each of its row groups (plus the row count at the end)."""
-    key = (url, path, dictionary)
+def _open_with_bounds(url: str, path: str, dictionary: tuple[str, ...] = ()) -> tuple[pq.ParquetFile, np.ndarray, tuple]:
+    """An open file, the first row of each of its row groups (plus the row count at the end), and its identity."""
+    pafs, _ = filesystem(url) if url else filesystem(path)
+    info = pafs.get_file_info(path)
+    inode = None if url else os.stat(path).st_ino  # an atomic rewrite is a new inode, even within one mtime tick
+    key = (url, path, dictionary, info.size, info.mtime_ns, inode)
     hit = _FILES.get(key)
     if hit is None:
-        pafs, _ = filesystem(url) if url else filesystem(path)
         pf = pq.ParquetFile(pafs.open_input_file(path), read_dictionary=list(dictionary) or None)
         sizes = [pf.metadata.row_group(i).num_rows for i in range(pf.metadata.num_row_groups)]
-        hit = _FILES[key] = (pf, np.concatenate(([0], np.cumsum(sizes, dtype=np.int64))))
+        hit = _FILES[key] = (pf, np.concatenate(([0], np.cumsum(sizes, dtype=np.int64))), key)
         while len(_FILES) > _CACHED_FILES:
             _FILES.popitem(last=False)
     else:
@@ -131,13 +135,13 @@ def _open_with_bounds(url: str, path: str, dictionary: tuple[str, ...] = ()) -> 
 
 def read_rows(url: str, path: str, start: int, stop: int, columns: tuple[str, ...]) -> pa.Table:
     """Rows [start, stop) of one file, read through the row groups that hold them."""
-    pf, bounds = _open_with_bounds(url, path)
+    pf, bounds, identity = _open_with_bounds(url, path)
     first = int(np.searchsorted(bounds, start, side="right") - 1)
     tables = []
     for g in range(first, len(bounds) - 1):
         if bounds[g] >= stop:
             break
-        key = (url, path, g, columns)
+        key = (identity, g, columns)
         table = _GROUPS.get(key)
         if table is None:
             table = pf.read_row_group(g, columns=list(columns))

@@ -61,7 +61,7 @@ RESULT_FIELDS: tuple[ResultField, ...] = tuple(ResultField(name, type_, source) 
     ("config", "strategy:string oracle:string solver:string"),
     ("stats", "runtime_s:float64 search_s:float64 smt_s:float64 smt_queries:int64 nodes_expanded:int64 "
               "peak_rss_mb:float64"),
-    ("run", "error:string config_hash:string version:string"),
+    ("run", "error:string config_hash:string version:string frame_hash:string"),
 ) for name, type_ in (field.split(":") for field in spec.split()))
 
 

@@ -29,7 +29,9 @@ from extractors.frames_dataset import FramesDataset
 from extractors.frames_schema import MAPS_DIR
 from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
 from extractors.writer import frames_writer
+from pipeline.batch.parent import watch_parent
 from pipeline.errors import UserError
+from pipeline.outputs import stage_beside
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 
@@ -85,10 +87,7 @@ def extract_parallel(source: Source, input_path: str, out: str, options: Extract
     if is_dataset(out) and target.exists():
         _check_replaceable(target)
     units = source.units(input_path)
-    stage = target.parent / f".{target.name}.{os.getpid()}.parts.tmp"
-    target.parent.mkdir(parents=True, exist_ok=True)
-    shutil.rmtree(stage, ignore_errors=True)
-    stage.mkdir()
+    stage = stage_beside(target)  # a crashed extraction's is removed first
     (stage / MAPS_DIR).mkdir()
     try:
         results = []
@@ -121,7 +120,8 @@ def _map(source, units, options, stage, jobs):
         for i, unit in enumerate(units):
             yield extract_unit(source, unit, i, options, stage)
         return
-    executor = get_reusable_executor(max_workers=min(jobs, len(units)))
+    executor = get_reusable_executor(max_workers=min(jobs, len(units)), initializer=watch_parent,
+                                     initargs=(os.getpid(),))  # its workers end with this process
     futures = [executor.submit(extract_unit, source, unit, i, options, stage) for i, unit in enumerate(units)]
     try:
         for future in as_completed(futures):

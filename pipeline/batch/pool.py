@@ -199,7 +199,10 @@ class LokyPool:
     def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from joblib.externals.loky import get_reusable_executor
 
-        executor = get_reusable_executor(max_workers=self.jobs)  # a fresh one after a death or a kill
+        from pipeline.batch.parent import watch_parent
+
+        # A fresh one after a death or a kill; its workers end when this process does, however it ends.
+        executor = get_reusable_executor(max_workers=self.jobs, initializer=watch_parent, initargs=(os.getpid(),))
 
         def wait_first(futures: list, timeout: float | None) -> Iterable:
             return wait(futures, timeout=timeout, return_when=FIRST_COMPLETED).done
@@ -351,7 +354,14 @@ def _alone(pool: Pool, task: ChunkTask, log: Callable[[str], None]) -> Iterator[
 
 
 def _lost_rows(task: ChunkTask, status: str, reason: str) -> pa.Table:
+    """The rows of frames whose worker died, with the hash of their rows (read here: a rare event, one frame
+    usually) so that a resume keeps the verdict for the same rows; None if they cannot be read (recomputed)."""
+    from pipeline.batch.task import ChunkUnreadable
     from pipeline.programs import failure_row, programs_table
 
-    return programs_table([failure_row(fid, status, reason, n - 1, task.config, task.config_hash)
-                           for fid, _, n in task.frames])
+    try:
+        hashes = task.read()[2]
+    except ChunkUnreadable:
+        hashes = [None] * len(task.frames)
+    return programs_table([failure_row(fid, status, reason, n - 1, task.config, task.config_hash, frame_hash=h)
+                           for (fid, _, n), h in zip(task.frames, hashes)])

@@ -27,6 +27,7 @@ from typing import Any
 from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
 from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart
 from storage.frame_index import frame_hashes
 from synth.config import SynthConfig, as_config
 
@@ -69,7 +70,11 @@ def run_frames(
         raise UserError(f"unknown backend {backend!r} (backends: {', '.join(BACKENDS)})")
     if scheduler and backend != "dask":
         raise UserError("--scheduler needs --backend dask")
-    _check_apart(str(frames), Path(out))
+    from pipeline.batch.store import is_single_file
+
+    check_apart(out, [("input frames", frames)])
+    if is_single_file(out):  # its parts go beside it, in <out>.parts/
+        check_apart(f"{out}.parts", [("input frames", frames)])
     return _Run(str(frames), Path(out), config, jobs, backend, scheduler, chunk_size, part_rows,
                 log or _stderr, log_every_s, terminal, synthesizer).go()
 
@@ -79,17 +84,6 @@ def _stderr(line: str) -> None:
 
     sys.stderr.write(f"r2s run: {line}\n")
     sys.stderr.flush()
-
-
-def _check_apart(frames: str, out: Path) -> None:
-    """The output must not be the input, nor inside it (a directory input would read our parts as frames)."""
-    if "://" in frames:
-        return
-    src, dst = Path(frames).resolve(), out.resolve()
-    if src == dst:
-        raise UserError("--out is the input frames file; choose another path")
-    if src in dst.parents or dst in src.parents:
-        raise UserError(f"--out {out} and the input {frames} are inside one another; choose another --out")
 
 
 class _Run:
@@ -114,16 +108,24 @@ class _Run:
             self._log(message)
 
     def go(self) -> Summary:
+        from extractors.frame_hash import FrameHasher
         from extractors.frames_dataset import FramesDataset
         from pipeline.batch.store import RunStore
 
         store = RunStore(self.out)
         store.check_writable()
         dataset = FramesDataset.open(self.frames)  # bad input is refused before even the lock file is made
-        n_frames, index = dataset.check()
+        hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
+        n_frames, index = dataset.check(hasher)
         store.lock()
-        plan = store.plan(index, self.config_hash)
-        del index  # 16 bytes a frame: not kept while the frames run
+        try:
+            plan = store.plan(index, hasher.keys(), self.config_hash)
+            del index, hasher  # 16 + 16 bytes a frame: not kept while the frames run
+            return self._locked(store, dataset, n_frames, plan)
+        finally:
+            store.unlock()
+
+    def _locked(self, store, dataset, n_frames: int, plan) -> Summary:
         todo = n_frames - len(plan.done)
         with self._pool(todo) as pool:  # connects to dask: may refuse, and nothing is written yet
             if pool is not None and hasattr(pool, "check_readable"):
@@ -135,7 +137,8 @@ class _Run:
             store.remove_temporaries()
             computed = self._compute(store, pool, dataset, plan.done, n_frames, todo) if todo else 0
         store.finish()
-        summary = summarize(store.status_counts(), computed, time.monotonic() - self.started, self.first_result_s)
+        summary = summarize(store.status_counts(), computed, time.monotonic() - self.started, self.first_result_s,
+                            plan.changed)
         self.log(f"{summary.line()} -> {self.out}")
         return summary
 
@@ -143,7 +146,14 @@ class _Run:
         files = f" in {len(dataset.parts)} files" if len(dataset.parts) > 1 else ""
         self.log(f"{n_frames:,} frames{files} checked in {time.monotonic() - self.started:.1f} s")
         if len(plan.done):
-            self.log(f"resuming: {len(plan.done)} of {n_frames} frames already done with this config")
+            self.log(f"resuming: {len(plan.done)} of {n_frames} frames already done from the same rows with this "
+                     "config")
+        if plan.changed:
+            self.log(f"recomputing {plan.changed} frame(s) whose rows changed since their program was made "
+                     f"(e.g. {plan.changed_example}); their rows are replaced")
+        if plan.unhashed:
+            self.log(f"recomputing {plan.unhashed} frame(s) whose rows were written without a frame_hash "
+                     "(by an older r2s): what they were computed from is unknown")
         if plan.stale:
             self.log(f"recomputing {plan.stale} frame(s) whose rows have another config hash "
                      f"(e.g. {plan.stale_example}); their rows are replaced")
@@ -183,10 +193,13 @@ class _Run:
         from pipeline.batch.progress import Progress
         from pipeline.batch.rules import PartBuffer
         from pipeline.batch.task import ChunkUnreadable
+        from storage.atomic import temp_directory
 
         local = isinstance(pool, LokyPool)
         slots = pool.jobs if local else pool.slots()
-        progress_dir = tempfile.mkdtemp(prefix="r2s-run-progress-") if local else None
+        # Workers' progress markers, in the temp directory (not beside the output: a full output disk must not
+        # stop the markers); named by host and pid, so a killed run's folder is removed by the next run.
+        progress_dir = str(temp_directory(Path(tempfile.gettempdir()) / "r2s-run-progress")) if local else None
         buffer = PartBuffer(self.part_rows, PART_MAX_AGE_S)
         self._progress = Progress(todo, self._log, self.log_every_s, self.terminal, self.started)
         computed = written = 0

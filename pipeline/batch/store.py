@@ -7,18 +7,23 @@ Two layouts, chosen by --out:
 - one file (--out ending in .parquet, as before): parts go to `<out>.parts/`, and at the end they are merged
   into `<out>` by streaming row batches (bounded memory), after the rows of an earlier `<out>`.
 
-A kill at any moment leaves only whole files. On start, the rows already there are read two columns at a time
-(frame_id, config_hash: column projection), hashed (storage.frame_index), and sorted out: the last row of a
-frame wins (output file, then parts in order), rows of frames not in the input or computed with another config
-are dropped (their files rewritten without them, atomically), and the frames left are done. So a resumed run
-computes each frame once, and the output holds every frame of the input exactly once when the run ends.
+A kill at any moment leaves only whole files. On start, the rows already there are read a few short columns at
+a time (frame_id, config_hash, frame_hash: column projection), hashed (storage.frame_index), and sorted out:
+the last row of a frame wins (output file, then parts in order); rows of frames not in the input, computed from
+other rows of the frame (frame_hash, extractors.frame_hash) or with another config are dropped (their files
+rewritten without them, atomically), and the frames left are done. So a resumed run computes each frame once,
+reuses a program only for the same rows and config, and the output holds every frame of the input exactly once
+when the run ends.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,8 +32,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from extractors.frame_hash import frame_keys, from_hex
 from pipeline.errors import UserError
-from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, check_programs_schema, check_programs_values
+from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, as_programs, check_programs_schema, check_programs_values
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 
@@ -41,9 +47,12 @@ MERGE_BATCH_ROWS = 2048
 
 @dataclass(frozen=True)
 class ResumePlan:
-    done: FrameIndex  # frames whose row is kept (computed earlier with this config)
+    done: FrameIndex  # frames whose row is kept (computed earlier from the same rows with this config)
     stale: int  # frames whose row had another config hash: recomputed, row dropped
     stale_example: str | None
+    changed: int  # frames whose rows changed since their row was computed: recomputed, row dropped
+    changed_example: str | None
+    unhashed: int  # frames whose row has no frame_hash (an older writer): recomputed, row dropped
     foreign: int  # rows of frames that are not in the input: dropped
     superseded: int  # older rows of a frame that has a later one (a kill during the merge): dropped
     drops: dict[Path, np.ndarray] = field(default_factory=dict)  # rows (indices) to drop, per file
@@ -61,7 +70,7 @@ class RunStore:
         self.single_file = is_single_file(out)
         self.parts = Path(f"{self.out}.parts") if self.single_file else self.out
         self._next = 0
-        self._lock_fd: int | None = None
+        self._lock = None
         self._unreadable: list[Path] = []
 
     def describe(self) -> str:
@@ -80,29 +89,24 @@ class RunStore:
             if foreign:
                 raise UserError(f"--out {self.out} holds files that are not parts of a run "
                                 f"({', '.join(foreign[:3])}); choose an empty or new directory")
-        parent = self.out.parent
-        if parent.exists() and not os.access(parent, os.W_OK):
-            raise UserError(f"cannot write in {parent}")
+        # Where files will be created, tried for real before any frame is computed (os.access says yes to root
+        # on a read-only mount): the output's directory (lock, merge) and the directory of the parts.
+        for where in dict.fromkeys((_existing(self.out.parent), _existing(self.parts))):
+            _probe(where)
 
     def lock(self) -> None:
-        """Hold `<out>`'s lock for the rest of this process, or refuse: two runs on one output would overwrite
-        each other's parts and merge under each other. The lock is an flock on an empty file in the temp
-        directory named by the output's resolved path (nothing appears beside the output, so refused input still
-        writes nothing there); the kernel drops it when the process ends, however it ends: no stale lock."""
-        import fcntl
-        import hashlib
-        import tempfile
+        """Hold `<out>`'s lock (pipeline.batch.lock: a file beside the output, locked by the kernel) until
+        `unlock()` or the end of the process, or refuse: two runs on one output would overwrite each other's parts
+        and merge under each other."""
+        from pipeline.batch.lock import OutputLock
 
-        key = hashlib.sha256(str(self.out.resolve()).encode()).hexdigest()[:24]
-        path = Path(tempfile.gettempdir()) / f"r2s-run-{key}.lock"
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise UserError(f"another r2s run on this machine is writing {self.out} (lock {path}); "
-                            "wait for it or choose another --out") from None
-        self._lock_fd = fd  # kept open: closing it would release the lock
+        self._lock = OutputLock(self.out)
+        self._lock.acquire()
+
+    def unlock(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
 
     def part_files(self) -> list[Path]:
         if not self.parts.is_dir():
@@ -117,9 +121,10 @@ class RunStore:
 
     # ------------------------------------------------------------------------------------------------ resume
 
-    def plan(self, frames: FrameIndex, config_hash: str) -> ResumePlan:
-        """What the rows already written mean for this run (see the module docstring)."""
-        his, los, src, rows, same = [], [], [], [], []
+    def plan(self, frames: FrameIndex, contents: FrameIndex, config_hash: str) -> ResumePlan:
+        """What the rows already written mean for this run (see the module docstring). `frames`: the input's
+        frame ids; `contents`: its frames with their rows (extractors.frame_hash.FrameHasher.keys)."""
+        his, los, src, rows, same, fresh, hashed = [], [], [], [], [], [], []
         warnings = []
         sources = self.sources()
         for s, path in enumerate(sources):
@@ -140,31 +145,42 @@ class RunStore:
             src.append(np.full(len(hi), s, np.int32))
             rows.append(np.arange(len(hi), dtype=np.int64))
             same.append(np.asarray(pc.equal(table.column("config_hash"), config_hash).to_numpy(zero_copy_only=False)))
+            lane0, lane1, valid = from_hex(table.column("frame_hash"))
+            kh, kl = frame_keys(hi, lo, lane0, lane1)
+            fresh.append(valid & contents.contains(kh, kl))
+            hashed.append(valid)
         for p in self.part_files():
             self._next = max(self._next, _part_number(p) + 1)
         if not his:
-            return ResumePlan(FrameIndex.of([]), 0, None, 0, 0, {}, tuple(warnings))
-        hi, lo, src, rows, same = (np.concatenate(a) for a in (his, los, src, rows, same))
+            return ResumePlan(FrameIndex.of([]), 0, None, 0, None, 0, 0, 0, {}, tuple(warnings))
+        hi, lo, src, rows, same, fresh, hashed = (np.concatenate(a) for a in (his, los, src, rows, same, fresh,
+                                                                                hashed))
         del his, los
         order = np.lexsort((rows, src, lo, hi))  # by frame, then oldest first
         h, lw = hi[order], lo[order]
         last = np.ones(len(order), dtype=bool)
         last[:-1] = (h[1:] != h[:-1]) | (lw[1:] != lw[:-1])
         in_input = frames.contains(h, lw)
-        ok = same[order]
-        keep = last & in_input & ok
-        stale = last & in_input & ~ok
+        ok, fresh, hashed = same[order], fresh[order], hashed[order]
+        keep = last & in_input & fresh & ok
+        changed = last & in_input & hashed & ~fresh
+        unhashed = last & in_input & ~hashed
+        stale = last & in_input & fresh & ~ok
         foreign = last & ~in_input
         drop = order[~keep]
         drops = {}
         for s in np.unique(src[drop]):
             drops[sources[s]] = np.sort(rows[drop][src[drop] == s])
-        example = None
-        if stale.any():
-            first = order[int(np.argmax(stale))]
-            example = str(_read_keys(sources[src[first]]).column("frame_id")[int(rows[first])])
-        return ResumePlan(FrameIndex(h[keep], lw[keep]), int(stale.sum()), example, int(foreign.sum()),
-                          int((~last).sum()), drops, tuple(warnings))
+
+        def example(mask: np.ndarray) -> str | None:
+            if not mask.any():
+                return None
+            first = order[int(np.argmax(mask))]
+            return str(_read_keys(sources[src[first]]).column("frame_id")[int(rows[first])])
+
+        return ResumePlan(FrameIndex(h[keep], lw[keep]), int(stale.sum()), example(stale), int(changed.sum()),
+                          example(changed), int(unhashed.sum()), int(foreign.sum()), int((~last).sum()), drops,
+                          tuple(warnings))
 
     def apply(self, plan: ResumePlan) -> None:
         """Rewrite the files that hold dropped rows without them (each atomically; an emptied part goes)."""
@@ -176,7 +192,7 @@ class RunStore:
             if not keep.any() and path != self.out:
                 path.unlink()
                 continue
-            with atomic_path(path) as tmp:
+            with _writing(path), atomic_path(path) as tmp:
                 _copy_rows(path, tmp, keep)
 
     def remove_temporaries(self) -> None:
@@ -189,10 +205,11 @@ class RunStore:
     # ------------------------------------------------------------------------------------------------ writing
 
     def write_part(self, table: pa.Table) -> Path:
-        self.parts.mkdir(parents=True, exist_ok=True)
+        with _writing(self.parts):
+            self.parts.mkdir(parents=True, exist_ok=True)
         path = self.parts / f"{PART_PREFIX}{self._next:06d}{PART_SUFFIX}"
         self._next += 1
-        with atomic_path(path) as tmp:  # .part-NNNNNN.parquet.*.tmp: hidden from dataset readers
+        with _writing(path), atomic_path(path) as tmp:  # .part-NNNNNN.parquet.*.tmp: hidden from dataset readers
             pq.write_table(table, tmp, compression="zstd")
         return path
 
@@ -204,7 +221,7 @@ class RunStore:
         sources = self.sources()
         if sources == [self.out]:
             return
-        with atomic_path(self.out) as tmp:
+        with _writing(self.out), atomic_path(self.out) as tmp:
             with pq.ParquetWriter(tmp, PROGRAMS_SCHEMA, compression="zstd") as writer:
                 for path in sources:
                     for batch in _batches(path):
@@ -221,18 +238,51 @@ class RunStore:
         return Counter({k: int(v) for k, v in counts.items()})
 
 
+def _existing(path: Path) -> Path:
+    """The directory itself if it exists, else its nearest existing ancestor (where mkdir will create it)."""
+    path = path.absolute()
+    while not path.is_dir() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _probe(directory: Path) -> None:
+    """Create and remove a file in `directory`, or refuse with the system's reason (read-only, no permission)."""
+    from storage.atomic import temp_prefix
+
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(directory / "probe"), suffix=".tmp", dir=directory)
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise UserError(f"cannot write in {directory}: {exc.strerror or exc}") from None
+
+
+@contextmanager
+def _writing(path: Path) -> Iterator[None]:
+    """An output that cannot be written (a full disk, a read-only or vanished directory) is bad input, one line:
+    the atomic write has removed its temporary, and the files already there are whole."""
+    try:
+        yield
+    except OSError as exc:
+        raise UserError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
 def _ours(name: str) -> bool:
     return (name.startswith(PART_PREFIX) and name.endswith(PART_SUFFIX)) or (
         name.startswith(TMP_PREFIX) and name.endswith(".tmp"))
 
 
 def _read_keys(path: Path) -> pa.Table:
-    """frame_id and config_hash of a programs file, and status to check it: a resume reads three short columns
-    (column projection), never the programs' text."""
+    """frame_id, config_hash and frame_hash of a programs file, and status to check it: a resume reads four short
+    columns (column projection), never the programs' text. A file written before frame_hash gets nulls."""
     try:
         pf = pq.ParquetFile(path, read_dictionary=["status", "config_hash"])
         check_programs_schema(pf.schema_arrow, str(path))
-        table = pf.read(columns=["frame_id", "config_hash", "status"])
+        keys = ["frame_id", "config_hash", "status", "frame_hash"]
+        table = pf.read(columns=[c for c in keys if c in pf.schema_arrow.names])
+        if "frame_hash" not in table.column_names:
+            table = table.append_column("frame_hash", pa.nulls(table.num_rows, pa.string()))
     except ProgramsError:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
@@ -242,9 +292,10 @@ def _read_keys(path: Path) -> pa.Table:
 
 
 def _batches(path: Path):
-    names = list(PROGRAMS_SCHEMA.names)
-    for batch in pq.ParquetFile(path).iter_batches(batch_size=MERGE_BATCH_ROWS, columns=names):
-        yield batch.select(names).cast(PROGRAMS_SCHEMA)  # an older writer's int64 where the schema has int32
+    pf = pq.ParquetFile(path)
+    names = [c for c in PROGRAMS_SCHEMA.names if c in pf.schema_arrow.names]
+    for batch in pf.iter_batches(batch_size=MERGE_BATCH_ROWS, columns=names):
+        yield as_programs(batch)
 
 
 def _copy_rows(source: Path, target: Path, keep: np.ndarray) -> None:

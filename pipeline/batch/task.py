@@ -20,8 +20,10 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
+import numpy as np
 import pyarrow as pa
 
+from extractors.frame_hash import frame_hashes_of, to_hex
 from extractors.frames import FramesError, frame_to_scene
 from pipeline.programs import failure_row, programs_table, result_row
 from storage.parquet import read_rows
@@ -51,6 +53,7 @@ class FrameTask:
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
     synthesizer: Synthesizer | None = None  # None: synth.synthesize
+    frame_hash: str | None = None  # the hash of the rows the scene came from (extractors.frame_hash)
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,22 @@ class ChunkTask:
     def marker(self) -> str | None:
         return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
 
+    def read(self) -> tuple[pa.Table, int, list[str]]:
+        """The rows of the chunk's span (whole frames, from its first frame's first row to its last frame's last
+        row), the span's first row, and the hash of each of the chunk's frames' rows in its order
+        (extractors.frame_hash): a row records what it was computed from, as the worker read it."""
+        first = min(f[1] for f in self.frames)
+        stop = max(f[1] + f[2] for f in self.frames)
+        try:
+            rows = read_rows(self.url, self.path, first, stop, self.columns)
+        except (OSError, pa.ArrowException) as exc:
+            raise ChunkUnreadable(one_line(f"cannot read {self.url or ''}{self.path}: {exc}", 400)) from None
+        # The span cut at every start and end of the chunk's frames (rows between them are other frames': one
+        # vectorized pass over the span, the pieces between are hashed and not used).
+        cuts = sorted({f[1] - first for f in self.frames} | {f[1] + f[2] - first for f in self.frames} - {stop - first})
+        hashes = dict(zip(cuts, to_hex(*frame_hashes_of(rows, np.array(cuts, dtype=np.int64)))))
+        return rows, first, [hashes[f[1] - first] for f in self.frames]
+
 
 class ChunkUnreadable(InternalError):
     """A worker could not read its chunk (the file moved, or a cluster worker does not see the path)."""
@@ -94,25 +113,22 @@ class ChunkUnreadable(InternalError):
 def run_chunk(task: ChunkTask) -> pa.Table:
     """Programs rows of every frame of the chunk, in its order. Never raises for a frame, only when the rows
     cannot be read at all (ChunkUnreadable)."""
-    first = min(f[1] for f in task.frames)
-    stop = max(f[1] + f[2] for f in task.frames)
-    try:
-        rows = read_rows(task.url, task.path, first, stop, task.columns).to_pandas()
-    except (OSError, pa.ArrowException) as exc:
-        raise ChunkUnreadable(one_line(f"cannot read {task.url or ''}{task.path}: {exc}", 400)) from None
+    table, first, hashes = task.read()
+    rows = table.to_pandas()
     marker = task.marker()
     out = []
-    for i, (frame_id, start, n) in enumerate(task.frames):
+    for i, ((frame_id, start, n), frame_hash) in enumerate(zip(task.frames, hashes)):
         if marker is not None:
             with open(marker, "w") as f:  # its mtime is when this frame started (the wall-clock guard reads it)
                 f.write(str(i))
         try:
             scene = frame_to_scene(rows.iloc[start - first: start - first + n])
         except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
-            out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, task.config_hash))
+            out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, task.config_hash,
+                                   frame_hash=frame_hash))
             continue
         out.append(run_frame(FrameTask(frame_id, scene, task.config, task.config_hash, task.hard_cap,
-                                       task.synthesizer)))
+                                       task.synthesizer, frame_hash)))
     if marker is not None:
         try:
             os.unlink(marker)
@@ -128,13 +144,14 @@ def run_frame(task: FrameTask) -> dict:
     _reset_peak_rss()
     try:
         with _hard_memory_cap(config.memory_limit if task.hard_cap else None):
-            return result_row((task.synthesizer or synthesize)(task.scene, config), task.config_hash)
+            return result_row((task.synthesizer or synthesize)(task.scene, config), task.config_hash,
+                              task.frame_hash)
     except MemoryError:
         status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
     except Exception as exc:  # the run goes on: the frame is recorded as an error, with the reason
         status, message = "error", one_line(f"{type(exc).__name__}: {exc}")
     return failure_row(task.frame_id, status, message, len(task.scene.others), config, task.config_hash,
-                       runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb())
+                       runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb(), frame_hash=task.frame_hash)
 
 
 def one_line(text: str, limit: int = 300) -> str:

@@ -28,11 +28,13 @@ def run(args: argparse.Namespace) -> int:
     from extractors.frames import read_frames
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
+    from pipeline.outputs import check_apart
     from storage.atomic import write_text_atomic
 
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number of metres, got {args.max_distance!r}")
     out = Path(args.out)
+    check_apart(out, [("predictions", args.pred), ("ground truth", args.gt)])
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} exists and is not a directory")
     pred, gt = read_frames(args.pred), read_frames(args.gt)

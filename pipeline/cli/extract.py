@@ -17,6 +17,7 @@ from extractors.sniff import wrong_source_hint
 from extractors.writer import frames_writer
 from pipeline.batch.extract import extract_parallel, is_dataset
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -29,8 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="extract N input files (logs, bags) at once, in worker processes (default 1)")
     p.add_argument("--radius", type=float, default=50.0, metavar="M", help="keep objects within M metres of ego")
-    p.add_argument("--categories", default="vehicles", metavar="C",
-                   help="vehicles (default), all, or a comma list of Scenic classes / raw categories "
+    p.add_argument("--categories", default="all", metavar="C",
+                   help="all (default: every type, so a query for pedestrians finds them), vehicles, or a comma "
+                        "list of Scenic classes / raw categories "
                         "(Car,Pedestrian or human.pedestrian,vehicle.car)")
     p.add_argument("--every", type=int, default=1, metavar="K", help="keep every K-th frame")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
@@ -45,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_apart(args.out, [("input", args.input)])
     src = source(args.source)
     try:
         options = src.options.options_from(

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from pipeline.cli.options import add_config_option
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):
         if value is not None and value < 1:
             raise UserError(f"{flag} must be at least 1, got {value}")
+    check_apart(args.out, [("input frames", args.frames), ("pattern", args.pattern), ("config", args.config)])
     if Path(args.out).is_dir():
         raise UserError(f"--out {args.out} is a directory; matches are one Parquet file")
     config = load_config(args.config)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,6 +34,8 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.variants.render import FORMATS, View, draw, save
     from synth.semantics import check
 
+    check_apart(args.out, [("scene", args.scene), ("program", args.program), ("programs", args.programs),
+                           ("config", args.config)])
     if Path(args.out).suffix.lstrip(".").lower() not in FORMATS:
         raise UserError(f"--out {args.out}: the file name must end in {', '.join('.' + f for f in FORMATS)}")
     if Path(args.out).is_dir():

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart, staged_directory
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,9 +27,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.report.output import check_replaceable, staged_directory
+    from pipeline.report.output import check_replaceable
     from pipeline.report.stats import ProgramsDB
 
+    check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query)])
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
     extra = _query_sections(args)  # a bad pattern or option: exit 2 before anything is read or written

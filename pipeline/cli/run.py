@@ -13,6 +13,7 @@ import sys
 
 from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
 from pipeline.cli.options import add_synthesis_options, synthesis_config
+from pipeline.outputs import check_apart
 from synth.errors import ExitCode
 
 
@@ -50,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.batch.stage import run_frames
 
+    check_apart(args.out, [("config", args.config)])  # and the frames: run_frames checks them
     config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))

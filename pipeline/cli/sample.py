@@ -25,6 +25,7 @@ from pathlib import Path
 
 from pipeline.cli.options import add_config_option, add_sampling_options, bounded_int, sample_options
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart, staged_files
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,9 +45,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
     from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
-    from storage.atomic import write_text_atomic
 
     out = Path(args.out)
+    check_apart(out, [("program", args.scenic_file), ("program", args.dsl_file), ("scene", args.scene),
+                      ("config", args.config)])
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {args.out} exists and is not a directory")
     options = sample_options(args, args.n)
@@ -72,12 +74,15 @@ def run(args: argparse.Namespace) -> int:
         finally:
             progress.close()
     width = max(3, len(str(args.n - 1)))
-    written = {out / f"sample_{k:0{width}d}.json" for k in range(len(samples.scenes))}
-    for k, scene in enumerate(samples.scenes):
-        write_text_atomic(out / f"sample_{k:0{width}d}.json", scene.to_json())
-    # Samples of an earlier, larger run would read as part of this one: the directory holds this run only.
-    for stale in sorted(set(out.glob("sample_*.json")) - written):
-        if re.fullmatch(r"sample_\d{3,}\.json", stale.name):  # only names this verb writes
+    # Every sample is written beside the directory first and moved in only when all are: a full disk never
+    # leaves some of them.
+    with staged_files(out) as stage:
+        for k, scene in enumerate(samples.scenes):
+            (stage / f"sample_{k:0{width}d}.json").write_text(scene.to_json(), encoding="utf-8")
+    # Samples of an earlier, larger run would read as part of this one: the directory holds this run's only.
+    written = {f"sample_{k:0{width}d}.json" for k in range(len(samples.scenes))}
+    for stale in sorted(out.glob("sample_*.json")):
+        if stale.name not in written and re.fullmatch(r"sample_\d{3,}\.json", stale.name):  # names we write
             stale.unlink()
     print(f"wrote {len(samples.scenes)} scenes to {out} (seed {args.seed}, {samples.describe()})")
     return 0

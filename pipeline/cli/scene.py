@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from pipeline.errors import UserError
+from pipeline.outputs import check_apart
 
 # Beyond this many frames, "did you mean" only looks at ids of the same scene (the part before the last '/').
 MAX_HINT_POOL = 200_000
@@ -29,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from extractors.frames_dataset import FramesDataset
     from storage.atomic import write_text_atomic
 
+    check_apart(args.out, [("input frames", args.frames)])
     dataset = FramesDataset.open(args.frames)
     table = dataset.find(args.frame_id)
     if table is None:

@@ -7,6 +7,7 @@ import json
 import sys
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
+from pipeline.outputs import check_apart
 from synth.synthesize import synthesize
 
 
@@ -23,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene
     from storage.atomic import write_text_atomic
 
+    check_apart(args.out, [("input scene", args.scene), ("config", args.config)])
     config = synthesis_config(args)
     scene = read_scene(args.scene, max_entities=args.max_entities)
     result = synthesize(scene, config)

@@ -1,13 +1,9 @@
 """Where `r2s report` writes: DIR is replaced wholesale, so it must be absent, empty or an earlier report, and the new
-report is built in a directory beside it that takes its place only when complete."""
+report is built in a directory beside it that takes its place only when complete (pipeline.outputs.staged_directory,
+as every output directory)."""
 
 from __future__ import annotations
 
-import os
-import secrets
-import shutil
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 from pipeline.errors import UserError
@@ -29,24 +25,3 @@ def check_replaceable(target: Path) -> None:
     if foreign:
         raise UserError(f"--out {target} holds files that are not part of a report ({', '.join(foreign[:3])}); "
                         "choose an empty or new directory")
-
-
-@contextmanager
-def staged_directory(target: Path) -> Iterator[Path]:
-    """Yield an empty directory beside target; on success it takes target's place (an old target is removed)."""
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        # mkdir (not mkdtemp, which makes it 0700) so the report gets the user's usual permissions.
-        stage = target.parent / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-        stage.mkdir()
-    except OSError as exc:
-        raise UserError(f"cannot write beside --out {target}: {exc.strerror or exc}") from None
-    retired = stage.with_name(stage.name + ".old")
-    try:
-        yield stage
-        if target.exists():
-            os.replace(target, retired)  # rename aside first: rename(2) will not replace a non-empty directory
-        os.replace(stage, target)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-        shutil.rmtree(retired, ignore_errors=True)

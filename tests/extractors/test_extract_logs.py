@@ -86,7 +86,7 @@ def test_mcap_through_the_cli(tmp_path, capsys, samples):
     path = tmp_path / f"{SCENE}.mcap"
     fx.write_foxglove_protobuf(path, samples)
     out = tmp_path / "frames.parquet"
-    res = r2s(capsys, "extract", "mcap", str(path), "--out", str(out), "--every", "2")
+    res = r2s(capsys, "extract", "mcap", str(path), "--out", str(out), "--every", "2", "--categories", "vehicles")
     assert res.returncode == 0, res.stderr
     df = pd.read_parquet(out)
     assert list(dict.fromkeys(df.frame_id)) == [f"{SCENE}/0", f"{SCENE}/2"]

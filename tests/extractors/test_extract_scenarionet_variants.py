@@ -111,7 +111,8 @@ def test_unknown_object_types_are_typed_by_their_metadrive_type_or_object_and_co
     assert tally.unknown_kept == {"human.jetpack": len(ped_rows)} and not tally.unknown_left_out
 
     out = tmp_path / "frames.parquet"
-    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out), "--radius", "1000")
+    res = r2s(capsys, "extract", "scenarionet", str(db), "--out", str(out), "--radius", "1000", "--categories",
+              "vehicles")
     assert res.returncode == 0, res.stderr
     df = read_frames(out)
     assert car in set(df.track_id) and ped not in set(df.track_id)  # vehicles: the unknown pedestrian left out

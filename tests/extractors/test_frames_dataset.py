@@ -242,3 +242,17 @@ def test_bad_datasets_are_refused_in_one_line(tmp_path, kind):
     with pytest.raises(FramesError) as err:
         FramesDataset.open(path).check()
     assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_rewritten_file_is_read_again_not_served_from_the_cache(tmp_path):
+    """Workers cache open files and row groups; a file rewritten in place (atomically, same size: only the values
+    differ) between two reads of one process must give its new rows (issue 22: stale results)."""
+    from extractors.frames import write_frames
+
+    path = tmp_path / "frames.parquet"
+    rows = scene_to_rows(shipped_frames()[0], source="test")
+    write_frames(rows, path)
+    before = read_rows("", str(path), 0, len(rows), ("frame_id", "x"))
+    write_frames([dict(r, x=r["x"] + 1.0) for r in rows], path)
+    after = read_rows("", str(path), 0, len(rows), ("frame_id", "x"))
+    assert after.column("x").to_pylist() == [x + 1.0 for x in before.column("x").to_pylist()]

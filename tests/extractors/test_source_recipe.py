@@ -92,7 +92,7 @@ def test_jobs_cut_the_input_into_its_files(tmp_path, capsys, toy):
     res = r2s(capsys, "extract", "toy", str(toy), "--jobs", "2", "--out", str(out))
     assert res.returncode == 0, res.stderr
     assert len(list(out.glob("part-*.parquet"))) == len(LOGS)
-    pd.testing.assert_frame_equal(got(out), expected(1.0, {"Car"}))  # --categories vehicles by default
+    pd.testing.assert_frame_equal(got(out), expected(1.0, {"Car", "Pedestrian", "Object"}))  # all by default
 
 
 def test_categories_are_checked_against_its_taxonomy(tmp_path, capsys, toy):

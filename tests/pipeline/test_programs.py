@@ -63,7 +63,7 @@ def test_programs_parquet_has_the_documented_columns_and_types_and_the_json_valu
     pq.write_table(programs_table(rows), tmp_path / "p.parquet")
     table = pq.read_table(tmp_path / "p.parquet")
     documented = documented_columns()
-    assert len(documented) == 20
+    assert len(documented) == 21
     assert [(f.name, str(f.type)) for f in table.schema] == [(n, ARROW_NAMES.get(t, t)) for n, t in documented]
     written, failed = table.to_pylist()
     doc = result.to_json_dict()

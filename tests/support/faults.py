@@ -15,6 +15,7 @@ the fault in every frame that run_frames gives its workers (real processes, real
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import signal
@@ -72,6 +73,25 @@ def r2s_with_fault(spec: str, *args: str) -> list[str]:
     """The command line of `r2s ARGS...` with SPEC injected into its frames (subprocess.run / Popen, with the
     repository's root as the working directory)."""
     return [sys.executable, "-m", "tests.support.faults", spec, *args]
+
+
+@contextlib.contextmanager
+def small_filesystem(path, size_kb: int = 64, read_only: bool = False):
+    """A tmpfs of `size_kb` KB mounted at `path` (a full disk, or a read-only one, for real), unmounted after;
+    skips the test where mounting is not allowed (not root, or no CAP_SYS_ADMIN in the container)."""
+    import subprocess
+
+    import pytest
+
+    os.makedirs(path, exist_ok=True)
+    options = f"size={size_kb}k" + (",ro" if read_only else "")
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({mounted.stderr.decode().strip()[:80]}): needs root")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True)
 
 
 def main(argv: list[str]) -> int:

@@ -102,6 +102,58 @@ def test_extract_then_run_with_two_jobs(tmp_path):
     assert f"{len(order)} frames ({len(order)} computed, 0 kept), 100.0% optimal" in _summary(proc.stderr)
 
 
+def test_a_frame_whose_rows_changed_is_recomputed_never_kept(tmp_path):
+    """The stale resume of issue 22: extract vehicles, run, extract every category into the same path, run again
+    into the same output: every frame gained entities, so every program is recomputed and declares them; then
+    one entity of one frame moves, and only that frame is recomputed."""
+    frames, out = tmp_path / "frames.parquet", tmp_path / "programs"
+    extract = ("extract", "scenarionet", str(EXCERPT), "--out", str(frames))
+    assert run_r2s(*extract, "--categories", "vehicles").returncode == 0
+    assert run_r2s("run", str(frames), "--out", str(out), "--jobs", "2").returncode == 0
+    before = _programs(out)
+    assert not before["program"].str.contains("Pedestrian").any()
+    assert run_r2s(*extract, "--categories", "all").returncode == 0
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    n = len(_frame_ids(frames))
+    assert f"({n} computed, 0 kept)" in _summary(proc.stderr)
+    assert _summary(proc.stderr).endswith(f"; {n} recomputed because their rows changed -> {out}")
+    assert f"recomputing {n} frame(s) whose rows changed since their program was made" in proc.stderr
+    after = _programs(out)
+    assert after["program"].str.contains("Pedestrian").any()
+    assert (after["n_entities"] > before["n_entities"]).all()
+    _assert_programs_contain_scenes(frames, out, SynthConfig())
+
+    df = read_frames(frames)
+    victim = df["frame_id"].iloc[-1]
+    row = df.index[(df["frame_id"] == victim) & ~df["is_ego"]][0]
+    df.loc[row, "x"] += 3.0
+    write_frames(df, frames)
+    proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert f"(1 computed, {n - 1} kept)" in _summary(proc.stderr) and "; 1 recomputed because" in proc.stderr
+    again = _programs(out)
+    kept = [f for f in again.index if f != victim]
+    assert list(again.loc[kept, "runtime_s"]) == list(after.loc[kept, "runtime_s"])
+    assert again.loc[victim, "frame_hash"] != after.loc[victim, "frame_hash"]
+    _assert_programs_contain_scenes(frames, out, SynthConfig())
+
+
+def test_rows_without_a_frame_hash_are_recomputed_and_still_read(small_frames, tmp_path):
+    """A programs file of a version before frame_hash: its rows are read (report, merge) but never reused, since
+    what they were computed from is unknown."""
+    out = tmp_path / "programs.parquet"
+    assert run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2").returncode == 0
+    old = pq.read_table(out)
+    pq.write_table(old.drop_columns(["frame_hash"]), out)
+    assert read_programs(out)["frame_hash"].isna().all()
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "recomputing 6 frame(s) whose rows were written without a frame_hash" in proc.stderr
+    assert "(6 computed, 0 kept)" in _summary(proc.stderr)
+    assert read_programs(out)["frame_hash"].notna().all()
+
+
 def test_rerun_keeps_rows_and_a_new_config_replaces_them(small_frames, tmp_path):
     out = tmp_path / "programs.parquet"
     assert run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2").returncode == 0
@@ -165,8 +217,14 @@ def test_a_second_run_on_the_same_out_is_refused_and_sigterm_stops_the_first(jso
     try:
         time.sleep(4)  # workers started and sleeping in their first frames
         assert proc.poll() is None
-        second = run_r2s("run", str(json_frames), "--out", str(out), "--jobs", "1")
-        assert_one_line_error(second, 2, contains="another r2s run on this machine is writing")
+        # Another TMPDIR, another working directory and a relative --out: the lock is with the output, not in /tmp.
+        other_tmp = tmp_path / "other-tmp"
+        other_tmp.mkdir()
+        second = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(json_frames), "--out", out.name,
+                                 "--jobs", "1"], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                                env={**os.environ, "TMPDIR": str(other_tmp), "PYTHONPATH": str(ROOT)})
+        assert_one_line_error(second, 2, contains=f"another r2s run (pid {proc.pid} on ")
+        assert f"is writing {out.name} (lock {tmp_path / ('.' + out.name + '.lock')})" in second.stderr
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=60)  # far less than the frames in flight would take
         assert proc.returncode == 128 + signal.SIGTERM
@@ -185,6 +243,64 @@ def test_a_second_run_on_the_same_out_is_refused_and_sigterm_stops_the_first(jso
         except ProcessLookupError:
             pass
     assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other-tmp"]  # the lock file went with the run
+
+
+def test_the_lock_dies_with_its_run_and_the_next_run_takes_it(small_frames, tmp_path):
+    """kill -9 leaves the lock file but not the lock: the kernel drops it with the process."""
+    out = tmp_path / "programs"
+    proc = subprocess.Popen(r2s_with_fault("sleep=120@*", "run", str(small_frames), "--out", str(out), "--jobs", "1"),
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        lock = tmp_path / ".programs.lock"
+        deadline = time.monotonic() + 60
+        while not lock.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert lock.exists() and f'"pid": {proc.pid}' in lock.read_text()
+        proc.kill()
+        proc.wait(timeout=30)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    proc = run_r2s("run", str(small_frames), "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "(6 computed, 0 kept)" in _summary(proc.stderr)
+    assert not lock.exists()
+
+
+def test_the_lock_without_record_locks_uses_its_holder(tmp_path, monkeypatch):
+    """A filesystem without record locks (ENOLCK): the file's host and pid decide; a dead holder here is stale."""
+    import errno
+    import fcntl
+    import json
+    import socket
+
+    from pipeline.batch.lock import OutputLock
+    from pipeline.errors import UserError
+
+    def no_locks(*_args):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "lockf", no_locks)
+    out = tmp_path / "programs"
+    lock = OutputLock(out)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    for host, pid, refused in ((socket.gethostname(), int(dead.stdout), False),
+                               (socket.gethostname(), os.getppid(), True), ("elsewhere", os.getpid(), True)):
+        lock.path.write_text(json.dumps({"host": host, "pid": pid, "since": "then"}))
+        if refused:
+            with pytest.raises(UserError, match=f"pid {pid} on {host}"):
+                lock.acquire()
+            assert json.loads(lock.path.read_text())["pid"] == pid
+        else:
+            lock.acquire()
+            assert json.loads(lock.path.read_text())["pid"] == os.getpid()
+            with pytest.raises(UserError, match="another r2s run"):
+                OutputLock(out).acquire()
+            lock.release()
+            assert not lock.path.exists()
 
 
 # --------------------------------------------------------------------------------------------------- limits
@@ -372,7 +488,7 @@ def test_an_output_that_is_not_a_programs_file_is_not_overwritten(small_frames, 
     assert out.read_text() == "my notes\n"
     assert not Path(f"{out}.parts").exists()
     proc = run_r2s("run", str(small_frames), "--out", str(small_frames))
-    assert_one_line_error(proc, 2, "input frames file")
+    assert_one_line_error(proc, 2, "is the input frames")
 
 
 # ------------------------------------------------------------------------------------------------------ dask
@@ -422,23 +538,41 @@ def test_dask_local_cluster_replaces_a_dead_worker(small_frames, tmp_path):
 
 # -------------------------------------------------------------------------------------------- pure logic
 
-def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0) -> dict:
-    return dict(failure_row(fid, "error", "x", 1, SynthConfig(), h, runtime_s=runtime), status=status)
+SAME, OTHER = "0123456789abcdef" * 2, "fedcba9876543210" * 2  # frame hashes: the input's, and other rows'
 
 
-def test_resume_plan_keeps_same_hash_recomputes_other_hash_and_drops_foreign_frames(tmp_path):
-    from pipeline.batch.store import RunStore
+def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0, rows: str | None = SAME) -> dict:
+    return dict(failure_row(fid, "error", "x", 1, SynthConfig(), h, runtime_s=runtime, frame_hash=rows),
+                status=status)
+
+
+def _input(ids: list[str]):
+    """The frame-id index and the content index of an input whose frames all have the rows hashed as SAME."""
+    import pyarrow as pa
+
+    from extractors.frame_hash import frame_keys, from_hex
     from storage.frame_index import FrameIndex, frame_hashes
 
+    lane0, lane1, _ = from_hex(pa.array([SAME] * len(ids)))
+    return FrameIndex(*frame_hashes(ids)), FrameIndex(*frame_keys(*frame_hashes(ids), lane0, lane1))
+
+
+def test_resume_plan_keeps_same_rows_and_hash_recomputes_the_others_and_drops_foreign_frames(tmp_path):
+    from pipeline.batch.store import RunStore
+    from storage.frame_index import frame_hashes
+
     store = RunStore(tmp_path / "programs")
-    store.write_part(programs_table([_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0")]))
+    store.write_part(programs_table([_row("a"), _row("b", "h0"), _row("z"), _row("c", "h0"), _row("e", rows=OTHER),
+                                     _row("f", rows=None), _row("g", "h0", rows=OTHER)]))
     store.write_part(programs_table([_row("c", "h1", runtime=2.0)]))
-    plan = RunStore(tmp_path / "programs").plan(FrameIndex(*frame_hashes(["a", "b", "c", "d"])), "h1")
-    done = plan.done.contains(*frame_hashes(["a", "b", "c", "d", "z"]))
-    assert list(done) == [True, False, True, False, False]
+    ids = ["a", "b", "c", "d", "e", "f", "g"]
+    plan = RunStore(tmp_path / "programs").plan(*_input(ids), "h1")
+    done = plan.done.contains(*frame_hashes(ids + ["z"]))
+    assert list(done) == [True, False, True, False, False, False, False, False]
     assert (plan.stale, plan.stale_example, plan.foreign, plan.superseded) == (1, "b", 1, 1)
+    assert (plan.changed, plan.unhashed) == (2, 1) and plan.changed_example in ("e", "g")  # g: config changed too
     fresh = RunStore(tmp_path / "programs")
-    fresh.plan(FrameIndex(*frame_hashes(["a", "b", "c", "d"])), "h1")
+    fresh.plan(*_input(ids), "h1")
     fresh.apply(plan)
     left = read_programs(tmp_path / "programs").set_index("frame_id")
     assert sorted(left.index) == ["a", "c"]
@@ -460,6 +594,8 @@ def test_part_buffer_flushes_by_size_and_by_age():
 def test_summary_line():
     line = summarize({"optimal": 2, "memout": 1, "error": 1}, computed=3, seconds=2.04).line()
     assert line == "4 frames (3 computed, 1 kept), 50.0% optimal, 0 feasible, 0 timeout, 1 memout, 1 errors, 2.0 s"
+    line = summarize({"optimal": 4}, computed=3, seconds=1.0, changed=2).line()
+    assert line.endswith("1.0 s; 2 recomputed because their rows changed")
 
 
 def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
@@ -471,7 +607,8 @@ def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
     from synth.synthesize import synthesize
 
     frames = tmp_path / "frames.parquet"
-    proc = run_r2s("extract", "scenarionet", str(ROOT / "data/nuscenes-mini-excerpt/scenarionet"), "--out", str(frames))
+    proc = run_r2s("extract", "scenarionet", str(ROOT / "data/nuscenes-mini-excerpt/scenarionet"), "--out", str(frames),
+                   "--categories", "vehicles")  # few entities a frame: the frames are synthesized twice more here
     assert proc.returncode == 0, proc.stderr
     plain, robust = tmp_path / "plain.parquet", tmp_path / "robust.parquet"
     assert run_r2s("run", str(frames), "--out", str(plain), "--jobs", "1").returncode == 0

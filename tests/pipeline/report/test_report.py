@@ -281,7 +281,8 @@ def test_programs_files_with_wrong_types_or_values_exit_2_everywhere(two_strateg
     assert_one_line_error(proc, 2, contains=message)
     assert not (tmp_path / "report").exists()
     frames = tmp_path / "frames.parquet"
-    assert run_r2s("extract", "scenarionet", "data/nuscenes-mini-excerpt/scenarionet", "--out", str(frames)).returncode == 0
+    assert run_r2s("extract", "scenarionet", "data/nuscenes-mini-excerpt/scenarionet", "--out", str(frames),
+                   "--categories", "vehicles").returncode == 0
     proc = run_r2s("run", str(frames), "--out", str(path), "--jobs", "1")
     assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     assert path.read_bytes() == before

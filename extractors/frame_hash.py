@@ -1,0 +1,187 @@
+"""The content hash of a frame: what a stored program was computed from (docs/cli.md, "When a stored program is
+reused").
+
+`r2s run` keeps a frame's program across runs only while the frame's rows are the same; the hash of the rows is
+written beside the program (the programs column `frame_hash`) and compared on resume. It covers what synthesis
+reads of a frame, and nothing else:
+
+- the columns HASHED_COLUMNS, in that order; an optional column a file lacks hashes as nulls, so a file with a
+  `speed` column of nulls and one without it hash alike;
+- the rows in the order they are stored: synthesis declares entities in row order and its program can depend
+  on it (reordering a frame's rows recomputes it), so the canonical order is the stored one;
+- every float as the IEEE-754 binary64 bit pattern of its value (float32 columns widened exactly, -0.0 and 0.0
+  apart), a null or NaN as the canonical quiet NaN (synthesis reads both as "not given"); every string as the
+  first 8 bytes of its BLAKE2b digest (UTF-8), a null as the same NaN pattern;
+- how Parquet stores them does not count: encodings, dictionaries, row groups, compression, file names.
+
+The hash is two 64-bit lanes (32 hex digits). A row is a chain of SplitMix64 finalizers over its values, salted
+with its position in the frame; a frame is the sum of its rows (mod 2^64) and its row count, finalized per lane.
+The sum lets a frame continue from one row group into the next (streaming), and vectorizes over a row group: the
+work is a few dozen numpy operations per row, no Python per row or per frame. It is a checksum against stale
+results, not a cryptographic commitment: whoever writes the frames file also chooses what is synthesized.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from storage.frame_index import FrameIndex, frame_hashes
+
+HASHED_COLUMNS = ("entity_id", "type", "x", "y", "heading", "length", "width", "speed", "pos_sigma",
+                  "heading_sigma", "speed_sigma")
+STRING_COLUMNS = ("entity_id", "type")
+HASH_CHARS = 32  # two 64-bit lanes in hex
+
+_NULL = np.uint64(0x7FF8000000000000)  # the canonical quiet NaN's bits: a null, a NaN, an absent column
+_SEEDS = (np.uint64(0x72327367656E2E66), np.uint64(0x6672616D652E6831))  # "r2sgen.f", "frame.h1"
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """SplitMix64's finalizer (a bijection of uint64), on a fresh array."""
+    x = x ^ (x >> np.uint64(30))
+    x *= _M1
+    x ^= x >> np.uint64(27)
+    x *= _M2
+    x ^= x >> np.uint64(31)
+    return x
+
+
+def _string_values(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
+    """8 bytes of BLAKE2b per distinct string (dictionary-encoded: the work is per distinct value)."""
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    if not pa.types.is_dictionary(arr.type):
+        arr = pc.dictionary_encode(arr)
+    words = np.array([int.from_bytes(hashlib.blake2b(s.encode("utf-8"), digest_size=8).digest(), "little")
+                      for s in arr.dictionary.to_pylist()] + [int(_NULL)], dtype=np.uint64)
+    codes = arr.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).astype(np.int64)
+    return words[codes]
+
+
+def _float_values(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
+    values = np.asarray(column.to_numpy(zero_copy_only=False), dtype=np.float64)  # nulls come as NaN
+    bits = values.view(np.uint64).copy()
+    bits[np.isnan(values)] = _NULL
+    return bits
+
+
+def row_chain(table: pa.Table) -> np.ndarray:
+    """The position-free hash of each row: the chain of its values over HASHED_COLUMNS."""
+    h = np.full(table.num_rows, _SEEDS[0], dtype=np.uint64)
+    for name in HASHED_COLUMNS:
+        if name not in table.column_names:
+            values = np.full(table.num_rows, _NULL, dtype=np.uint64)
+        elif name in STRING_COLUMNS:
+            values = _string_values(table.column(name))
+        else:
+            values = _float_values(table.column(name))
+        h = _mix(h ^ values)
+    return h
+
+
+def _row_lanes(chain: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    salted = chain ^ _mix(positions.astype(np.uint64) + np.uint64(1))
+    return _mix(salted ^ _SEEDS[0]), _mix(salted ^ _SEEDS[1])
+
+
+def _finish(sum0: np.ndarray, sum1: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = rows.astype(np.uint64)
+    return _mix(sum0 ^ _mix(n ^ _SEEDS[0])), _mix(sum1 ^ _mix(n ^ _SEEDS[1]))
+
+
+def frame_hashes_of(table: pa.Table, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lane0, lane1) of each frame of a table of whole frames; frame i is rows starts[i] .. starts[i+1]."""
+    n = table.num_rows
+    if len(starts) == 0:
+        return np.zeros(0, np.uint64), np.zeros(0, np.uint64)
+    lengths = np.diff(np.append(starts, n))
+    positions = np.arange(n, dtype=np.int64) - np.repeat(starts, lengths)
+    lane0, lane1 = _row_lanes(row_chain(table), positions)
+    return _finish(np.add.reduceat(lane0, starts), np.add.reduceat(lane1, starts), lengths)
+
+
+def to_hex(lane0: np.ndarray, lane1: np.ndarray) -> list[str]:
+    return [f"{int(a):016x}{int(b):016x}" for a, b in zip(lane0, lane1)]
+
+
+def from_hex(column: pa.ChunkedArray | pa.Array) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lane0, lane1, valid) of a column of stored hashes; a null or malformed value is not valid (its frame is
+    recomputed). Vectorized: the digits are read as bytes, never one Python int per row."""
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    n = len(arr)
+    if n == 0:
+        return np.zeros(0, np.uint64), np.zeros(0, np.uint64), np.zeros(0, bool)
+    arr = arr.cast(pa.binary())
+    valid = np.asarray(pc.fill_null(pc.equal(pc.binary_length(arr), HASH_CHARS), False).to_numpy(
+        zero_copy_only=False), dtype=bool)
+    text = pc.if_else(pa.array(valid), arr, pa.scalar(b"0" * HASH_CHARS, pa.binary()))
+    offsets = np.frombuffer(text.buffers()[1], dtype=np.int32)[text.offset: text.offset + n + 1]
+    raw = np.frombuffer(text.buffers()[2], dtype=np.uint8)[offsets[0]: offsets[-1]].reshape(n, HASH_CHARS)
+    digit = raw.astype(np.int64) - 48
+    letter = (raw | 0x20).astype(np.int64) - 87
+    nibbles = np.where((raw >= 48) & (raw <= 57), digit, np.where((letter >= 10) & (letter <= 15), letter, -1))
+    valid &= (nibbles >= 0).all(axis=1)
+    nibbles = np.where(nibbles < 0, 0, nibbles).astype(np.uint64)
+    shifts = (np.uint64(4) * np.arange(15, -1, -1, dtype=np.uint64))
+    lane0 = np.bitwise_or.reduce(nibbles[:, :16] << shifts, axis=1)
+    lane1 = np.bitwise_or.reduce(nibbles[:, 16:] << shifts, axis=1)
+    return lane0, lane1, valid
+
+
+class FrameHasher:
+    """frame_hashes_of for a stream of tables (row groups) of one part after another, where a frame may continue
+    from one table into the next. `keys()`: each frame's hash folded into its frame id's (storage.frame_index),
+    as a FrameIndex: "this frame with these rows"."""
+
+    columns = HASHED_COLUMNS  # what the tables fed must hold (those a file has; the rest hash as null)
+
+    def __init__(self) -> None:
+        self._keys: list[tuple[np.ndarray, np.ndarray]] = []
+        self._open: tuple[str, np.uint64, np.uint64, int] | None = None  # (id, sum0, sum1, rows so far)
+
+    def feed(self, table: pa.Table, starts: np.ndarray, ids: np.ndarray) -> None:
+        """A table and its frames (first row and id of each run of equal frame ids)."""
+        n = table.num_rows
+        if n == 0:
+            return
+        lengths = np.diff(np.append(starts, n))
+        positions = np.arange(n, dtype=np.int64) - np.repeat(starts, lengths)
+        continues = self._open is not None and ids[0] == self._open[0]
+        if continues:
+            positions[: lengths[0]] += self._open[3]
+        lane0, lane1 = _row_lanes(row_chain(table), positions)
+        sum0, sum1 = np.add.reduceat(lane0, starts), np.add.reduceat(lane1, starts)
+        ids, lengths = np.asarray(ids, dtype=object), lengths.astype(np.int64)
+        if continues:
+            _, s0, s1, rows = self._open
+            sum0[:1] += s0  # array arithmetic: wraps mod 2^64 (a scalar sum would warn)
+            sum1[:1] += s1
+            lengths[0] += rows
+        elif self._open is not None:
+            self.end_part()
+        self._emit(ids[:-1], sum0[:-1], sum1[:-1], lengths[:-1])
+        self._open = (str(ids[-1]), sum0[-1], sum1[-1], int(lengths[-1]))
+
+    def end_part(self) -> None:
+        if self._open is not None:
+            fid, s0, s1, rows = self._open
+            self._open = None
+            self._emit(np.array([fid], dtype=object), np.array([s0], np.uint64), np.array([s1], np.uint64),
+                       np.array([rows], np.int64))
+
+    def _emit(self, ids, sum0, sum1, lengths) -> None:
+        if len(ids):
+            self._keys.append(frame_keys(*frame_hashes(ids), *_finish(sum0, sum1, lengths)))
+
+    def keys(self) -> FrameIndex:
+        self.end_part()
+        return FrameIndex.of(self._keys)
+
+
+def frame_keys(id_hi: np.ndarray, id_lo: np.ndarray, lane0: np.ndarray, lane1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A frame id (its storage.frame_index.frame_hashes) and its rows' hash as one key of a FrameIndex."""
+    return id_hi ^ lane0, id_lo ^ lane1
