@@ -32,9 +32,10 @@ def _is_path(value: object) -> bool:
 
 
 def check_apart(out: str | os.PathLike, inputs: Iterable[tuple[str, str | os.PathLike | None]],
-                flag: str = "--out") -> None:
-    """Refuse (UserError) an output that is an input, is inside an input directory, or holds an input.
-    `inputs`: (what it is, path) pairs; None, "-" (standard input) and URLs are skipped."""
+                flag: str = "--out", directory: bool = False) -> None:
+    """Refuse (UserError) an output that is an input, is inside an input directory, or (`directory`: the verb
+    writes a directory there, replacing it or adding to it) holds an input. `inputs`: (what it is, path) pairs;
+    None, "-" (standard input) and URLs are skipped. A verb that writes one file refuses a directory itself."""
     if not _is_path(out):
         return
     dst = _real(out)
@@ -52,7 +53,7 @@ def check_apart(out: str | os.PathLike, inputs: Iterable[tuple[str, str | os.Pat
             raise UserError(f"{flag} {out} is the {what} {path} (the same file or directory); choose another {flag}")
         if src in dst.parents:
             raise UserError(f"{flag} {out} is inside the {what} {path}; choose a {flag} outside it")
-        if dst in src.parents:
+        if directory and dst in src.parents:
             raise UserError(f"the {what} {path} is inside {flag} {out}, which the output replaces; choose another "
                             f"{flag}")
 

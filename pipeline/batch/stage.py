@@ -72,9 +72,9 @@ def run_frames(
         raise UserError("--scheduler needs --backend dask")
     from pipeline.batch.store import is_single_file
 
-    check_apart(out, [("input frames", frames)])
+    check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
-        check_apart(f"{out}.parts", [("input frames", frames)])
+        check_apart(f"{out}.parts", [("input frames", frames)], directory=True)
     return _Run(str(frames), Path(out), config, jobs, backend, scheduler, chunk_size, part_rows,
                 log or _stderr, log_every_s, terminal, synthesizer).go()
 

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number of metres, got {args.max_distance!r}")
     out = Path(args.out)
-    check_apart(out, [("predictions", args.pred), ("ground truth", args.gt)])
+    check_apart(out, [("predictions", args.pred), ("ground truth", args.gt)], directory=True)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} exists and is not a directory")
     pred, gt = read_frames(args.pred), read_frames(args.gt)

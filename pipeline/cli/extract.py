@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_apart(args.out, [("input", args.input)])
+    check_apart(args.out, [("input", args.input)], directory=not str(args.out).endswith(".parquet"))
     src = source(args.source)
     try:
         options = src.options.options_from(

@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.report.output import check_replaceable
     from pipeline.report.stats import ProgramsDB
 
-    check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query)])
+    check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query)], directory=True)
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
     extra = _query_sections(args)  # a bad pattern or option: exit 2 before anything is read or written

@@ -51,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.batch.stage import run_frames
 
-    check_apart(args.out, [("config", args.config)])  # and the frames: run_frames checks them
+    check_apart(args.out, [("config", args.config)], directory=not str(args.out).endswith(".parquet"))  # and the frames: run_frames checks them
     config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))

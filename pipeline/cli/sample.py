@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     check_apart(out, [("program", args.scenic_file), ("program", args.dsl_file), ("scene", args.scene),
-                      ("config", args.config)])
+                      ("config", args.config)], directory=True)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {args.out} exists and is not a directory")
     options = sample_options(args, args.n)
