@@ -70,8 +70,7 @@ def workers(path: Path, repeat: int, chunks: int = 200, size: int = 32) -> dict:
         every += [(str(f), int(s), int(n)) for f, s, n in zip(runs.ids, runs.starts, runs.lengths)]
         if len(every) >= chunks * size:
             break
-    tasks = [ChunkTask(f"c{c}", "", part.path, tuple(every[c * size: (c + 1) * size]), part.columns, SynthConfig(),
-                       "h") for c in range(chunks)]
+    tasks = [ChunkTask(f"c{c}", "", part.path, tuple(every[c * size: (c + 1) * size]), part.columns, SynthConfig()) for c in range(chunks)]
 
     def read_only():
         for t in tasks:

@@ -31,28 +31,29 @@ class ProgramsError(InputError, ValueError):
     """A programs file that is not what the schema says. One line, fit for a user."""
 
 
-def result_row(result: Any, config_hash: str, frame_hash: str | None = None) -> dict[str, Any]:
-    """A programs row from a synth.synthesize.SynthResult; `frame_hash`: the hash of the frame's rows it was
-    computed from (extractors.frame_hash), None when it did not come from a frames file."""
+def result_row(result: Any, frame_hash: str | None = None) -> dict[str, Any]:
+    """A programs row from a synth.synthesize.SynthResult (its config's hash is the row's config_hash);
+    `frame_hash`: the hash of the frame's rows it was computed from (extractors.frame_hash), None when it did not
+    come from a frames file."""
     return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"},
-            **_run_fields(None, config_hash, frame_hash)}
+            **_run_fields(None, result.config, frame_hash)}
 
 
-def failure_row(frame_id: str, status: str, message: str, n_entities: int, config: Any, config_hash: str,
-                runtime_s: float = 0.0, peak_rss_mb: float = 0.0, frame_hash: str | None = None) -> dict[str, Any]:
+def failure_row(frame_id: str, status: str, message: str, n_entities: int, config: Any, runtime_s: float = 0.0,
+                peak_rss_mb: float = 0.0, frame_hash: str | None = None) -> dict[str, Any]:
     """A row for a frame that produced no program (error, or a worker killed at its memory limit)."""
     if status not in STATUSES:
         raise ValueError(f"unknown status {status!r}")
     row = dict.fromkeys(PROGRAMS_COLUMNS)  # null where there is no program
     row.update({f.name: getattr(config, f.name) for f in RESULT_FIELDS if f.source == "config"})
     row.update(frame_id=frame_id, status=status, n_entities=n_entities, certified=False, runtime_s=runtime_s,
-               peak_rss_mb=peak_rss_mb, **_run_fields(message, config_hash, frame_hash))
+               peak_rss_mb=peak_rss_mb, **_run_fields(message, config, frame_hash))
     return row
 
 
-def _run_fields(error: str | None, config_hash: str, frame_hash: str | None) -> dict[str, Any]:
+def _run_fields(error: str | None, config: Any, frame_hash: str | None) -> dict[str, Any]:
     """The batch stage's own fields of a row (RESULT_FIELDS' "run" source)."""
-    return {"error": error, "config_hash": config_hash, "version": __version__, "frame_hash": frame_hash}
+    return {"error": error, "config_hash": config.hash, "version": __version__, "frame_hash": frame_hash}
 
 
 def programs_table(rows: list[dict[str, Any]]) -> pa.Table:

@@ -7,6 +7,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
+from functools import cached_property
 from typing import Any
 
 from synth.errors import InputError
@@ -110,6 +111,11 @@ class SynthConfig:
     def with_(self, **changes: Any) -> SynthConfig:
         """A copy with the given fields changed; None values leave a field as it is."""
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    @cached_property
+    def hash(self) -> str:
+        """semantic_hash(), computed once per value: what a programs row records as its config_hash."""
+        return self.semantic_hash()
 
     def semantic_hash(self) -> str:
         """Hash of what decides the program: constants, strategy, oracle, solver, limits.

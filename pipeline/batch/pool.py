@@ -66,6 +66,18 @@ class TaskQueue:
 
 
 class Pool(Protocol):
+    """What the batch stage (pipeline.batch.stage) asks of the workers, whatever they are."""
+
+    # Each worker is a process of this machine with nothing else in it: a per-process limit (the hard memory cap)
+    # is the frame's own, and its progress markers can be read here (a lost chunk then blames one frame).
+    own_processes: bool
+
+    def slots(self) -> int:
+        """How many chunks run at once."""
+
+    def check_readable(self, url: str, path: str) -> None:
+        """Refuse (UserError), before anything is written, workers that cannot read the frames themselves."""
+
     def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         """Tables as chunks finish, Lost for a chunk whose death is pinned on it, None as a heartbeat while
         nothing finishes; raises WorkerLost when the pool broke with chunks in flight."""
@@ -195,6 +207,13 @@ class LokyPool:
 
     jobs: int
     guard_s: float | None = None
+    own_processes = True
+
+    def slots(self) -> int:
+        return self.jobs
+
+    def check_readable(self, url: str, path: str) -> None:
+        """The workers are processes of this machine: they read what the run read."""
 
     def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from joblib.externals.loky import get_reusable_executor
@@ -247,6 +266,7 @@ class DaskPool:
     # Task keys are the run's own: two runs on one cluster (or a rerun while the scheduler still remembers the
     # last one) must never share a result.
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex[:12])
+    own_processes = False  # threaded workers, maybe on other machines
 
     def slots(self) -> int:
         return self.jobs or max(1, sum(self.client.nthreads().values()))
@@ -363,5 +383,5 @@ def _lost_rows(task: ChunkTask, status: str, reason: str) -> pa.Table:
         hashes = task.read()[2]
     except ChunkUnreadable:
         hashes = [None] * len(task.frames)
-    return programs_table([failure_row(fid, status, reason, n - 1, task.config, task.config_hash, frame_hash=h)
+    return programs_table([failure_row(fid, status, reason, n - 1, task.config, frame_hash=h)
                            for (fid, _, n), h in zip(task.frames, hashes)])

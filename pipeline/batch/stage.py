@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
+from pipeline.batch.options import RunOptions
 from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart
@@ -33,7 +34,6 @@ from synth.config import SynthConfig, as_config
 
 PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
 MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
-BACKENDS = ("loky", "dask")
 
 
 def run_frames(
@@ -52,31 +52,25 @@ def run_frames(
     synthesizer: Callable | None = None,
 ) -> Summary:
     """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
-    (a dataset directory, or one file if the name ends in .parquet); frames already in `out` with the same
-    config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults (docs/api.md).
-    Returns the summary; raises UserError / FramesError / ProgramsError / ConfigError on bad input (nothing
-    written then). `log` receives one line at a time (default: stderr); `terminal` forces the progress bar on or
-    off (default: a bar when stderr is a terminal, else a log line every `log_every_s` seconds). `synthesizer`:
-    what each frame runs instead of synth.synthesize (same signature; a module-level function or a partial of one,
-    which the tasks carry to the workers by reference)."""
-    config = as_config(config)
-    if jobs is not None and jobs < 1:
-        raise UserError(f"--jobs must be at least 1, got {jobs}")
-    if chunk_size < 1:
-        raise UserError(f"--chunk-size must be at least 1, got {chunk_size}")
-    if part_rows < 1:
-        raise UserError(f"--part-rows must be at least 1, got {part_rows}")
-    if backend not in BACKENDS:
-        raise UserError(f"unknown backend {backend!r} (backends: {', '.join(BACKENDS)})")
-    if scheduler and backend != "dask":
-        raise UserError("--scheduler needs --backend dask")
+    (a dataset directory, or one file if the name ends in .parquet); frames already in `out` from the same rows
+    with the same config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults
+    (docs/api.md). Returns the summary; raises UserError / FramesError / ProgramsError / ConfigError on bad input
+    (nothing written then). `log` receives one line at a time (default: stderr); the other keywords are the
+    fields of RunOptions (pipeline.batch.options), which says what each means."""
+    options = RunOptions(jobs, backend, scheduler, chunk_size, part_rows, log_every_s, terminal, synthesizer)
+    return run(frames, out, as_config(config), options, log or _stderr)
+
+
+def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, options: RunOptions,
+        log: Callable[[str], None]) -> Summary:
+    """run_frames with its options as one value."""
     from pipeline.batch.store import is_single_file
 
+    options.check()
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
         check_apart(f"{out}.parts", [("input frames", frames)], directory=True)
-    return _Run(str(frames), Path(out), config, jobs, backend, scheduler, chunk_size, part_rows,
-                log or _stderr, log_every_s, terminal, synthesizer).go()
+    return _Run(str(frames), Path(out), config, options, log).go()
 
 
 def _stderr(line: str) -> None:
@@ -89,14 +83,9 @@ def _stderr(line: str) -> None:
 class _Run:
     """One invocation: check, plan, workers, parts, summary."""
 
-    def __init__(self, frames, out, config, jobs, backend, scheduler, chunk_size, part_rows, log, log_every_s,
-                 terminal, synthesizer) -> None:
-        self.frames, self.out, self.config = frames, out, config
-        self.jobs, self.backend, self.scheduler = jobs, backend, scheduler
-        self.chunk_size, self.part_rows = chunk_size, part_rows
-        self._log, self.log_every_s, self.terminal = log, log_every_s, terminal
-        self.synthesizer = synthesizer
-        self.config_hash = config.semantic_hash()
+    def __init__(self, frames: str, out: Path, config: SynthConfig, options: RunOptions,
+                 log: Callable[[str], None]) -> None:
+        self.frames, self.out, self.config, self.options, self._log = frames, out, config, options, log
         self.started = time.monotonic()
         self.first_result_s: float | None = None
         self._progress = None
@@ -119,7 +108,7 @@ class _Run:
         n_frames, index = dataset.check(hasher)
         store.lock()
         try:
-            plan = store.plan(index, hasher.keys(), self.config_hash)
+            plan = store.plan(index, hasher.keys(), self.config.hash)
             del index, hasher  # 16 + 16 bytes a frame: not kept while the frames run
             return self._locked(store, dataset, n_frames, plan)
         finally:
@@ -128,7 +117,7 @@ class _Run:
     def _locked(self, store, dataset, n_frames: int, plan) -> Summary:
         todo = n_frames - len(plan.done)
         with self._pool(todo) as pool:  # connects to dask: may refuse, and nothing is written yet
-            if pool is not None and hasattr(pool, "check_readable"):
+            if pool is not None:
                 pool.check_readable(dataset.url, dataset.parts[0].path)
             for w in plan.warnings:
                 self.log(w)
@@ -166,14 +155,14 @@ class _Run:
 
         if todo == 0:
             return nullcontext(None)
-        if self.backend == "dask":
+        if self.options.backend == "dask":
             from pipeline.batch.cluster import dask_pool
 
-            return dask_pool(self.scheduler, self.jobs)
-        jobs = min(self.jobs or os.cpu_count() or 1, todo)
+            return dask_pool(self.options.scheduler, self.options.jobs)
+        jobs = min(self.options.jobs or os.cpu_count() or 1, todo)
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
 
-    def _tasks(self, dataset, done, todo: int, slots: int, progress_dir: str | None) -> Iterator:
+    def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
         from pipeline.batch.task import ChunkTask
 
         def runs():
@@ -181,31 +170,32 @@ class _Run:
                 mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
                 yield r.part, r.starts, r.lengths, r.ids, mask
 
-        sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.chunk_size))
+        slots = pool.slots()
+        sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.options.chunk_size))
         for n, (k, frames) in enumerate(chunks(runs(), sizes, MAX_SPAN_ROWS)):
             part = dataset.parts[k]
             yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.columns, self.config,
-                            self.config_hash, hard_cap=self.backend == "loky", synthesizer=self.synthesizer,
+                            hard_cap=pool.own_processes, synthesizer=self.options.synthesizer,
                             progress_dir=progress_dir)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
-        from pipeline.batch.pool import LokyPool, compute
+        from pipeline.batch.pool import compute
         from pipeline.batch.progress import Progress
         from pipeline.batch.rules import PartBuffer
         from pipeline.batch.task import ChunkUnreadable
         from storage.atomic import temp_directory
 
-        local = isinstance(pool, LokyPool)
-        slots = pool.jobs if local else pool.slots()
-        # Workers' progress markers, in the temp directory (not beside the output: a full output disk must not
-        # stop the markers); named by host and pid, so a killed run's folder is removed by the next run.
-        progress_dir = str(temp_directory(Path(tempfile.gettempdir()) / "r2s-run-progress")) if local else None
-        buffer = PartBuffer(self.part_rows, PART_MAX_AGE_S)
-        self._progress = Progress(todo, self._log, self.log_every_s, self.terminal, self.started)
+        # Workers' progress markers, where the workers are processes of this machine's: in the temp directory (not
+        # beside the output: a full output disk must not stop the markers), named by host and pid, so a killed
+        # run's folder is removed by the next run.
+        progress_dir = (str(temp_directory(Path(tempfile.gettempdir()) / "r2s-run-progress"))
+                        if pool.own_processes else None)
+        buffer = PartBuffer(self.options.part_rows, PART_MAX_AGE_S)
+        self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started)
         computed = written = 0
         stopped = True
         try:
-            tasks = self._tasks(dataset, done, todo, slots, progress_dir)
+            tasks = self._tasks(dataset, done, todo, pool, progress_dir)
             for table in compute(pool, tasks, self.log):
                 now = time.monotonic()
                 if table is not None:

@@ -48,7 +48,6 @@ class FrameTask:
     frame_id: str
     scene: Scene
     config: SynthConfig
-    config_hash: str
     # Set only where the worker is a process of its own (loky): an address-space limit is per process, and a
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
@@ -66,7 +65,6 @@ class ChunkTask:
     frames: tuple[tuple[str, int, int], ...]
     columns: tuple[str, ...]
     config: SynthConfig
-    config_hash: str
     hard_cap: bool = False
     synthesizer: Synthesizer | None = None  # None: synth.synthesize
     progress_dir: str | None = None  # where the marker goes; None: progress is not tracked (remote workers)
@@ -124,11 +122,9 @@ def run_chunk(task: ChunkTask) -> pa.Table:
         try:
             scene = frame_to_scene(rows.iloc[start - first: start - first + n])
         except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
-            out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, task.config_hash,
-                                   frame_hash=frame_hash))
+            out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, frame_hash=frame_hash))
             continue
-        out.append(run_frame(FrameTask(frame_id, scene, task.config, task.config_hash, task.hard_cap,
-                                       task.synthesizer, frame_hash)))
+        out.append(run_frame(FrameTask(frame_id, scene, task.config, task.hard_cap, task.synthesizer, frame_hash)))
     if marker is not None:
         try:
             os.unlink(marker)
@@ -144,14 +140,12 @@ def run_frame(task: FrameTask) -> dict:
     _reset_peak_rss()
     try:
         with _hard_memory_cap(config.memory_limit if task.hard_cap else None):
-            return result_row((task.synthesizer or synthesize)(task.scene, config), task.config_hash,
-                              task.frame_hash)
+            return result_row((task.synthesizer or synthesize)(task.scene, config), task.frame_hash)
     except MemoryError:
         status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
     except Exception as exc:  # the run goes on: the frame is recorded as an error, with the reason
         status, message = "error", one_line(f"{type(exc).__name__}: {exc}")
-    return failure_row(task.frame_id, status, message, len(task.scene.others), config, task.config_hash,
-                       runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb(), frame_hash=task.frame_hash)
+    return failure_row(task.frame_id, status, message, len(task.scene.others), config, runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb(), frame_hash=task.frame_hash)
 
 
 def one_line(text: str, limit: int = 300) -> str:

@@ -59,7 +59,7 @@ def test_the_json_document_has_the_documented_keys_in_order(tmp_path):
 def test_programs_parquet_has_the_documented_columns_and_types_and_the_json_values(tmp_path):
     config = SynthConfig()
     result = synthesize(scene_from_dict(SCENE), config)
-    rows = [result_row(result, "0123456789abcdef"), failure_row("bad", "error", "why", 2, config, "0123456789abcdef")]
+    rows = [result_row(result), failure_row("bad", "error", "why", 2, config)]
     pq.write_table(programs_table(rows), tmp_path / "p.parquet")
     table = pq.read_table(tmp_path / "p.parquet")
     documented = documented_columns()
@@ -70,6 +70,7 @@ def test_programs_parquet_has_the_documented_columns_and_types_and_the_json_valu
     assert {k: written[k] for k in doc if k != "stats"} == {k: v for k, v in doc.items() if k != "stats"}
     assert {k: written[k] for k in doc["stats"]} == doc["stats"]
     assert (written["strategy"], written["oracle"], written["solver"]) == (config.strategy, config.oracle, config.solver)
-    assert (written["error"], written["config_hash"]) == (None, "0123456789abcdef")
+    assert (written["error"], written["config_hash"], failed["config_hash"]) == (None, config.semantic_hash(),
+                                                                                config.semantic_hash())
     assert failed["status"] == "error" and failed["error"] == "why" and failed["program"] is None
     assert failed["certified"] is False and failed["strategy"] == config.strategy and failed["smt_queries"] is None

@@ -369,7 +369,7 @@ def _chunk_tasks(frames: Path, size: int, hook: str | None = None, progress: Pat
     config = config or SynthConfig()
     dataset = FramesDataset.open(frames)
     runs = ((r.part, r.starts, r.lengths, r.ids, r.lengths > 0) for r in dataset.runs())
-    return [ChunkTask(f"t{n}", "", dataset.parts[k].path, tuple(fr), dataset.parts[k].columns, config, "h",
+    return [ChunkTask(f"t{n}", "", dataset.parts[k].path, tuple(fr), dataset.parts[k].columns, config,
                       hard_cap=True, synthesizer=hook and fault(hook), progress_dir=None if progress is None else str(progress))
             for n, (k, fr) in enumerate(chunks(runs, size, 10**6))]
 
@@ -541,9 +541,11 @@ def test_dask_local_cluster_replaces_a_dead_worker(small_frames, tmp_path):
 SAME, OTHER = "0123456789abcdef" * 2, "fedcba9876543210" * 2  # frame hashes: the input's, and other rows'
 
 
+CONFIGS = {"h1": SynthConfig(), "h0": SynthConfig(strategy="astar-cpa")}  # the run's config, and another
+
+
 def _row(fid: str, h: str = "h1", status: str = "optimal", runtime: float = 1.0, rows: str | None = SAME) -> dict:
-    return dict(failure_row(fid, "error", "x", 1, SynthConfig(), h, runtime_s=runtime, frame_hash=rows),
-                status=status)
+    return dict(failure_row(fid, "error", "x", 1, CONFIGS[h], runtime_s=runtime, frame_hash=rows), status=status)
 
 
 def _input(ids: list[str]):
@@ -566,13 +568,13 @@ def test_resume_plan_keeps_same_rows_and_hash_recomputes_the_others_and_drops_fo
                                      _row("f", rows=None), _row("g", "h0", rows=OTHER)]))
     store.write_part(programs_table([_row("c", "h1", runtime=2.0)]))
     ids = ["a", "b", "c", "d", "e", "f", "g"]
-    plan = RunStore(tmp_path / "programs").plan(*_input(ids), "h1")
+    plan = RunStore(tmp_path / "programs").plan(*_input(ids), CONFIGS["h1"].hash)
     done = plan.done.contains(*frame_hashes(ids + ["z"]))
     assert list(done) == [True, False, True, False, False, False, False, False]
     assert (plan.stale, plan.stale_example, plan.foreign, plan.superseded) == (1, "b", 1, 1)
     assert (plan.changed, plan.unhashed) == (2, 1) and plan.changed_example in ("e", "g")  # g: config changed too
     fresh = RunStore(tmp_path / "programs")
-    fresh.plan(*_input(ids), "h1")
+    fresh.plan(*_input(ids), CONFIGS["h1"].hash)
     fresh.apply(plan)
     left = read_programs(tmp_path / "programs").set_index("frame_id")
     assert sorted(left.index) == ["a", "c"]

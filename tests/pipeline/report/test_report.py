@@ -34,12 +34,12 @@ def _rows(frames, strategies: tuple[str, ...]) -> list[dict]:
         for scene in frames:
             n = len(scene.others)
             if strategy == "auto" or n <= 20:
-                rows.append(result_row(synthesize(scene, config), config.semantic_hash()))
+                rows.append(result_row(synthesize(scene, config)))
             elif n <= 80:
-                rows.append(failure_row(scene.frame_id, "timeout", "time limit 60 s", n, config,
-                                        config.semantic_hash(), runtime_s=60.0, peak_rss_mb=512.0))
+                rows.append(failure_row(scene.frame_id, "timeout", "time limit 60 s", n, config, runtime_s=60.0,
+                                        peak_rss_mb=512.0))
             else:
-                rows.append(failure_row(scene.frame_id, "error", ERROR_MESSAGE, n, config, config.semantic_hash()))
+                rows.append(failure_row(scene.frame_id, "error", ERROR_MESSAGE, n, config))
     return rows
 
 
@@ -300,7 +300,7 @@ def test_motion_relations_are_counted_only_where_programs_have_them(real_frames,
     for scene in [s for s in real_frames if len(s.others) <= 25][:6]:
         moving = Scene(scene.frame_id, tuple(replace(e, speed=rng.choice([0.0, 0.3, rng.uniform(1, 12)]))
                                              for e in scene.entities))
-        rows.append(result_row(synthesize(moving, config), config.semantic_hash()))
+        rows.append(result_row(synthesize(moving, config)))
     out = tmp_path / "report"
     proc = run_r2s("report", str(_write(rows, tmp_path / "programs.parquet")), "--out", str(out))
     assert proc.returncode == 0, proc.stderr

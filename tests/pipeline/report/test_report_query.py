@@ -32,7 +32,7 @@ def inputs(real_frames, tmp_path_factory) -> tuple[Path, Path]:
     write_frames([r for s in real_frames for r in scene_to_rows(s, source="test")], frames)
     config = SynthConfig()
     programs = d / "programs.parquet"
-    pq.write_table(programs_table([result_row(synthesize(s, config), config.semantic_hash()) for s in real_frames]),
+    pq.write_table(programs_table([result_row(synthesize(s, config)) for s in real_frames]),
                    programs)
     return frames, programs
 
