@@ -23,16 +23,30 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as ds
+import pyarrow.parquet as pq
 
 from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, ROAD_COLUMNS, FramesError
 from storage.frame_index import FrameIndex, frame_hashes
-from storage.parquet import check_column_types, dataset_files, filesystem, footer, open_file
-from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
+from storage.parquet import (
+    check_column_types,
+    check_value_sizes,
+    dataset_files,
+    filesystem,
+    footer,
+    null_count,
+    open_file,
+)
+from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_frame_id, check_identifier
 
 # What the check reads: the columns validate_frames looks at. String columns are read dictionary-encoded:
 # a frame id or entity id repeats on many rows, so the work is per distinct value, not per row.
 CHECK_COLUMNS = ("frame_id", "entity_id", "type", "x", "y", "heading", "is_ego")
 DICTIONARY_COLUMNS = ("frame_id", "entity_id", "type")
+# Text columns are bounded before a byte of them is decoded (storage.parquet.check_value_sizes): ids are at most
+# 256 characters (frame ids; entity ids 64), so an average of MAX_VALUE_BYTES a value is far above any real file.
+STRING_COLUMNS = tuple(f.name for f in FRAMES_SCHEMA if pa.types.is_string(f.type))
+MAX_VALUE_BYTES = 1024
+OPTIONAL_SCHEMA = pa.schema(list(OPTIONAL_COLUMNS.items()))
 
 
 @dataclass(frozen=True)
@@ -64,6 +78,20 @@ class FramesDataset:
             if missing:
                 raise FramesError(f"{where} is not a frames file: it lacks column(s) {', '.join(missing)}")
             check_column_types(schema, FRAMES_SCHEMA, where, FramesError)
+            check_column_types(schema, OPTIONAL_SCHEMA, where, FramesError)  # a speed stored as text, ...
+            check_value_sizes(meta, STRING_COLUMNS, MAX_VALUE_BYTES, where, FramesError)
+            # A row without a frame id belongs to no frame: refused here, where even `r2s scene` (which reads only
+            # its frame's rows, and a filter on frame_id never matches a null) sees it.
+            nulls = null_count(meta, "frame_id")
+            if nulls is None:
+                try:
+                    with pafs.open_input_file(f) as handle:
+                        nulls = pq.ParquetFile(handle).read(columns=["frame_id"]).column("frame_id").null_count
+                except (pa.ArrowException, OSError, ValueError) as exc:
+                    raise FramesError(f"{where} is not a readable Parquet file ({type(exc).__name__}: "
+                                      f"{str(exc)[:120]})") from None
+            if nulls:
+                raise FramesError(f"{where}: column frame_id has {nulls} missing value(s): every row belongs to a frame")
             optional = tuple(c for c in OPTIONAL_COLUMNS if c in schema.names)
             parts.append(FramesPart(f, meta.num_rows,
                                     tuple(meta.row_group(i).num_rows for i in range(meta.num_row_groups)), optional))
@@ -156,7 +184,12 @@ class FramesDataset:
         schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in optional])
         tables = []
         for part in self.parts:
-            table = open_file(self.url, part.path).read(columns=list(part.columns))
+            try:
+                table = open_file(self.url, part.path).read(columns=list(part.columns))
+            except (pa.ArrowException, OSError) as exc:  # the check read some columns; a page of another is bad
+                raise FramesError(f"{self.where(part)} is not a readable Parquet file "
+                                  f"({type(exc).__name__}: {str(exc)[:120]})") from None
+            _valid(table, self.where(part))
             for c in optional:
                 if c not in part.optional:
                     table = table.append_column(c, pa.nulls(table.num_rows, OPTIONAL_COLUMNS[c]))
@@ -169,8 +202,22 @@ class FramesDataset:
         pafs, _ = filesystem(self.source)
         dataset = ds.dataset([p.path for p in self.parts], format="parquet", filesystem=pafs)
         columns = list(FRAMES_COLUMNS) + [c for c in (*OPTIONAL_COLUMNS, *ROAD_COLUMNS) if c in dataset.schema.names]
-        table = dataset.to_table(columns=columns, filter=ds.field("frame_id") == frame_id)
+        try:
+            table = dataset.to_table(columns=columns, filter=ds.field("frame_id") == frame_id)
+        except (pa.ArrowException, OSError) as exc:
+            raise FramesError(f"{self.source} is not a readable frames dataset ({str(exc)[:120]})") from None
+        _valid(table, self.source)
         return table if table.num_rows else None
+
+
+def _valid(table: pa.Table, where: str) -> pa.Table:
+    """Rows as read are what their types say: pyarrow checks neither UTF-8 nor dictionary indices on reading, and
+    a corrupt page that still decompresses would reach pandas (exit 1) or a program."""
+    try:
+        table.validate(full=True)
+    except pa.ArrowException as exc:
+        raise FramesError(f"{where} holds corrupt values ({str(exc)[:100]})") from None
+    return table
 
 
 @dataclass(frozen=True)
@@ -188,7 +235,11 @@ class FrameRuns:
 def _dictionary(column: pa.ChunkedArray | pa.Array) -> pa.DictionaryArray:
     arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
     if not pa.types.is_dictionary(arr.type):
-        arr = pc.dictionary_encode(arr)
+        return pc.dictionary_encode(arr)
+    try:  # as read from a file: pyarrow does not check that each index is within the dictionary
+        arr.validate(full=True)
+    except pa.ArrowException as exc:
+        raise FramesError(f"a dictionary-encoded column is corrupt ({str(exc)[:100]})") from None
     return arr
 
 
@@ -256,6 +307,11 @@ class FramesCheck:
             return
         fid = _dictionary(table.column("frame_id"))
         starts, ids = _run_starts(fid)
+        for k, name in enumerate(ids):  # printed into programs' file names and reports: printable, 1 to 256
+            try:
+                check_frame_id(name)
+            except SceneError as exc:
+                raise FramesError(f"{exc} (row {int(starts[k])} of its row group)") from None
         lengths = np.diff(np.append(starts, n))
 
         def frame_at(row: int) -> str:

@@ -17,6 +17,9 @@ from pyarrow import fs
 
 from storage.regular_files import check_regular
 
+# A column chunk's own bytes beside its values: page headers, statistics, a dictionary's offsets.
+CHUNK_SLACK_BYTES = 64 * 1024
+
 
 def filesystem(path: str):
     """(pyarrow filesystem, path inside it) for a local path or a URL (s3://, gs://, file://, or any fsspec
@@ -90,6 +93,43 @@ def check_column_types(schema: pa.Schema, expected: pa.Schema, where: str, error
                 schema.field(field.name).type):
             raise error(f"{where}: column {field.name} is {schema.field(field.name).type}, not {field.type} "
                         "(a column does not have the schema's type)")
+
+
+def check_value_sizes(meta: pq.FileMetaData, columns: tuple[str, ...], max_average: int, where: str,
+                      error: type[ValueError]) -> None:
+    """Refuse, from the footer alone, a file whose values of `columns` are far longer than `max_average` bytes on
+    average in some row group: a column chunk's uncompressed size bounds the bytes its values decode to, and a few
+    kilobytes of zstd can hold a gigabyte of one repeated character (a 135 KB file with one 1 GiB cell took 10 GB
+    of memory to decode). A dictionary page counts too, so one huge distinct value is caught however encoded."""
+    try:  # a corrupt footer's names may not even decode
+        chunks = [(g, meta.row_group(g).num_rows, meta.row_group(g).column(c)) for g in range(meta.num_row_groups)
+                  for c in range(meta.row_group(g).num_columns)]
+        chunks = [(g, rows, chunk.path_in_schema, chunk.total_uncompressed_size) for g, rows, chunk in chunks]
+    except (ValueError, pa.ArrowException) as exc:
+        raise error(f"{where} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:100]})") from None
+    for g, rows, name, size in chunks:
+        if name in columns:
+            if size > CHUNK_SLACK_BYTES + rows * max_average:
+                raise error(f"{where}: column {name} holds {size:,} bytes in {rows:,} row(s) of row group {g}, more "
+                            f"than {max_average:,} a value: a value is far longer than one may be")
+
+
+def null_count(meta: pq.FileMetaData, column: str) -> int | None:
+    """The nulls of a column over a file's row groups from the footer's statistics; None where a row group has
+    none (a writer may leave them out: the column must then be read to know)."""
+    total = 0
+    try:
+        for g in range(meta.num_row_groups):
+            group = meta.row_group(g)
+            chunk = next((group.column(c) for c in range(group.num_columns)
+                          if group.column(c).path_in_schema == column), None)
+            stats = chunk.statistics if chunk is not None else None
+            if stats is None or not stats.has_null_count:
+                return None
+            total += stats.null_count
+    except (ValueError, pa.ArrowException):  # a corrupt footer: the column is read instead, and refused there
+        return None
+    return total
 
 
 def footer(pafs, path: str, where: str, error: type[ValueError]) -> pq.FileMetaData:

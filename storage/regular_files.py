@@ -88,9 +88,14 @@ def open_regular(path: str | os.PathLike, limit: int | None = None) -> BinaryIO:
 
 def read_regular(path: str | os.PathLike, limit: int) -> bytes:
     """The bytes of a regular file of at most `limit` bytes; never reads more than limit + 1 (a file that grows
-    while it is read is still refused)."""
+    while it is read is still refused). Reads its size + 1 first, not limit + 1: read(n) reserves n bytes up front,
+    and a limit of gigabytes would reserve that much address space for a small file."""
     with open_regular(path, limit) as fh:
-        data = fh.read(limit + 1)
-    if len(data) > limit:
+        chunks = [fh.read(min(os.fstat(fh.fileno()).st_size, limit) + 1)]
+        total = len(chunks[0])
+        while chunks[-1] and total <= limit:  # it grew since fstat: read on, never past limit + 1
+            chunks.append(fh.read(min(limit + 1 - total, 2**20)))
+            total += len(chunks[-1])
+    if total > limit:
         raise _too_large(path, limit)
-    return data
+    return b"".join(chunks)

@@ -72,18 +72,18 @@ class SynthConfig:
     def __post_init__(self) -> None:
         for name in ("delta1", "delta2"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0.0 < v < 45.0):
+            if not (_number(v) and 0.0 < v < 45.0):
                 raise ConfigError(f"{name} must be a number in (0, 45) degrees, got {v!r}")
         # Ranges print with 2 decimals; a width under 0.02 could not stay centred on the observed value.
         for name in ("c_dist", "c_head"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0.02 <= v <= 1000.0):
+            if not (_number(v) and 0.02 <= v <= 1000.0):
                 raise ConfigError(f"{name} must be a number in [0.02, 1000], got {v!r}")
-        if not (isinstance(self.dreal_delta, (int, float)) and 0.0 < self.dreal_delta < 1.0):
+        if not (_number(self.dreal_delta) and 0.0 < self.dreal_delta < 1.0):
             raise ConfigError(f"dreal_delta must be a number in (0, 1), got {self.dreal_delta!r}")
         for name in ("time_limit", "memory_limit"):
             v = getattr(self, name)
-            if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+            if v is not None and not (_number(v) and v > 0.0):
                 raise ConfigError(f"{name} must be a positive number of {'seconds' if 'time' in name else 'MB'}")
         if not (_number(self.pos_uncertainty) and 0.0 <= self.pos_uncertainty < MAX_POS_SIGMA):
             raise ConfigError(f"pos_uncertainty must be a number of metres in [0, {MAX_POS_SIGMA:g}), "
@@ -144,7 +144,13 @@ MOTION_FIELDS = ("motion", "v_stop", "dv", "c_speed", "speed_uncertainty")
 
 
 def _number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    """A finite number: true and false are not numbers (TOML `delta1 = true`), nor is an integer beyond floats."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:  # an int of 400 digits
+        return False
 
 
 UNCERTAINTY_FIELDS = ("pos_uncertainty", "heading_uncertainty", "speed_uncertainty")

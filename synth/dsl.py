@@ -29,7 +29,7 @@ from synth.parts.heading import FACINGS, AbsoluteHeading, FacingRelation, Relati
 from synth.parts.motion import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary
 from synth.parts.position import DIRECTIONS, AbsoluteXYPos, DirectionPos, LocalXYPos
 from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_identifier
-from synth.syntax import DslError, Line, Range, fmt_number
+from synth.syntax import BLANKS, DslError, Line, Range, fmt_number, lines
 
 Position = Union[DirectionPos, LocalXYPos, AbsoluteXYPos]
 Heading = Union[FacingRelation, RelativeHeading, AbsoluteHeading]
@@ -114,9 +114,9 @@ def parse_statements(text: str, types: Collection[str]) -> tuple[Statement, ...]
     synth.pattern, add their type classes). Errors name the line and column."""
     declared: set[str] = set()
     statements = []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in enumerate(lines(text), start=1):
         line = raw.split("#", 1)[0]
-        if not line.strip():
+        if not line.strip(BLANKS):
             continue
         st = _statement(Line(line, lineno), declared, types)
         declared.add(st.id)

@@ -12,6 +12,7 @@ import json
 import keyword
 import math
 import re
+import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
@@ -48,6 +49,8 @@ VEHICLE_CLASSES = frozenset(
 
 EGO_ID = "ego"
 MAX_ID_LENGTH = 64
+MAX_FRAME_ID_LENGTH = 256
+MAX_COORDINATE = 1e6  # metres from ego, |x| and |y|
 DEFAULT_MAX_ENTITIES = 1000
 # Bounds on a measurement error (robust synthesis): metres of position, degrees of heading, m/s of speed.
 MAX_POS_SIGMA = 1000.0
@@ -88,11 +91,35 @@ def check_identifier(name: Any, what: str = "id") -> str:
     return name
 
 
+def _coordinate(value: Any, what: str) -> float:
+    """A position in metres within the supported range (docs/formats.md): beyond MAX_COORDINATE the exact
+    certification of programs fails (1e154 m squared is past every float), and a subnormal (5e-324) loses the
+    precision its bearings need; 0 and every normal float up to 1e6 m in magnitude are certified."""
+    v = _finite(value, what)
+    if abs(v) > MAX_COORDINATE or (v != 0.0 and abs(v) < sys.float_info.min):
+        raise SceneError(f"{what} is {value!r}, outside the supported range: 0 or 2.2e-308 to {MAX_COORDINATE:g} m "
+                         "in magnitude")
+    return v
+
+
+def check_frame_id(frame_id: Any) -> str:
+    """Return frame_id if it is a frame id (scene JSON, frames files): printable text of 1 to MAX_FRAME_ID_LENGTH
+    characters (it names output files and report rows), else raise SceneError."""
+    if not isinstance(frame_id, str) or not frame_id or len(frame_id) > MAX_FRAME_ID_LENGTH or not frame_id.isprintable():
+        shown = repr(frame_id[:40]) + ("..." if len(frame_id) > 40 else "") if isinstance(frame_id, str) else \
+            type(frame_id).__name__
+        raise SceneError(f"frame_id {shown} is not a printable string of 1 to {MAX_FRAME_ID_LENGTH} characters")
+    return frame_id
+
+
 def _finite(value: Any, what: str) -> float:
     # bool is an int subclass; true/false in JSON is never a coordinate.
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{what} must be a number, got {type(value).__name__}")
-    f = float(value)
+    try:
+        f = float(value)
+    except OverflowError:  # an integer of hundreds of digits (JSON has no bound): no float holds it
+        raise SceneError(f"{what} must be finite, got an integer of {value.bit_length()} bits") from None
     if not math.isfinite(f):
         raise SceneError(f"{what} must be finite, got {value!r}")
     return f
@@ -272,8 +299,8 @@ def entity_from_mapping(raw: Any, index: int) -> Entity:
     return Entity(
         id=eid,
         type=etype,
-        x=_finite(raw["x"], f"entity {eid!r} x"),
-        y=_finite(raw["y"], f"entity {eid!r} y"),
+        x=_coordinate(raw["x"], f"entity {eid!r} x"),
+        y=_coordinate(raw["y"], f"entity {eid!r} y"),
         heading=_finite(raw["heading"], f"entity {eid!r} heading"),
         length=dims[0],
         width=dims[1],
@@ -326,9 +353,7 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
     if "entities" not in raw:
         raise _lacks(raw, ["entities"], SCENE_KEYS, "scene")
     _unknown_keys(raw, SCENE_KEYS, "scene")
-    frame_id = raw.get("frame_id", "scene")
-    if not isinstance(frame_id, str) or not frame_id or len(frame_id) > 256 or not frame_id.isprintable():
-        raise SceneError("frame_id must be a printable string of 1 to 256 characters")
+    frame_id = check_frame_id(raw.get("frame_id", "scene"))
     ents = raw.get("entities")
     if not isinstance(ents, list):
         raise SceneError("'entities' must be a list")

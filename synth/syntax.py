@@ -48,9 +48,20 @@ def printed(v: float) -> Fraction:
     return Fraction(fmt_number(v))
 
 
+# The DSL is ASCII: digits are 0-9 (not Arabic-Indic or full-width digits, which \d and float() would read as
+# numbers), blanks are spaces and tabs, and a line ends at \n, \r\n or \r only (str.splitlines would also end one
+# at U+2028, U+0085, a form feed...). Any other character is "unexpected", with its line and column.
 _TOKEN = re.compile(
-    r"\s*(?:(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/]))"
+    r"[ \t]*(?:(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/]))",
+    re.ASCII,
 )
+_LINE_END = re.compile(r"\r\n|\r|\n")
+BLANKS = " \t"
+
+
+def lines(text: str) -> list[str]:
+    """The lines of DSL text (see _TOKEN)."""
+    return _LINE_END.split(text)
 
 
 @dataclass(frozen=True)
@@ -63,11 +74,12 @@ class _Tok:
 def _tokens(line: str, lineno: int) -> list[_Tok]:
     out, pos = [], 0
     while pos < len(line):
-        if line[pos:].strip() == "":
+        if line[pos:].strip(BLANKS) == "":
             break
         m = _TOKEN.match(line, pos)
         if not m or m.end() == pos:
-            raise DslError(f"line {lineno} column {pos + 1}: unexpected character {line[pos:].lstrip()[:1]!r}")
+            bad = pos + len(line[pos:]) - len(line[pos:].lstrip(BLANKS))
+            raise DslError(f"line {lineno} column {bad + 1}: unexpected character {line[bad]!r}")
         kind = m.lastgroup or "?"
         out.append(_Tok(kind, m.group(kind), m.start(kind) + 1))
         pos = m.end()

@@ -15,6 +15,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 
 from synth.errors import ExitCode, exit_code
 from synth.version import __version__
@@ -130,6 +131,9 @@ def main(argv: list[str] | None = None) -> int:
         return ExitCode.BAD_INPUT
     module = importlib.import_module(VERBS[verb][0])
     args = build_parser(verb).parse_args(argv[1:])
+    # A verb's messages are its own lines: numpy's floating-point warnings (overflow in an extreme input, ...)
+    # would print before them, and the input is checked and refused on its own terms.
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
     try:
         return int(module.run(args) or ExitCode.OK)
     except KeyboardInterrupt:
@@ -139,10 +143,12 @@ def main(argv: list[str] | None = None) -> int:
         return ExitCode.OK
     except Exception as exc:  # the one place where an error becomes an exit code (its kind's, synth.errors)
         code = exit_code(exc)
+        message = " ".join(str(exc).splitlines())  # one line, whatever the message (a library's may hold several)
         if code != ExitCode.INTERNAL_ERROR:  # bad input, a failed check, no variant: its one line says it all
-            sys.stderr.write(f"r2s {verb}: {exc}\n")
+            sys.stderr.write(f"r2s {verb}: {message}\n")
             return code
         if os.environ.get("R2S_DEBUG"):  # a bug: one line by default, the traceback on request
             raise
-        sys.stderr.write(f"r2s {verb}: internal error: {type(exc).__name__}: {exc} (R2S_DEBUG=1 shows the traceback)\n")
+        sys.stderr.write(f"r2s {verb}: internal error: {type(exc).__name__}: {message} (R2S_DEBUG=1 shows the "
+                         "traceback)\n")
         return code

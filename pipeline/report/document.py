@@ -23,7 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.programs import STATUSES
-from pipeline.report.plots import Plot, all_plots
+from pipeline.report.plots import PLOT_FILES, Plot, all_plots
 from pipeline.report.stats import (
     ABSOLUTE_COST_PER_ENTITY,
     FailureGroup,
@@ -312,8 +312,38 @@ def _walk(doc: Document, heading: Callable[[str], str], table: Callable[[Table],
     return out
 
 
+# Every string of the document is plain text, much of it data (frame ids, strategy names, error messages,
+# programs, file names: anyone's). The HTML renderer escapes it with html.escape; the Markdown renderer with
+# md_text and md_code, so that a Markdown viewer shows the text and nothing else: no raw HTML (a `<script` or an
+# `<iframe src=javascript:...>` in a frame id), no link, no code span or emphasis, no new block from a newline
+# or a leading `#`, `-` or `1.`, and no code fence closed from inside. The only links are to the plots we wrote.
+_MD_ACTIVE = re.compile(r"([\\`*_\[\]|~])")
+_MD_NUMBERED = re.compile(r"\d+(?=[.)])")
+
+
+def md_text(text: str, block: bool = True) -> str:
+    """Plain text as Markdown inline content that renders as exactly that text, on one line; `block`: it starts a
+    block (a paragraph), where a leading `-` or `1.` would make a list (in a table cell or a heading it would not)."""
+    text = " ".join(str(text).splitlines()).strip()  # every line break CommonMark or Python knows
+    text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    text = _MD_ACTIVE.sub(r"\\\1", text)
+    if not block:
+        return text
+    if text[:1] in ("-", "+", "=", "#"):  # a list item, a heading or its underline at the start of a block
+        return "\\" + text
+    start = _MD_NUMBERED.match(text)  # "1." or "1)": an ordered list
+    return f"{start.group()}\\{text[start.end():]}" if start else text
+
+
+def md_code(code: str) -> str:
+    """A fenced code block that holds `code` verbatim: its fence is longer than any run of backticks in it."""
+    longest = max((len(run) for run in re.findall(r"`+", code)), default=0)
+    fence = "`" * max(3, longest + 1)
+    return f"{fence}\n{code}\n{fence}"
+
+
 def _md_cell(text: str, mark: str | None) -> str:
-    text = text.replace("|", "\\|").replace("\n", " ")
+    text = md_text(text, block=False)
     return f"**{text}**" if mark == "best" and text else text
 
 
@@ -331,11 +361,20 @@ def _md_table(t: Table) -> str:
 
 
 def render_markdown(doc: Document) -> str:
-    out = [f"# {doc.title}", *doc.intro]
-    out += _walk(doc, lambda title: f"## {title}", _md_table,
-                 lambda plot: f"![{plot.title}]({plot.filename})\n\n*{plot.caption}*", lambda text: text,
-                 lambda d: f"<details><summary>{html.escape(d.summary)}</summary>\n\n```\n{d.code}\n```\n\n</details>")
+    out = [f"# {md_text(doc.title, block=False)}", *map(md_text, doc.intro)]
+    out += _walk(doc, lambda title: f"## {md_text(title, block=False)}", _md_table,
+                 lambda plot: f"![{md_text(plot.title)}]({_own_file(plot.filename)})\n\n*{md_text(plot.caption)}*",
+                 md_text,
+                 lambda d: f"<details><summary>{html.escape(' '.join(d.summary.splitlines()))}</summary>\n\n"
+                           f"{md_code(d.code)}\n\n</details>")
     return "\n\n".join(out) + "\n"
+
+
+def _own_file(name: str) -> str:
+    """A link target: only the name of a file this report wrote beside report.md (PLOT_FILES)."""
+    if name not in PLOT_FILES:
+        raise ValueError(f"not a file of the report: {name!r}")
+    return name
 
 
 # ------------------------------------------------------------------------------------------------ html

@@ -21,7 +21,9 @@ def check_replaceable(target: Path) -> None:
         return
     if not target.is_dir():
         raise UserError(f"--out {target} exists and is not a directory")
-    foreign = sorted(e.name for e in target.iterdir() if e.name not in report_files())
+    # A report's own files are regular files: a folder or a link named report.md is the user's, never ours.
+    foreign = sorted(e.name for e in target.iterdir()
+                     if e.name not in report_files() or e.is_symlink() or not e.is_file())
     if foreign:
         raise UserError(f"--out {target} holds files that are not part of a report ({', '.join(foreign[:3])}); "
                         "choose an empty or new directory")

@@ -15,7 +15,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import pytest
 from hypothesis import HealthCheck, example, given, settings
 
 from tests.support import ROOT
@@ -26,10 +25,6 @@ HEADROOM = 2**30
 ALARM_S = 20
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 22: one flipped byte in a row group's page (the shipped excerpt's frames, byte len * 0.1875 XOR 1) "
-    "makes pyarrow's ParquetReader.read_all raise OSError past read_frames: `r2s scene` exits 1, not 2. "
-    "The frames reader's owner removes this mark with the fix"))
 def test_the_frames_reader_fuzz_finds_nothing_in_a_child_process():
     proc = subprocess.run([sys.executable, "-c", "from tests.extractors.test_fuzz_frames import main; main()"],
                           capture_output=True, text=True, cwd=ROOT, timeout=600)
@@ -57,7 +52,7 @@ def main() -> None:
     @settings(derandomize=True, max_examples=150, deadline=None, database=None,
               suppress_health_check=list(HealthCheck))
     @given(EDITS)
-    @example([("flip", 0.1875, 0.0, b"\x01")])  # a page of a row group cut short: pyarrow raises OSError
+    @example([("flip", 0.1875, 0.0, b"\x01")])  # a page of a row group cut short (pyarrow raised OSError past it)
     def run(edits):
         data = mutated(original, edits, max_span=256)
         path = work / "fuzz.parquet"

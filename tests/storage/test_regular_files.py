@@ -205,3 +205,18 @@ def test_open_regular_never_blocks_and_names_what_it_found(kind, tmp_path):
 
 def test_shipped_inputs_are_regular():
     assert check_regular(DATA.parent.parent / FRAMES).st_size > 0
+
+
+def test_a_small_file_under_a_large_limit_reserves_no_more_than_its_size(tmp_path):
+    """read(n) allocates n bytes up front: under a 1 GiB address-space cap, reading 10 bytes with a limit of
+    4 GiB must not ask for 4 GiB (a child process, so the cap is its own)."""
+    import subprocess
+    import sys
+
+    f = tmp_path / "f"
+    f.write_bytes(b"0123456789")
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_AS, (2**30, 2**30)); "
+            "from storage.regular_files import read_regular; "
+            f"print(read_regular({str(f)!r}, 4 * 2**30).decode())")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 0 and proc.stdout == "0123456789\n", proc.stderr[-300:]

@@ -431,17 +431,17 @@ def test_heartbeats_while_no_frame_finishes(small_frames, tmp_path, monkeypatch)
 
 def test_a_frame_that_is_not_a_scene_is_an_error_row(small_frames, tmp_path):
     df = read_frames(small_frames)
-    # The file as a whole is valid (bad ids or types refuse it whole, see test_extract_untrusted); this frame's id
-    # is longer than a scene's frame_id may be, which only the frame's own validation sees.
-    bad = "scene-x/" + "9" * 300
-    df.loc[df["frame_id"] == df["frame_id"].iloc[-1], "frame_id"] = bad
+    # The file as a whole is valid (bad ids or types refuse it whole, see test_extract_untrusted); this frame has an
+    # entity beyond the coordinates a scene supports (2e6 m away), which only the frame's own validation sees.
+    bad = df["frame_id"].iloc[-1]
+    df.loc[(df["frame_id"] == bad) & ~df["is_ego"], "x"] = 2e6
     frames, out = tmp_path / "frames.parquet", tmp_path / "programs.parquet"
     write_frames(df, frames)
     proc = run_r2s("run", str(frames), "--out", str(out), "--jobs", "2")
     assert proc.returncode == 0, proc.stderr
     programs = _programs(out)
     assert programs.loc[bad, "status"] == "error"
-    assert "frame_id" in programs.loc[bad, "error"]
+    assert "supported range" in programs.loc[bad, "error"]
     assert (programs.drop(index=bad)["status"] == "optimal").all()
 
 
