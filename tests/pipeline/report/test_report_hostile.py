@@ -35,12 +35,11 @@ def hostile_report(real_frames, tmp_path_factory) -> Path:
     config = SynthConfig()
     rows = []
     for k, (fid, scene) in enumerate(zip(HOSTILE_IDS, real_frames)):
-        row = result_row(synthesize(scene, config), config.semantic_hash())
+        row = result_row(synthesize(scene, config))
         row.update(frame_id=fid, program=HOSTILE_PROGRAM if k % 2 == 0 else row["program"],
                    strategy=f"auto{IFRAME}" if k < 3 else "auto")
         rows.append(row)
-        rows.append(failure_row(f"err{SCRIPT}{k}", "error", HOSTILE_ERROR, len(scene.others), config,
-                                config.semantic_hash()))
+        rows.append(failure_row(f"err{SCRIPT}{k}", "error", HOSTILE_ERROR, len(scene.others), config))
     where = tmp_path_factory.mktemp("hostile")
     pq.write_table(programs_table(rows), where / "programs.parquet")
     proc = run_r2s("report", str(where / "programs.parquet"), "--frames", f"frames{SCRIPT}.parquet",
