@@ -107,6 +107,10 @@ class SynthConfig:
         _one_of("strategy", self.strategy, STRATEGIES)
         _one_of("oracle", self.oracle, ORACLES)
         _one_of("solver", self.solver, SOLVERS)
+        if self.strategy == "monolithic" and self.solver != "z3":
+            # The baseline is one z3 Optimize problem; dReal has no optimiser, and answering with z3 under the
+            # name of dReal would misreport which solver a benchmark measured.
+            raise ConfigError("strategy monolithic is one z3 optimisation problem: use it with --solver z3")
 
     def with_(self, **changes: Any) -> SynthConfig:
         """A copy with the given fields changed; None values leave a field as it is."""

@@ -41,3 +41,9 @@ def test_an_int_and_the_same_float_are_one_setting():
     assert SynthConfig(time_limit=10, pos_uncertainty=1).semantic_hash() == \
         SynthConfig(time_limit=10.0, pos_uncertainty=1.0).semantic_hash()
     assert SynthConfig(time_limit=10).semantic_hash() != SynthConfig(time_limit=11).semantic_hash()
+
+
+def test_monolithic_is_refused_with_dreal_instead_of_running_z3_under_its_name():
+    SynthConfig(strategy="monolithic", solver="z3")  # the paper's Pure-SMT baseline
+    with pytest.raises(ConfigError, match="monolithic .* --solver z3"):
+        SynthConfig(strategy="monolithic", solver="dreal")
