@@ -12,9 +12,8 @@ import math
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -32,6 +31,9 @@ from extractors.naming import SceneNames
 from storage.atomic import atomic_path
 from synth.roadmap import RoadMap
 from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
+
+if TYPE_CHECKING:  # pandas is imported where rows are tabled: `r2s extract --help` and the sources need it not
+    import pandas as pd
 
 
 def frame_rows(
@@ -83,6 +85,8 @@ def known_speed(v: Any) -> float | None:
 
 def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
     """Rows as a table of exactly FRAMES_SCHEMA (plus optional columns present), validated."""
+    import pandas as pd
+
     if not isinstance(rows, pd.DataFrame):
         optional = [c for c in {**OPTIONAL_COLUMNS, **ROAD_COLUMNS} if any(c in r for r in rows)]
         rows = pd.DataFrame(rows, columns=list(FRAMES_COLUMNS) + optional)
@@ -112,6 +116,8 @@ def validate_frames(df: pd.DataFrame) -> None:
     """The rules every frames table obeys (finite positions, known types, one ego per frame, ids fit to print
     into programs, unique per frame, frames contiguous); the same check streams over datasets
     (extractors.frames_dataset.FramesCheck), so both refuse with the same words."""
+    import pandas as pd
+
     missing = [c for c in FRAMES_COLUMNS if c not in df.columns]
     if missing:
         raise FramesError(f"lacks column(s) {', '.join(missing)}")
@@ -140,6 +146,8 @@ def _dim(v: Any) -> float | None:
 
 def _given(v: Any) -> float | None:
     # NaN is how pandas stores a missing float; anything else (negative, inf) is for the scene to refuse.
+    import pandas as pd  # loaded already wherever rows come from pandas
+
     return None if v is None or pd.isna(v) else float(v)
 
 

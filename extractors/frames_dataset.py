@@ -22,7 +22,6 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from extractors.frames_schema import FRAMES_COLUMNS, FRAMES_SCHEMA, OPTIONAL_COLUMNS, ROAD_COLUMNS, FramesError
@@ -199,6 +198,8 @@ class FramesDataset:
     def find(self, frame_id: str) -> pa.Table | None:
         """The rows of one frame (row-group statistics skip most of a large dataset), with their road columns, or
         None."""
+        import pyarrow.dataset as ds  # it loads pandas: only a lookup pays for it, not `r2s extract --help`
+
         pafs, _ = filesystem(self.source)
         dataset = ds.dataset([p.path for p in self.parts], format="parquet", filesystem=pafs)
         columns = list(FRAMES_COLUMNS) + [c for c in (*OPTIONAL_COLUMNS, *ROAD_COLUMNS) if c in dataset.schema.names]

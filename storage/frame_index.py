@@ -11,13 +11,14 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 
 import numpy as np
-from pandas.util import hash_array
 
 _KEYS = ("r2sgen.frame_id1", "r2sgen.frame_id2")  # hash_array wants exactly 16 bytes per key
 
 
 def frame_hashes(ids: Sequence[str] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(hi, lo) uint64 arrays, one pair per id."""
+    from pandas.util import hash_array  # pandas loads where ids are hashed, not for `r2s extract --help`
+
     values = np.asarray(ids, dtype=object)
     return (hash_array(values, hash_key=_KEYS[0], categorize=False),
             hash_array(values, hash_key=_KEYS[1], categorize=False))
