@@ -40,6 +40,9 @@ and runs every sampled scene through synth.semantics.check):
   parser takes ~1 ms per name token, which for the 9,560 pairs of a 141-entity frame would be 8 s of
   compiling (one string per entity: 0.2 s). The requirements stay off when the global parameter
   r2s_allow_collisions is overridden (`r2s sample --allow-collisions`, or `scenic -p r2s_allow_collisions True`).
+- The road (synth.scenic_road), only for a scene that carries one: its lanes, crosswalks, intersections and
+  drivable areas as PolygonalRegions keyed by feature id, and helpers that say where an object's centre is as
+  the lane facts do; the record then holds the road too.
 - Motion (synth.parts.motion), only in programs with MOTION clauses: every object gets `with speed ...` (scenic
   3.1.1, core/object_types.py: `speed` defaults to 0 and `velocity` to Vector(0, speed, 0) rotated by the
   orientation, so the velocity follows the heading), ego its recorded speed; speeds are never negative (the
@@ -162,6 +165,10 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
     # Each part's own helpers, once, where some clause of the program uses them.
     carried = {name for st in program.statements for name, _ in st.parts}
     lines += [text for p in all_parts() if p.name in carried and (text := p.scenic_prelude(config))]
+    if scene.road is not None:
+        from synth.scenic_road import road_scenic  # numpy (synth.roadmap): loaded only for a scene with a road
+
+        lines += road_scenic(scene.road)
     if motion:
         if ego.speed is None:
             raise SceneError("ego has no speed, which the program's motion clauses need")
@@ -249,8 +256,13 @@ def _source_record(program: Program, scene: Scene, config: SynthConfig, header: 
     motion = has_motion(program)
     others = [_entity_record(by_id[st.id], motion) for st in program.statements]
     consts = {"v_stop": config.v_stop, "dv": config.dv} if motion else {}
+    road = {}
+    if scene.road is not None:
+        from synth.roadmap import road_to_dict
+
+        road = {"road": road_to_dict(scene.road)}
     return {"frame_id": scene.frame_id, "header": header, "delta1": config.delta1, "delta2": config.delta2,
-            **consts, "entities": [_entity_record(scene.ego, motion), *others], "program": str(program)}
+            **consts, "entities": [_entity_record(scene.ego, motion), *others], "program": str(program), **road}
 
 
 class NotGenerated(InputError, ValueError):
@@ -281,7 +293,7 @@ def read_source(text: str) -> Source:
         if not isinstance(rec, dict):
             raise ValueError("the record is not an object")
         entities = [{k: v for k, v in e.items() if v is not None} for e in rec["entities"]]
-        scene = scene_from_dict({"frame_id": rec["frame_id"], "entities": entities})
+        scene = scene_from_dict({"frame_id": rec["frame_id"], "entities": entities, "road": rec.get("road")})
         program = parse_program(rec["program"])
         config = SynthConfig(delta1=rec["delta1"], delta2=rec["delta2"],
                              **{k: rec[k] for k in ("v_stop", "dv") if k in rec})

@@ -1,0 +1,102 @@
+"""The recorded road as Scenic regions: the part of an emitted program that holds a scene's road (docs/scenic.md,
+"The road").
+
+A scene that carries a road (scene JSON's `road`: the map features within its radius, in its ego frame) gets, in
+its Scenic text, one PolygonalRegion per lane, crosswalk, intersection and drivable area, in four tables keyed
+by feature id (`road__lanes['ID']`, ...), every lane's centre line (`road__centre_lines['ID']`), and helpers that
+say where an object's centre is, as the lane facts say it (synth.lane_facts; docs/formats.md, "Lane facts"):
+`road__in(road__crosswalks, obj)` the ids of the table's regions containing it, `road__lane_of(obj)` its chosen
+lane (the tie rule). Lane clauses become requirements over them. Road lines bound no region and are left out.
+
+Coordinates are written as one string per feature, the floats' `repr` separated by spaces, which a helper
+splits: Scenic's parser takes ~1.4 ms per number token (a 100-lane road of 4,000 vertices as tuples: 11.6 s to
+compile; as strings: 0.15 s), and `repr` round-trips every float, so the regions are the scene's exactly.
+"""
+
+from __future__ import annotations
+
+from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, Points, RoadMap
+
+# (kind, the Scenic table of its regions), in the order the text defines them.
+TABLES = ((LANE, "road__lanes"), (CROSSWALK, "road__crosswalks"), (INTERSECTION, "road__intersections"),
+          (DRIVABLE_AREA, "road__drivable_areas"))
+CENTRE_LINES = "road__centre_lines"
+PIECE = 100  # characters of coordinates per string literal (adjacent literals join: short lines)
+
+ROAD_PRELUDE = '''\
+# The recorded road around ego (ego frame): one region per feature, by feature id (docs/scenic.md, "The road").
+import math as road__math
+
+def road__points(text):
+    """'x y x y ...' -> ((x, y), ...): coordinates as one string (Scenic parses a number token slowly)."""
+    v = [float(t) for t in text.split()]
+    return tuple(zip(v[0::2], v[1::2]))
+
+def road__in(regions, obj):
+    """The ids of the regions of a table whose polygon contains obj's centre, sorted."""
+    p = obj.position
+    return sorted(i for i, r in regions.items() if r.containsPoint(p))
+
+def road__direction_near(line, x, y):
+    """The direction (degrees counter-clockwise from +x) of the segment of a line nearest (x, y); None if none."""
+    best = None
+    for k in range(len(line) - 1):
+        ax, ay = line[k]
+        dx, dy = line[k + 1][0] - ax, line[k + 1][1] - ay
+        length2 = dx * dx + dy * dy
+        if length2 == 0:
+            continue
+        t = min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length2))
+        gap = road__math.hypot(ax + t * dx - x, ay + t * dy - y)
+        if best is None or gap < best[0]:
+            best = (gap, road__math.degrees(road__math.atan2(dy, dx)) % 360.0)
+    return None if best is None else best[1]
+
+def road__lane_of(obj):
+    """obj's lane: of the lanes containing its centre, the one whose direction at its centre-line segment nearest
+    the centre differs least from obj's heading, then the smaller id; None in no lane (synth.lane_facts)."""
+    here = road__in(road__lanes, obj)
+    if len(here) <= 1:
+        return here[0] if here else None
+    x, y = obj.position.x, obj.position.y
+    heading = road__math.degrees(obj.heading) + 90.0  # Scenic's heading is from +y, the directions from +x
+    best = None
+    for lane in here:
+        d = road__direction_near(road__centre_lines[lane], x, y)
+        key = (180.0 if d is None else abs((heading - d + 180.0) % 360.0 - 180.0), lane)
+        if best is None or key < best:
+            best = key
+    return best[1]
+'''
+
+
+def _coordinates(name: str, fid: str, call: str, pts: Points) -> list[str]:
+    """`NAME['ID'] = CALL('x y x y ...'))...` (call: the calls opened before the string, each closed after it),
+    the string split into adjacent literals on lines of their own."""
+    words = [f"{v!r}" for p in pts for v in p]
+    pieces, piece = [], ""
+    for w in words:
+        if piece and len(piece) + 1 + len(w) > PIECE:
+            pieces.append(piece + " ")
+            piece = w
+        else:
+            piece = f"{piece} {w}" if piece else w
+    pieces.append(piece)
+    head, close = f"{name}[{fid!r}] = {call}", ")" * call.count("(")
+    if len(pieces) == 1:
+        return [f"{head}{pieces[0]!r}{close}"]
+    return [head, *(f"    {p!r}" for p in pieces[:-1]), f"    {pieces[-1]!r}{close}"]
+
+
+def road_scenic(road: RoadMap) -> list[str]:
+    """The lines that define a scene's road in Scenic: the helpers, then the tables, features in map order."""
+    lines = [ROAD_PRELUDE, f"# map {road.map_id!r}"]
+    for kind, table in TABLES:
+        lines.append(f"{table} = {{}}")
+        for f in road.of_kind(kind):
+            lines += _coordinates(table, f.feature_id, "PolygonalRegion(road__points(", f.polygon)
+    lines.append(f"{CENTRE_LINES} = {{}}")
+    for f in road.lanes:
+        lines += _coordinates(CENTRE_LINES, f.feature_id, "road__points(", f.line)
+    lines.append("")
+    return lines
