@@ -12,7 +12,13 @@ here (Scenic draws radians; a uniform draw is the same distribution in either un
   Jacobian of the map from parameters to placement, which a move that re-expresses a placed entity in new
   parameters must weigh (synth.gibbs);
 - `reach`: a sound bound on every value the clause can take over the whole box, given its reference's bound: a
-  disc for the centre, an arc for the heading (synth.collision_rule keeps only the pairs of boxes that can meet).
+  disc for the centre, an arc for the heading (synth.collision_rule keeps only the pairs of boxes that can meet);
+- `allowed`: a requirement beyond the box (`requires`), which the emitted text states as a `require` line: Scenic
+  rejects a scene that fails it, the chain a move. It sees the entity's pose, its reference's, and the scene's
+  road (synth.lane_facts.SceneRoad: the lane facts of a pose), so a clause can keep its entity in a region.
+
+A `Requirement` is a clause that draws nothing and only constrains (a lane clause: its entity's centre in a
+region of the recorded road): an empty box, and reads of both poses so that every move of either asks it again.
 """
 
 from __future__ import annotations
@@ -20,12 +26,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
+
+if TYPE_CHECKING:
+    from synth.lane_facts import SceneRoad
 
 # Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
 REACH_SLACK = 1e-6
 
 XY, HEADING, SPEED = "xy", "heading", "speed"  # the fields of a Pose that the built-in clauses write and read
+PLACE = "place"  # what a Requirement writes: no field, and nothing reads it (re-evaluating it moves nothing)
 
 
 @dataclass
@@ -96,9 +106,31 @@ class Draws:
 
     requires = False  # does the emitted text add a requirement beyond the box (`allowed`)?
 
-    def allowed(self, ref: Pose | None) -> bool:
-        """That requirement (Scenic rejects a draw that fails it)."""
+    def allowed(self, own: Pose, ref: Pose | None, road: SceneRoad | None) -> bool:
+        """That requirement at the entity's pose and its reference's, on the scene's road (None: the scene has
+        none). Scenic rejects a draw that fails it."""
         return True
+
+
+@dataclass(frozen=True)
+class Requirement(Draws):
+    """A clause that draws nothing and only constrains its entity's pose (and its reference's): `allowed`, over
+    an empty box. It reads both poses' centres and headings, so a move of the entity or of its reference asks it
+    again (Parameterisation.moved_by, the chain's readers); it writes nothing that any clause reads."""
+
+    writes = PLACE
+    reads = (XY, HEADING)
+    reads_own = (XY, HEADING)
+    requires = True
+
+    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
+        return None
+
+    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
+        return ()
+
+    def reach(self, own: Reach, ref: Reach | None) -> Reach:
+        return own  # it places nothing: the entity is where its other clauses put it
 
 
 def _clip(v: float, lo: float, hi: float) -> float:

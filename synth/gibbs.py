@@ -46,6 +46,7 @@ from synth.collision_rule import CollisionRule, collision_rule
 from synth.config import DEFAULT_BURN_IN, DEFAULT_THIN, SynthConfig
 from synth.dsl import Program
 from synth.errors import SamplingError
+from synth.lane_facts import SceneRoad
 from synth.overlap import box_radius, boxes_overlap
 from synth.parameters import SPEED, Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
@@ -104,6 +105,9 @@ class Chain:
         self.rule: CollisionRule | None = None if allow_collisions else collision_rule(program, scene, config, p)
         self.rng = np.random.Generator(np.random.PCG64(seed))
         self.frame_id = scene.frame_id
+        # The recorded road, for the requirements that keep an entity in its regions (a lane clause) and the lane
+        # facts every variant carries; None for a scene without one.
+        self.road = SceneRoad(scene.road) if scene.road is not None else None
         self.poses, self.params = p.start(scene)
         n = len(p.ids)
         by_id = scene.by_id()
@@ -211,7 +215,13 @@ class Chain:
     def _unmet(self, moved, poses: list[Pose]) -> int:
         """How many requirements beyond the boxes (Draws.allowed) the moved entities' clauses fail at poses."""
         p = self.params_of
-        return sum(not p.draws[m][c].allowed(poses[p.refs[m][c]]) for m in moved for c in self.required[m])
+        return sum(not p.draws[m][c].allowed(poses[m], _at(poses, p.refs[m][c]), self.road)
+                   for m in moved for c in self.required[m])
+
+    def unmet_entities(self) -> list[str]:
+        """The entities some requirement of whose clauses fails in the current state."""
+        p = self.params_of
+        return [p.ids[m] for m in range(1, len(self.poses)) if self._unmet([m], self.poses)]
 
     def _readers(self, k: int, part: int) -> list[tuple[int, int]]:
         """(m, clause) of the other entities whose clauses read what a redraw of k's clause `part` changes."""
@@ -266,7 +276,9 @@ class Chain:
     def sweep(self, descend: bool = False) -> None:
         """Move every part of every statement once, in declaration order (and re-anchor it, where it is read)."""
         for k in range(1, len(self.poses)):
-            for part in range(len(self.params_of.draws[k])):
+            for part, draws in enumerate(self.params_of.draws[k]):
+                if not draws.lo:
+                    continue  # a Requirement draws nothing: the moves of what it reads ask it
                 self._move(k, part, descend)
                 if not descend and self.rule is not None and self.readers[k][part]:  # without a rule, no need
                     self._reanchor(k, part)
@@ -294,7 +306,8 @@ class Chain:
         ents = [Entity(i, t, float(q.x) + 0.0, float(q.y) + 0.0, float(q.heading) + 0.0, float(length), float(width),
                        speed=float(q.speed) + 0.0 if self.motion else None)
                 for i, t, q, length, width in zip(p.ids, p.types, self.poses, self.length, self.width)]
-        return make_scene(frame_id, ents)
+        scene = make_scene(frame_id, ents)
+        return scene if self.road is None else self.road.placed(scene)
 
 
 def sample_variants(program: Program, scene: Scene, config: SynthConfig, n: int, seed: int,
@@ -307,12 +320,11 @@ def sample_variants(program: Program, scene: Scene, config: SynthConfig, n: int,
     while chain.violated_pairs() or chain._unmet(everyone, chain.poses):
         if start == settings.start_sweeps:
             pairs = tuple(chain.rule.named(tuple(chain.violated_pairs()))) if chain.rule else ()
-            if not pairs:  # only a speed requirement: a reference too slow for a relative Range below 0
-                p = chain.params_of
-                slow = sorted({p.ids[p.refs[m][c]] for m in everyone for c in chain.required[m]
-                               if not p.draws[m][c].allowed(chain.poses[p.refs[m][c]])})
-                raise NoVariant(f"no variant found in {start} sweeps: {', '.join(slow)} never fast enough for the "
-                                "relative speeds below it", ())
+            if not pairs:  # only requirements beyond the boxes fail (a speed below a Range, a lane clause)
+                raise NoVariant(f"no variant found in {start} sweeps: the requirements of "
+                                f"{', '.join(chain.unmet_entities())} never hold (a reference never fast enough for "
+                                "a relative speed below it, or an entity never in the regions its lane clause "
+                                "names)", ())
             shown = ", ".join(f"{a} and {b}" for a, b in pairs[:5])
             raise NoVariant(f"no variant found in {start} sweeps: {len(pairs)} pair{'s' if len(pairs) > 1 else ''} "
                             f"of boxes that do not overlap in the scene always collide ({shown}"
@@ -368,6 +380,10 @@ def autocorrelation_time(trace: np.ndarray, window: float = 5.0) -> float:
     m = np.arange(1, n)
     ok = np.nonzero(m >= window * taus)[0]
     return float(taus[ok[0]] if ok.size else taus[-1])
+
+
+def _at(poses: list[Pose], ref: int | None) -> Pose | None:
+    return None if ref is None else poses[ref]
 
 
 def _reflect(v: float, lo: float, hi: float) -> float:

@@ -213,3 +213,45 @@ def local_direction(f: MapFeature, x: float, y: float) -> float | None:
     """The heading (degrees CCW from +x) of the segment of f's line nearest (x, y); None without a segment."""
     seg = Segments.of(f.line)
     return seg.direction_near(x, y) if seg is not None else None
+
+
+class SceneRoad:
+    """A scene's road (in its ego frame) and the lane facts of entities placed in it, headings as scenes give them
+    (degrees counter-clockwise from +y, where the facts' directions are from +x): what the variant sampler asks
+    of every pose it tries (a lane clause's requirement) and what every variant carries."""
+
+    def __init__(self, road: RoadMap) -> None:
+        self.road = road
+        self.index = RoadIndex(road)
+        # One pose at a time in plain Python (the sampler asks for one per move; numpy's per-call cost would
+        # dominate): bounding boxes, then `contains`, the exact test PolygonIndex agrees with.
+        self.boxes = {kind: [(min(p[0] for p in f.polygon), min(p[1] for p in f.polygon),
+                              max(p[0] for p in f.polygon), max(p[1] for p in f.polygon), f)
+                             for f in road.of_kind(kind)] for kind in (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)}
+
+    def _containing(self, kind: str, x: float, y: float) -> list[MapFeature]:
+        return [f for x0, y0, x1, y1, f in self.boxes[kind]
+                if x0 <= x <= x1 and y0 <= y <= y1 and contains(f.polygon, x, y)]
+
+    def facts(self, x: float, y: float, heading: float) -> LaneFacts:
+        """The lane facts of one pose: RoadIndex.facts's, for one point."""
+        lanes = self._containing(LANE, x, y)
+        chosen = self.index.choose_lane(lanes, x, y, (heading + 90.0) % 360.0)
+        return LaneFacts(
+            lanes=tuple(sorted(f.feature_id for f in lanes)),
+            lane=chosen.feature_id if chosen is not None else None,
+            in_intersection=bool(self._containing(INTERSECTION, x, y)) or any(f.is_intersection for f in lanes),
+            on_crosswalk=bool(self._containing(CROSSWALK, x, y)),
+            off_road=not lanes and not self._containing(DRIVABLE_AREA, x, y),
+        )
+
+    def placed(self, scene):
+        """The scene on this road, every entity with its lane facts decided again where it now is."""
+        from dataclasses import replace
+
+        ents = scene.entities
+        facts = self.index.facts(np.array([e.x for e in ents]), np.array([e.y for e in ents]),
+                                 np.array([(e.heading + 90.0) % 360.0 for e in ents]))
+        return replace(scene, road=self.road, entities=tuple(
+            replace(e, lanes=f.lanes, lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
+                    off_road=f.off_road) for e, f in zip(ents, facts)))

@@ -31,7 +31,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy
 from tqdm import tqdm
@@ -52,6 +52,7 @@ from synth.emit_scenic import (
 )
 from synth.geometry import normalize
 from synth.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
+from synth.lane_facts import SceneRoad
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.semantics import check
 
@@ -294,6 +295,9 @@ def _sample(program: Program, scene: Scene, config: SynthConfig, options: Sample
                                  "(--sampler gibbs) does not reject whole scenes") from None
         except ScenicProgramError as exc:  # our own text failing is a bug, not bad input
             raise RuntimeError(str(exc)) from None
+        if scene.road is not None:  # each variant on the recorded road, with its lane facts where it now is
+            road = SceneRoad(scene.road)
+            samples = replace(samples, scenes=tuple(road.placed(s) for s in samples.scenes))
     for k, s in enumerate(samples.scenes):
         result = check(program, s, config)
         if not result.ok:

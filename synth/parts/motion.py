@@ -32,6 +32,7 @@ from synth.syntax import Line, Range, fmt_number, printed
 from synth.tables import GUARD, NONE, UNDECIDED, SceneArrays, mark, no_self_witness
 
 if TYPE_CHECKING:
+    from synth.lane_facts import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
 
 MOTION_NAMES = ("stationary", "like")  # index = code in the tables
@@ -251,7 +252,7 @@ class SpeedDraws(Draws):
         # requires it (RelativeSpeed.scenic_requirements), so Scenic rejects such draws.
         return self.ref is not None and self.offsets[1] < 0.0
 
-    def allowed(self, ref: Pose | None) -> bool:
+    def allowed(self, own: Pose, ref: Pose | None, road: SceneRoad | None) -> bool:
         return not self.requires or ref.speed >= -self.offsets[1]
 
     def reach(self, own: Reach, ref: Reach | None) -> Reach:

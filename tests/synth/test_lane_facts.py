@@ -11,8 +11,8 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.lane_facts import PolygonIndex, RoadIndex, contains, orientation
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, LANE, MapFeature, RoadMap
+from synth.lane_facts import PolygonIndex, RoadIndex, SceneRoad, contains, orientation
+from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 
@@ -141,3 +141,37 @@ def test_the_chosen_lane_of_overlapping_lanes_is_the_one_heading_the_entity_s_wa
     east, north = index.facts(np.array([5.0, 5.0]), np.array([5.0, 5.0]), np.array([10.0, 80.0]))
     assert east.lanes == north.lanes == ("east", "north")
     assert (east.lane, north.lane) == ("east", "north")
+
+
+@given(st.lists(polygons, min_size=1, max_size=5), st.data())
+@settings(max_examples=80, deadline=None)
+def test_a_scene_road_gives_the_facts_of_one_pose_as_the_index_gives_them_for_many(rings, data):
+    """SceneRoad.facts (one pose in plain Python, heading from +y as scenes give it: what the sampler asks per
+    move) against RoadIndex.facts (vectorised, heading from +x) on random roads: overlapping lanes (the tie
+    rule), crosswalks, intersections, drivable areas; random points, vertices and edge midpoints."""
+    kinds = (LANE, LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)
+    features = tuple(MapFeature("m", f"f{i}", kinds[i], polygon=r, line=(r[0], r[1]) if kinds[i] == LANE else (),
+                                is_intersection=i == 1 and data.draw(st.booleans()))
+                     for i, r in enumerate(rings))
+    road_map = RoadMap.of("m", features)
+    points = [(data.draw(coord), data.draw(coord)) for _ in range(10)] + [p for r in rings for p in r[:3]]
+    points += [((r[0][0] + r[1][0]) / 2, (r[0][1] + r[1][1]) / 2) for r in rings]
+    headings = [data.draw(st.floats(0, 359.99)) for _ in points]
+    want = RoadIndex(road_map).facts(np.array([p[0] for p in points]), np.array([p[1] for p in points]),
+                                     np.array([(h + 90) % 360 for h in headings]))
+    one = SceneRoad(road_map)
+    assert [one.facts(x, y, h) for (x, y), h in zip(points, headings)] == want
+
+
+def test_a_scene_placed_on_its_road_carries_the_facts_of_where_its_entities_now_are():
+    from synth.scene import scene_from_dict
+
+    scene = scene_from_dict({"frame_id": "f", "entities": [
+        {"id": "ego", "type": "Car", "x": 5.0, "y": 1.0, "heading": 270.0},  # heading +x (from +y: 270)
+        {"id": "car1", "type": "Car", "x": 11.0, "y": 4.0, "heading": 90.0},
+        {"id": "car2", "type": "Car", "x": 50.0, "y": 50.0, "heading": 0.0}]})
+    placed = SceneRoad(road()).placed(scene)
+    assert placed.road == road() and [e.id for e in placed.entities] == ["ego", "car1", "car2"]
+    got = [(e.lanes, e.lane, e.in_intersection, e.on_crosswalk, e.off_road) for e in placed.entities]
+    assert got == [(("a",), "a", False, False, False), (("b",), "b", False, True, False),
+                   ((), None, False, False, True)]
