@@ -6,7 +6,9 @@ its Scenic text, one PolygonalRegion per lane, crosswalk, intersection and driva
 by feature id (`road__lanes['ID']`, ...), every lane's centre line (`road__centre_lines['ID']`), and helpers that
 say where an object's centre is, as the lane facts say it (synth.lane_facts; docs/formats.md, "Lane facts"):
 `road__in(road__crosswalks, obj)` the ids of the table's regions containing it, `road__lane_of(obj)` its chosen
-lane (the tie rule). Lane clauses become requirements over them. Road lines bound no region and are left out.
+lane (the tie rule), `road__in_intersection(obj)`, `road__on_crosswalk(obj)`, `road__off_road(obj)` (with
+`road__intersection_lanes`, the ids of the intersection lanes). Lane clauses become requirements over them. Road
+lines bound no region and are left out.
 
 Coordinates are written as one string per feature, the floats' `repr` separated by spaces, which a helper
 splits: Scenic's parser takes ~1.4 ms per number token (a 100-lane road of 4,000 vertices as tuples: 11.6 s to
@@ -15,16 +17,20 @@ compile; as strings: 0.15 s), and `repr` round-trips every float, so the regions
 
 from __future__ import annotations
 
+import json
+
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, Points, RoadMap
 
 # (kind, the Scenic table of its regions), in the order the text defines them.
 TABLES = ((LANE, "road__lanes"), (CROSSWALK, "road__crosswalks"), (INTERSECTION, "road__intersections"),
           (DRIVABLE_AREA, "road__drivable_areas"))
 CENTRE_LINES = "road__centre_lines"
+INTERSECTION_LANES = "road__intersection_lanes"
 PIECE = 100  # characters of coordinates per string literal (adjacent literals join: short lines)
 
 ROAD_PRELUDE = '''\
 # The recorded road around ego (ego frame): one region per feature, by feature id (docs/scenic.md, "The road").
+import json as road__json
 import math as road__math
 
 def road__points(text):
@@ -51,6 +57,18 @@ def road__direction_near(line, x, y):
         if best is None or gap < best[0]:
             best = (gap, road__math.degrees(road__math.atan2(dy, dx)) % 360.0)
     return None if best is None else best[1]
+
+def road__in_intersection(obj):
+    """obj's centre is in an intersection, or in an intersection lane (the lane fact in_intersection)."""
+    return bool(road__in(road__intersections, obj)) or any(
+        lane in road__intersection_lanes for lane in road__in(road__lanes, obj))
+
+def road__on_crosswalk(obj):
+    return bool(road__in(road__crosswalks, obj))
+
+def road__off_road(obj):
+    """obj's centre is in no lane and no drivable area (the lane fact off_road)."""
+    return not road__in(road__lanes, obj) and not road__in(road__drivable_areas, obj)
 
 def road__lane_of(obj):
     """obj's lane: of the lanes containing its centre, the one whose direction at its centre-line segment nearest
@@ -98,5 +116,8 @@ def road_scenic(road: RoadMap) -> list[str]:
     lines.append(f"{CENTRE_LINES} = {{}}")
     for f in road.lanes:
         lines += _coordinates(CENTRE_LINES, f.feature_id, "road__points(", f.line)
+    # ids as one JSON literal (one token, any characters), not a tuple of string tokens
+    crossing = json.dumps([f.feature_id for f in road.lanes if f.is_intersection])
+    lines.append(f"{INTERSECTION_LANES} = frozenset(road__json.loads({crossing!r}))")
     lines.append("")
     return lines

@@ -22,7 +22,7 @@ from synth.emit_scenic import SOURCE_PREFIX, render_scenic  # noqa: E402
 from synth.lane_facts import RoadIndex  # noqa: E402
 from synth.roadmap import AREA_KINDS  # noqa: E402
 from synth.scene import scene_from_dict, scene_from_json  # noqa: E402
-from synth.scenic_road import CENTRE_LINES, TABLES, road_scenic  # noqa: E402
+from synth.scenic_road import CENTRE_LINES, INTERSECTION_LANES, TABLES, road_scenic  # noqa: E402
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt"
 
@@ -32,16 +32,16 @@ def _box(x0, y0, x1, y1):
 
 
 # Two lanes of opposite direction that overlap in 2 <= x <= 4 (the tie rule decides there), an intersection lane
-# across them, a crosswalk, an intersection and a drivable area that leaves a margin off road.
+# across them that reaches beyond the intersection, a crosswalk, and a drivable area that leaves a margin off road.
 ROAD = {"map_id": "hand-made", "features": [
     {"id": "north", "kind": "lane", "polygon": _box(0, -30, 4, 30), "line": [[2, -30], [2, 0.5], [2, 30]],
      "successors": [], "predecessors": [], "left": None, "right": None, "is_intersection": False},
     {"id": "south", "kind": "lane", "polygon": _box(2, -30, 6, 30), "line": [[4, 30], [4, -30]],
      "successors": [], "predecessors": [], "left": None, "right": None, "is_intersection": False},
-    {"id": "turn", "kind": "lane", "polygon": _box(-4, 10, 8, 14), "line": [[-4, 12], [8, 12]],
+    {"id": "turn", "kind": "lane", "polygon": _box(-4, 10, 12, 14), "line": [[-4, 12], [12, 12]],
      "successors": [], "predecessors": [], "left": None, "right": None, "is_intersection": True},
     {"id": "cw", "kind": "crosswalk", "polygon": _box(-6, -12, 10, -8)},
-    {"id": "x1", "kind": "intersection", "polygon": _box(-6, 8, 10, 16)},
+    {"id": "x1", "kind": "intersection", "polygon": _box(-6, 8, 4, 16)},
     {"id": "da", "kind": "drivable_area", "polygon": _box(-8, -30, 12, 30)},
     {"id": "edge", "kind": "road_line", "line": [[-8, -30], [-8, 30]]},
 ]}
@@ -79,6 +79,7 @@ def test_the_regions_are_the_scenes_features_exactly():
         want = {f.feature_id: ("region", f.polygon) for f in scene.road.of_kind(kind)}
         assert space[table] == want  # float repr round-trips: every vertex as the scene has it
     assert space[CENTRE_LINES] == {f.feature_id: f.line for f in scene.road.lanes}
+    assert space[INTERSECTION_LANES] == {"turn"}
     assert {k for k, _ in TABLES} == set(AREA_KINDS) and "'edge'" not in _text().split(SOURCE_PREFIX)[0]
 
 
@@ -102,6 +103,14 @@ REQUIREMENTS = [
     ("not road__in(road__crosswalks, car1)", lambda f: not f.on_crosswalk),
     ("road__in(road__intersections, car1) == ['x1']", lambda f: f.in_intersection),
     ("not road__in(road__lanes, car1) and not road__in(road__drivable_areas, car1)", lambda f: f.off_road),
+    # the helpers of the lane facts, each way round (an intersection lane reaches beyond the intersection here)
+    ("road__in_intersection(car1) and not road__in(road__intersections, car1)",
+     lambda f: f.in_intersection and "turn" in f.lanes),
+    ("road__in_intersection(car1)", lambda f: f.in_intersection),
+    ("not road__in_intersection(car1)", lambda f: not f.in_intersection),
+    ("road__on_crosswalk(car1)", lambda f: f.on_crosswalk),
+    ("road__off_road(car1)", lambda f: f.off_road),
+    ("not road__off_road(car1)", lambda f: not f.off_road),
 ]
 
 
