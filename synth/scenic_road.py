@@ -10,32 +10,33 @@ lane (the tie rule), `road__in_intersection(obj)`, `road__on_crosswalk(obj)`, `r
 `road__intersection_lanes`, the ids of the intersection lanes). Lane clauses become requirements over them. Road
 lines bound no region and are left out.
 
-Coordinates are written as one string per feature, the floats' `repr` separated by spaces, which a helper
-splits: Scenic's parser takes ~1.4 ms per number token (a 100-lane road of 4,000 vertices as tuples: 11.6 s to
-compile; as strings: 0.15 s), and `repr` round-trips every float, so the regions are the scene's exactly.
+The features are data, written as one JSON document in one raw string literal (a feature a line) that the text
+decodes, and the tables are built from it by comprehensions: Scenic's parser is slow per statement and per
+token (the 60 features of an Argoverse 2 frame took 2.2 s to compile as one assignment each, 0.12 s as one
+literal; a number token costs ~1.4 ms), and JSON writes floats by `repr`, which round-trips, so the regions are
+the scene's exactly.
 """
 
 from __future__ import annotations
 
 import json
 
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, Points, RoadMap
+from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 
 # (kind, the Scenic table of its regions), in the order the text defines them.
 TABLES = ((LANE, "road__lanes"), (CROSSWALK, "road__crosswalks"), (INTERSECTION, "road__intersections"),
           (DRIVABLE_AREA, "road__drivable_areas"))
 CENTRE_LINES = "road__centre_lines"
 INTERSECTION_LANES = "road__intersection_lanes"
-PIECE = 100  # characters of coordinates per string literal (adjacent literals join: short lines)
+DATA = "road__data"
 
 ROAD_PRELUDE = '''\
 # The recorded road around ego (ego frame): one region per feature, by feature id (docs/scenic.md, "The road").
 import json as road__json
 import math as road__math
 
-def road__points(text):
-    """'x y x y ...' -> ((x, y), ...): coordinates as one string (Scenic parses a number token slowly)."""
-    v = [float(t) for t in text.split()]
+def road__pairs(v):
+    """[x, y, x, y, ...] -> ((x, y), ...)."""
     return tuple(zip(v[0::2], v[1::2]))
 
 def road__in(regions, obj):
@@ -88,36 +89,29 @@ def road__lane_of(obj):
 '''
 
 
-def _coordinates(name: str, fid: str, call: str, pts: Points) -> list[str]:
-    """`NAME['ID'] = CALL('x y x y ...'))...` (call: the calls opened before the string, each closed after it),
-    the string split into adjacent literals on lines of their own."""
-    words = [f"{v!r}" for p in pts for v in p]
-    pieces, piece = [], ""
-    for w in words:
-        if piece and len(piece) + 1 + len(w) > PIECE:
-            pieces.append(piece + " ")
-            piece = w
-        else:
-            piece = f"{piece} {w}" if piece else w
-    pieces.append(piece)
-    head, close = f"{name}[{fid!r}] = {call}", ")" * call.count("(")
-    if len(pieces) == 1:
-        return [f"{head}{pieces[0]!r}{close}"]
-    return [head, *(f"    {p!r}" for p in pieces[:-1]), f"    {pieces[-1]!r}{close}"]
+def _json(value: object) -> str:
+    """JSON that a raw triple-quoted Python literal holds as is: ASCII, and the quote ' escaped as JSON's
+    \\u0027, so that nothing ends the literal early (JSON never ends in a backslash)."""
+    return json.dumps(value, ensure_ascii=True, separators=(",", ":")).replace("'", "\\u0027")
+
+
+def _feature(f: MapFeature) -> str:
+    """One feature of the data: `"ID":{"polygon":[x,y,...]}`, a lane with its centre line and intersection flag."""
+    value: dict = {"polygon": [c for p in f.polygon for c in p]}
+    if f.kind == LANE:
+        value.update(line=[c for p in f.line for c in p], intersection=f.is_intersection)
+    return f"{_json(f.feature_id)}:{_json(value)}"
 
 
 def road_scenic(road: RoadMap) -> list[str]:
-    """The lines that define a scene's road in Scenic: the helpers, then the tables, features in map order."""
-    lines = [ROAD_PRELUDE, f"# map {road.map_id!r}"]
-    for kind, table in TABLES:
-        lines.append(f"{table} = {{}}")
-        for f in road.of_kind(kind):
-            lines += _coordinates(table, f.feature_id, "PolygonalRegion(road__points(", f.polygon)
-    lines.append(f"{CENTRE_LINES} = {{}}")
-    for f in road.lanes:
-        lines += _coordinates(CENTRE_LINES, f.feature_id, "road__points(", f.line)
-    # ids as one JSON literal (one token, any characters), not a tuple of string tokens
-    crossing = json.dumps([f.feature_id for f in road.lanes if f.is_intersection])
-    lines.append(f"{INTERSECTION_LANES} = frozenset(road__json.loads({crossing!r}))")
-    lines.append("")
+    """The lines that define a scene's road in Scenic: the helpers, the data (a feature a line, in map order),
+    the tables built from it."""
+    sections = [f'"{table}":{{' + ",".join(f"\n{_feature(f)}" for f in road.of_kind(kind)) + "}"
+                for kind, table in TABLES]
+    lines = [ROAD_PRELUDE, f"# map {road.map_id!r}", f"{DATA} = road__json.loads(r'''{{{','.join(sections)}}}''')"]
+    lines += [f"{table} = {{i: PolygonalRegion(road__pairs(f['polygon'])) for i, f in {DATA}['{table}'].items()}}"
+              for _, table in TABLES]
+    lines += [f"{CENTRE_LINES} = {{i: road__pairs(f['line']) for i, f in {DATA}['road__lanes'].items()}}",
+              f"{INTERSECTION_LANES} = frozenset(i for i, f in {DATA}['road__lanes'].items() if f['intersection'])",
+              ""]
     return lines

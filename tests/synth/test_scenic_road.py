@@ -143,8 +143,8 @@ def test_the_road_compiles_and_samples_with_the_program_and_is_in_the_provenance
     samples = sample_scenic(text, SampleOptions(n=3, seed=1, sampler="scenic"))
     assert len(samples.scenes) == 3
     # a road edited in the text (not in the record) is refused before anything runs
-    edited = text.replace("'-30 ", "'-31 ", 1) if "'-30 " in text else text.replace("-30", "-31", 1)
-    assert edited != text
+    edited = text.replace("-30.0,", "-31.0,", 1)
+    assert edited != text and edited.split(SOURCE_PREFIX)[1] == text.split(SOURCE_PREFIX)[1]
     with pytest.raises(ScenicProgramError, match="differs from what r2sgen writes"):
         ensure_generated(edited)
 
@@ -171,3 +171,20 @@ def test_a_real_road_from_r2s_scene_compiles_and_samples(tmp_path):
     proc = run_r2s("sample", str(scenic_file), "--sampler", "scenic", "--n", "2", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     assert len(list(out.glob("sample_*.json"))) == 2
+
+
+def test_feature_ids_of_any_characters_are_read_back_as_they_are():
+    """Ids are data: quotes (the literal's own ''' among them), backslashes, a newline, non-ASCII."""
+    import scenic
+
+    odd = ["x'''y", 'a"b', "back\\slash", "line\nbreak", "caf\u00e9 \u2028", "'", "\\"]
+    doc = {**SCENE, "road": {"map_id": "m'''\\", "features": [
+        {"id": fid, "kind": "crosswalk", "polygon": _box(k, 20, k + 1, 21)} for k, fid in enumerate(odd)]}}
+    text = _text(doc)
+    assert _tables(text)["road__crosswalks"] == {fid: ("region", scene_from_dict(doc).road[fid].polygon)
+                                                 for fid in odd}
+    scenario = scenic.scenarioFromString(text + f"require road__in(road__crosswalks, car1) == [{odd[0]!r}]\n",
+                                         mode2D=True)
+    random.seed(2)
+    scene, _ = scenario.generate(maxIterations=20000)
+    assert 0 <= scene.objects[1].position.x <= 1 and 20 <= scene.objects[1].position.y <= 21
