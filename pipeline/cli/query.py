@@ -37,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_pattern
     from pipeline.query.mining import query_frames
+    from pipeline.query.stop import cleaned_up_on_signal
 
     for flag, value in (("--threads", args.threads), ("--memory-limit", args.memory_limit)):
         if value is not None and value < 1:
@@ -46,8 +47,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {args.out} is a directory; matches are one Parquet file")
     config = load_config(args.config)
     pattern = read_pattern(args.pattern)
-    summary = query_frames(args.frames, pattern, args.out, all_bindings=args.all_bindings, config=config,
-                           threads=args.threads, memory_limit_mb=args.memory_limit, events=args.events,
-                           min_duration_s=args.min_duration)
+    with cleaned_up_on_signal("query"):  # Ctrl-C / SIGTERM: nothing left behind, one line, exit 130 / 143
+        summary = query_frames(args.frames, pattern, args.out, all_bindings=args.all_bindings, config=config,
+                               threads=args.threads, memory_limit_mb=args.memory_limit, events=args.events,
+                               min_duration_s=args.min_duration)
     print(f"r2s query: {summary.line()} -> {args.out}")
     return 0

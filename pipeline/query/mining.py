@@ -21,6 +21,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,8 +43,11 @@ from pipeline.query.sql import (
     WILD_HEADING,
     WILD_XY,
     bindings_query,
+    estimate_query,
     matches_select,
 )
+from pipeline.query.stop import leftover
+from pipeline.query.temporal import estimate_query as temporal_estimate_query
 from pipeline.query.temporal import prepare
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
@@ -53,6 +57,17 @@ from synth.temporal import TemporalPattern, parse_query_pattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
+# The bounds of a query (docs/cli.md, "Inputs and their bounds"). A pattern's names are joined per frame, so
+# names related neither to each other nor to ego multiply: four unrelated `Object` names over the 141 entities
+# of the largest shipped nuScenes frame are 4 x 10^8 candidate bindings in that one frame. The join's candidates
+# are estimated before it runs (sql.estimate_query, temporal.estimate_query) and the query is refused beyond
+# MAX_FRAME_BINDINGS in a frame or MAX_BINDINGS in all (about 10 minutes of DuckDB on 2 cores at the ~1.5 million
+# a second measured for unrelated names). DuckDB plans every name as a join, so their number is bounded too; the
+# spill under the memory limit is capped.
+MAX_PATTERN_NAMES = 12
+MAX_FRAME_BINDINGS = 10**6
+MAX_BINDINGS = 10**9
+SPILL_LIMIT_MB = 8192
 
 
 @dataclass(frozen=True)
@@ -78,6 +93,7 @@ def _sql_list(files: Sequence[str]) -> str:
 def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str):
     """A DuckDB session with the rows view of the files."""
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
+                                 "max_temp_directory_size": f"{SPILL_LIMIT_MB}MiB",
                                  **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
     # Progress is tracked for _Progress, never printed by DuckDB itself (it would write to stdout).
     con.execute("SET enable_progress_bar = true")
@@ -94,6 +110,30 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     for macro in MACROS:
         con.execute(macro)
     return con
+
+
+class _Named:
+    """The query's batches with their name-keyed structs (binding, tracks) keyed by the pattern's names: the query
+    keys them by position (sql.positional: DuckDB's field names ignore case, the pattern's names do not)."""
+
+    def __init__(self, reader, names: tuple[str, ...]):
+        self.reader, self.names = reader, names
+        fields = [pa.field(n, pa.string()) for n in names]
+        schema = reader.schema
+        self.columns = [i for i, f in enumerate(schema) if f.name in ("binding", "tracks")]
+        for i in self.columns:
+            typed = pa.struct([f.with_type(schema.field(i).type.field(k).type) for k, f in enumerate(fields)])
+            schema = schema.set(i, pa.field(schema.field(i).name, typed))
+        self.schema = schema
+
+    def __iter__(self):
+        for batch in self.reader:
+            arrays = list(batch.columns)
+            for i in self.columns:
+                column = arrays[i]
+                arrays[i] = pa.StructArray.from_arrays([column.field(k) for k in range(len(self.names))],
+                                                       fields=list(self.schema.field(i).type), mask=column.is_null())
+            yield pa.RecordBatch.from_arrays(arrays, schema=self.schema)
 
 
 def _write_matches(reader, path: Path) -> tuple[int, int]:
@@ -169,15 +209,60 @@ class _Progress:
         bar.close()
 
 
-def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, out: str | os.PathLike, *, all_bindings: bool = False,
-                 config: SynthConfig | None = None, threads: int | None = None, memory_limit_mb: int | None = None,
-                 events: bool = False, min_duration_s: float | None = None,
+def _check_size(con, estimate: Callable[[bool], str]) -> None:
+    """Refuse (exit 2, one line) a pattern whose join may meet more candidate bindings than the bounds: the
+    per-type product first (one scan), and only when it is over, the tighter product with pairwise fan-outs."""
+    for fanout in (False, True):
+        worst, frame, rows, total = con.execute(estimate(fanout)).fetchall()[0]
+        worst, total = worst or 0.0, total or 0.0
+        if worst <= MAX_FRAME_BINDINGS and total <= MAX_BINDINGS:
+            return
+    if worst > MAX_FRAME_BINDINGS:
+        raise UserError(f"the pattern may meet {worst:.3g} candidate bindings in frame {frame} ({rows} entities), "
+                        f"more than the bound of {MAX_FRAME_BINDINGS:.0e} a frame: relate its names to each other "
+                        "or to ego (docs/cli.md, Inputs and their bounds)")
+    raise UserError(f"the pattern may meet {total:.3g} candidate bindings over the frames, more than the bound of "
+                    f"{MAX_BINDINGS:.0e}: relate its names to each other or to ego, or query fewer frames "
+                    "(docs/cli.md, Inputs and their bounds)")
+
+
+def check_pattern_size(pattern: Pattern | TemporalPattern, steps: int) -> None:
+    """The bound on a pattern's size, before any frame is read: each name is a join, each step a query."""
+    if len(pattern.names) > MAX_PATTERN_NAMES:
+        raise UserError(f"the pattern declares {len(pattern.names)} names, more than the bound of "
+                        f"{MAX_PATTERN_NAMES} (docs/cli.md, Inputs and their bounds)")
+    if steps > MAX_PATTERN_NAMES:
+        raise UserError(f"the pattern has {steps} steps, more than the bound of {MAX_PATTERN_NAMES} "
+                        "(docs/cli.md, Inputs and their bounds)")
+
+
+def _parents(out: Path) -> list[Path]:
+    """The folders above `out` that do not exist yet, outermost first."""
+    missing = []
+    for folder in out.parents:
+        if folder.exists():
+            break
+        missing.append(folder)
+    return missing[::-1]
+
+
+def _is_interrupt(exc: BaseException) -> bool:
+    return isinstance(exc, duckdb.InterruptException) or "interrupted" in str(exc).lower()[:100]
+
+
+def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, out: str | os.PathLike, *,
+                 all_bindings: bool = False, config: SynthConfig | None = None, threads: int | None = None,
+                 memory_limit_mb: int | None = None, events: bool = False, min_duration_s: float | None = None,
                  log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> QuerySummary:
     """Write matches.parquet (atomically) for `pattern` over a frames file or dataset, or with events one row per
     event (pipeline.query.events; min_duration_s keeps the events at least that long, and needs every frame's
-    timestamp); bad input is a FramesError."""
+    timestamp); bad input is a FramesError, a pattern over the bounds or a query beyond its memory and spill a
+    UserError. Whatever fails leaves nothing it made: no folder, spill or temporary file (and with
+    pipeline.query.stop, not on a signal either)."""
     t0 = time.monotonic()
     config = config or SynthConfig()
+    temporal = isinstance(pattern, TemporalPattern)  # the one place the two kinds of pattern part ways
+    check_pattern_size(pattern, len(pattern.steps) if temporal else 1)
     dataset = FramesDataset.open(frames)
     if dataset.url:
         raise FramesError(f"{frames}: r2s query reads frames on a local filesystem (copy them here first)")
@@ -190,37 +275,69 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
         raise UserError("--min-duration is a length of events: it needs --events")
     if events and all_bindings:
         raise UserError("--events and --all are two outputs: choose one")
-    temporal = isinstance(pattern, TemporalPattern)  # the one place the two kinds of pattern part ways
     select = events_select(min_duration_s) if events else matches_select(all_bindings)
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    check = _ExactCheck(pattern.steps[0].pattern if isinstance(pattern, TemporalPattern) else pattern, config)
-    with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill:
+    created = []
+    try:
+        for folder in _parents(out):
+            folder.mkdir()
+            created.append(folder)
+        with ExitStack() as stack:
+            for folder in created:
+                stack.enter_context(leftover(folder, "folder"))
+            n_events, matched, bindings, calls = _run(dataset, frames, pattern, temporal, config, select, events,
+                                                      out, has_speed, threads, memory_limit_mb, min_duration_s, log)
+    except BaseException:
+        for folder in reversed(created):  # only the folders this query made, and only while empty
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+        raise
+    return QuerySummary(n_frames, matched, bindings, calls, time.monotonic() - t0, n_events)
+
+
+def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: str, events: bool, out: Path, has_speed: bool,
+         threads, memory_limit_mb, min_duration_s, log) -> tuple[int | None, int, int, int]:
+    """The query in its DuckDB session, its spill folder beside `out`; returns (events, frames matched, bindings,
+    exact checks)."""
+    check = _ExactCheck(pattern.steps[0].pattern if temporal else pattern, config)
+    estimate = temporal_estimate_query if temporal else estimate_query
+    with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill, \
+            leftover(spill, "tree"):
         con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill)
         try:
             if min_duration_s is not None:
                 _require_timestamps(con, frames, "--min-duration")
             if temporal and pattern.needs_timestamps:
                 _require_timestamps(con, frames, "the pattern (its durations or behaviours)")
-            with _Progress(con, log), atomic_path(out) as tmp:
+            _check_size(con, lambda fanout: estimate(pattern, config, fanout))
+            con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
+            with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
                 if temporal:
                     def register(step_pattern):
                         check.pattern = step_pattern  # each step's query runs alone, re-checked by its own statements
-                    con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
                     bindings = prepare(con, pattern, config, register)
                 else:
-                    con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
                     bindings = bindings_query(pattern, config)
-                reader = con.sql(bindings + "\n" + select).to_arrow_reader(BATCH_ROWS)
+                reader = _Named(con.sql(bindings + "\n" + select).to_arrow_reader(BATCH_ROWS), pattern.names)
                 if events:
                     n_events, matched, bindings = _write_rows(reader, tmp), 0, 0
                 else:
                     n_events, (matched, bindings) = None, _write_matches(reader, tmp)
         except duckdb.IOException as exc:  # the rows were checked, so this is a file that changed or broke since
             raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
+        except duckdb.OutOfMemoryException as exc:
+            limit = f"--memory-limit {memory_limit_mb} MB" if memory_limit_mb else "the memory limit"
+            raise UserError(f"the query ran out of memory under {limit} with at most {SPILL_LIMIT_MB} MB spilled to "
+                            f"disk: raise the limit ({str(exc).splitlines()[0][:120]})") from None
+        except duckdb.Error as exc:
+            if _is_interrupt(exc):
+                raise KeyboardInterrupt from None
+            raise
         finally:
             con.close()
-    return QuerySummary(n_frames, matched, bindings, check.calls, time.monotonic() - t0, n_events)
+    return n_events, matched, bindings, check.calls
 
 
 def _require_timestamps(con, frames, what: str) -> None:

@@ -231,10 +231,6 @@ def _alias(k: int) -> str:
     return f"t{k}"
 
 
-def _quote(name: str) -> str:
-    return f'"{name}"'  # names are identifiers (the parser checks them), so quoting is enough
-
-
 def clauses(st: Statement) -> tuple:
     """The statement's clauses, one per part it carries (synth.parts), each with a builder in BUILDERS."""
     return tuple(clause for _, clause in st.clauses())
@@ -254,27 +250,23 @@ def matches_select(all_bindings: bool) -> str:
     return select
 
 
-def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
-    """`WITH ..., m AS (...)`: CTEs whose last, m, has one row per binding of the pattern in a frame: frame_id,
-    frame_ord (the frame's order in the input), frame_pos (its position in its scene by frame index, from 1),
-    scene, timestamp_us, key (the bound rows' ordinals), binding (name -> entity id), tracks (name -> track id).
-    It calls r2s_exact(numbers, types) on the candidates that are not sure: numbers are ego's x, y, heading, speed,
-    then the same per name; types one per name."""
-    names = pattern.names
-    alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    cols = "f.fk, f.frame_id, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, f.s, f.wild"
-    # frame_pos: consecutive frames of a scene have consecutive positions (what events are runs of).
-    ctes = [f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
-            f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild "
-            f"FROM {ROWS} WHERE is_ego)"]
-    first = alias[names[0]]
-    joins, sure_parts, candidate_parts = [], [], []
-    for k, st in enumerate(pattern.statements):
-        a = alias[st.id]
+# ego's row per frame, with frame_pos: consecutive frames of a scene have consecutive positions (what events are
+# runs of).
+EGO_CTE = (f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
+           f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild "
+           f"FROM {ROWS} WHERE is_ego)")
+
+
+def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> list[str]:
+    """Per pattern name (its CTE named alias[name]) the rows it may bind: its type, and its clauses on ego or on
+    nothing as the candidate filter (`sure` says whether they surely hold). They read the CTE `ego` (EGO_CTE)."""
+    cols = ("f.fk, f.frame_id, f.scene, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, "
+            "f.s, f.wild")
+    ctes = []
+    for st in pattern.statements:
         # Clauses on ego or on nothing filter the name's rows (ego joined per frame); the others filter the join.
         unary = [clause_condition(c, "f", None if c.ref is None else "g", config)
                  for c in clauses(st) if c.ref in (None, EGO_ID)]
-        binary = [clause_condition(c, a, alias[c.ref], config) for c in clauses(st) if c.ref not in (None, EGO_ID)]
         where = ["NOT f.is_ego"]
         types = matched_types(st.type)
         if types is not None:
@@ -282,14 +274,39 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
         cond = Condition.all(unary)
         where.append(f"({cond.candidate})")
         join_ego = f" JOIN ego g ON {_same_frame('f', 'g')}" if any(c.ref == EGO_ID for c in clauses(st)) else ""
-        ctes.append(f"{a} AS (SELECT {cols}, ({cond.sure}) AS sure FROM {ROWS} f{join_ego} WHERE {' AND '.join(where)})")
+        ctes.append(f"{alias[st.id]} AS (SELECT {cols}, ({cond.sure}) AS sure FROM {ROWS} f{join_ego} "
+                    f"WHERE {' AND '.join(where)})")
+    return ctes
+
+
+def positional(values: list[str]) -> str:
+    """A struct of the values with fields named by position (`0`, `1`, ...). DuckDB's struct field and column names
+    ignore case and pattern names do not (`a` and `A` are two names), so every struct or column keyed by a pattern
+    name is keyed by the name's position in the pattern; pipeline.query.mining names the fields as it writes them."""
+    return "struct_pack(" + ", ".join(f'"{k}" := {v}' for k, v in enumerate(values)) + ")"
+
+
+def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
+    """`WITH ..., m AS (...)`: CTEs whose last, m, has one row per binding of the pattern in a frame: frame_id,
+    frame_ord (the frame's order in the input), frame_pos (its position in its scene by frame index, from 1),
+    scene, timestamp_us, key (the bound rows' ordinals), binding (name -> entity id), tracks (name -> track id),
+    the two structs keyed by the names' positions (positional). It calls r2s_exact(numbers, types) on the
+    candidates that are not sure: numbers are ego's x, y, heading, speed, then the same per name; types one per
+    name."""
+    names = pattern.names
+    alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
+    ctes = [EGO_CTE, *_name_ctes(pattern, config, alias)]
+    first = alias[names[0]]
+    joins, sure_parts, candidate_parts = [], [], []
+    for k, st in enumerate(pattern.statements):
+        a = alias[st.id]
         sure_parts.append(f"{a}.sure")
         if k == 0:
             continue
         on = [_same_frame(a, first)]
         # Injective: a different input row from every earlier name whose types can coincide.
         on += [f"{a}.ord <> {alias[other.id]}.ord" for other in pattern.statements[:k] if _overlap(st.type, other.type)]
-        bcond = Condition.all(binary)
+        bcond = Condition.all(_binary(st, alias, config))
         on.append(f"({bcond.candidate})")
         sure_parts.append(f"({bcond.sure})")
         candidate_parts.append(f"({bcond.candidate})")
@@ -297,8 +314,8 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
     numbers = [f"{a}.{c}" for a in ["g"] + [alias[n] for n in names] for c in ("x", "y", "heading", "speed")]
     types = [f"{alias[n]}.type" for n in names]
     key = "[" + ", ".join(f"{alias[n]}.ord" for n in names) + "]"
-    binding = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.entity_id" for n in names) + ")"
-    tracks = "struct_pack(" + ", ".join(f"{_quote(n)} := {alias[n]}.track_id" for n in names) + ")"
+    binding = positional([f"{alias[n]}.entity_id" for n in names])
+    tracks = positional([f"{alias[n]}.track_id" for n in names])
     ctes.append(
         f"m AS (SELECT g.frame_id, g.frame_ord, g.frame_pos, g.scene, g.timestamp_us, {key} AS key, "
         f"{binding} AS binding, {tracks} AS tracks "
@@ -308,6 +325,62 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
         f"WHERE CASE WHEN {' AND '.join(sure_parts)} THEN TRUE WHEN {' AND '.join(candidate_parts) or 'TRUE'} "
         f"THEN {EXACT_UDF}([{', '.join(numbers)}], [{', '.join(types)}]) ELSE FALSE END)")
     return "WITH " + ",\n".join(ctes)
+
+
+def _binary(st: Statement, alias: dict[str, str], config: SynthConfig) -> list[Condition]:
+    """The conditions of a statement's clauses between two pattern names (they filter the join)."""
+    return [clause_condition(c, alias[st.id], alias[c.ref], config) for c in clauses(st) if c.ref not in (None, EGO_ID)]
+
+
+def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: str = "p") -> list[str]:
+    """CTEs ending in `label`: one row per frame (fk, frame_id, scene, rows: its non-ego rows, p) where p bounds
+    from above the candidate bindings the pattern's join can meet in the frame: the product over the names of how
+    many rows each may bind (its type and its clauses on ego), and with `fanout` a tighter product in which a name
+    constrained by an earlier name counts at most the rows that may stand in that relation to one row of the earlier
+    name (a pairwise join, the query's own first step). A binding picks each name among those rows, so the product
+    is an upper bound. Names and helper CTEs are prefixed by `label`, so several patterns' estimates share a query."""
+    names = pattern.names
+    alias = {name: f"{label}_{_alias(k)}" for k, name in enumerate(names)} | {EGO_ID: "g"}
+    ctes = _name_ctes(pattern, config, alias)
+    factors = []
+    for k, st in enumerate(pattern.statements):
+        a = alias[st.id]
+        binary = [c for c in clauses(st) if c.ref not in (None, EGO_ID)] if fanout and k else []
+        n_k = f"{label}_n{k}"
+        if binary:
+            ref = alias[binary[0].ref]  # one earlier name's relation bounds how many rows pair with each of its rows
+            cond = Condition.all([clause_condition(c, a, ref, config) for c in binary if alias[c.ref] == ref])
+            ctes.append(f"{n_k} AS (SELECT fk, frame_id, max(n) AS n FROM (SELECT {ref}.fk, {ref}.frame_id, "
+                        f"count(*) AS n FROM {ref} JOIN {a} ON {_same_frame(a, ref)} AND ({cond.candidate}) "
+                        f"GROUP BY {ref}.fk, {ref}.frame_id, {ref}.ord) GROUP BY fk, frame_id)")
+        else:
+            ctes.append(f"{n_k} AS (SELECT fk, frame_id, count(*) AS n FROM {a} GROUP BY fk, frame_id)")
+        factors.append(f"coalesce({n_k}.n, 0)::DOUBLE")
+    joins = " ".join(f"LEFT JOIN {label}_n{k} ON {_same_frame(f'{label}_n{k}', 'g')}" for k in range(len(names)))
+    ctes.append(f"{label} AS (SELECT g.fk, g.frame_id, g.scene, g.rows, {' * '.join(factors)} AS p "
+                f"FROM r2s_frames g {joins})")
+    return ctes
+
+
+# The frames an estimate runs over: one row per frame with its scene and non-ego rows.
+ESTIMATE_FRAMES = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS scene, count(*) - 1 AS rows "
+                   f"FROM {ROWS} GROUP BY fk, frame_id)")
+
+
+def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_frame: bool = False) -> str:
+    """One aggregate over estimate_ctes: (largest product, its frame id, that frame's non-ego rows, sum of the
+    products), or with per_frame one row per frame (frame id, product)."""
+    ctes = [EGO_CTE, ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
+    return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "0", per_frame)
+
+
+def estimate_select(products: str, extra: str, per_frame: bool) -> str:
+    """The estimate's answer from a relation of per-frame products (frame_id, rows, p) and a scalar SQL `extra`
+    added to the total: (largest product, its frame id, that frame's non-ego rows, total), or per frame (frame id,
+    product)."""
+    if per_frame:
+        return f"SELECT frame_id, p FROM {products}"
+    return f"SELECT max(p), arg_max(frame_id, p), arg_max(rows, p), sum(p) + ({extra}) FROM {products}"
 
 
 def _same_frame(a: str, b: str) -> str:

@@ -19,7 +19,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from pipeline.query.sql import ROWS, bindings_query
+from pipeline.query.sql import (
+    EGO_CTE,
+    ESTIMATE_FRAMES,
+    ROWS,
+    bindings_query,
+    estimate_ctes,
+    estimate_select,
+    positional,
+)
 from synth.config import SynthConfig
 from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern
@@ -37,8 +45,10 @@ IDS = "r2s_ids"
 CANDIDATES = "r2s_candidates"
 
 
-def _var(name: str) -> str:
-    return f'"v_{name}"'  # a variable's track column (prefixed: a variable may be called scene)
+def _var(k: int) -> str:
+    # The track column of the pattern's k-th variable (TemporalPattern.names): by position, as sql.positional keys
+    # structs (DuckDB's column names ignore case, the pattern's names do not), and prefixed (never `scene`).
+    return f'"v{k}"'
 
 
 def _lit(v: float) -> str:
@@ -64,41 +74,44 @@ def behaviour_sql(config: SynthConfig) -> str:
     )
 
 
-def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], config: SynthConfig) -> str:
-    """The frames (scene, position, timestamp) and track tuples at which step k holds."""
+def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], variables: tuple[str, ...],
+             config: SynthConfig) -> str:
+    """The frames (scene, position, timestamp) and track tuples at which step k holds (its tracks struct is keyed
+    by the step's positions, its columns by the positions of the whole pattern's `variables`)."""
     names = pattern.names
-    cols = ", ".join(f'm.tracks."{n}" AS {_var(n)}' for n in names)
+    cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(names))
     joins = "".join(
-        f" JOIN {BEHAVIOUR_TABLE} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = m.tracks.\"{n}\" "
-        f"AND b{j}.{b}" for j, (n, b) in enumerate(behaviours))
+        f" JOIN {BEHAVIOUR_TABLE} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = "
+        f"m.tracks.\"{names.index(n)}\" AND b{j}.{b}" for j, (n, b) in enumerate(behaviours))
     return (f"CREATE TEMP TABLE r2s_step{k} AS {bindings_query(pattern, config)}\n"
             f"SELECT DISTINCT m.scene, m.frame_pos, m.timestamp_us, {cols} FROM m{joins}")
 
 
 def candidates_sql(pattern: TemporalPattern) -> str:
     """Every binding of the pattern's variables to distinct tracks that each step binds somewhere in the scene."""
+    names = pattern.names
     parts = []
     for k, step in enumerate(pattern.steps):
-        cols = ", ".join(_var(n) for n in step.names)
+        cols = ", ".join(_var(names.index(n)) for n in step.names)
         parts.append(f"(SELECT DISTINCT scene, {cols} FROM r2s_step{k}) s{k}")
     sql = parts[0]
     seen = set(pattern.steps[0].names)
     for k, step in enumerate(pattern.steps[1:], start=1):
-        shared = ["scene"] + [_var(n) for n in step.names if n in seen]
+        shared = ["scene"] + [_var(names.index(n)) for n in step.names if n in seen]
         sql += f" JOIN {parts[k]} USING ({', '.join(shared)})"
         seen |= set(step.names)
-    names = pattern.names
-    distinct = [f"{_var(a)} <> {_var(b)}" for i, a in enumerate(names) for b in names[i + 1:]]
+    distinct = [f"{_var(i)} <> {_var(j)}" for i in range(len(names)) for j in range(i + 1, len(names))]
     where = f" WHERE {' AND '.join(distinct)}" if distinct else ""
-    return f"CREATE TEMP TABLE {CANDIDATES} AS SELECT scene, {', '.join(_var(n) for n in names)} FROM {sql}{where}"
+    return f"CREATE TEMP TABLE {CANDIDATES} AS SELECT scene, {', '.join(map(_var, range(len(names))))} FROM {sql}{where}"
 
 
 def ends_sql(k: int, pattern: TemporalPattern) -> str:
     """r2s_ends{k}: (scene, binding, position, timestamp) where step k can end a chain of steps 0..k."""
     step = pattern.steps[k]
-    allv = ", ".join(_var(n) for n in pattern.names)
-    using = ", ".join(["scene"] + [_var(n) for n in step.names])
-    held = (f"SELECT h.scene, {', '.join('c.' + _var(n) for n in pattern.names)}, h.frame_pos, h.timestamp_us "
+    variables = range(len(pattern.names))
+    allv = ", ".join(map(_var, variables))
+    using = ", ".join(["scene"] + [_var(pattern.names.index(n)) for n in step.names])
+    held = (f"SELECT h.scene, {', '.join('c.' + _var(j) for j in variables)}, h.frame_pos, h.timestamp_us "
             f"FROM r2s_step{k} h JOIN {CANDIDATES} c USING ({using})")
     part = f"PARTITION BY scene, {allv}"
     if k == 0:
@@ -137,17 +150,51 @@ def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Cal
         con.execute(behaviour_sql(config))
     for k, step in enumerate(pattern.steps):
         exact_check(step.pattern)
-        con.execute(step_sql(k, step.pattern, step.behaviours, config))
+        con.execute(step_sql(k, step.pattern, step.behaviours, pattern.names, config))
     con.execute(candidates_sql(pattern))
     for k in range(len(pattern.steps)):
         con.execute(ends_sql(k, pattern))
     names = pattern.names
     last = len(pattern.steps) - 1
-    joins = " ".join(f"JOIN {IDS} i{j} ON i{j}.scene = e.scene AND i{j}.track_id = e.{_var(n)}"
-                     for j, n in enumerate(names))
-    binding = ", ".join(f'"{n}" := i{j}.entity_id' for j, n in enumerate(names))
-    tracks = ", ".join(f'"{n}" := e.{_var(n)}' for n in names)
+    joins = " ".join(f"JOIN {IDS} i{j} ON i{j}.scene = e.scene AND i{j}.track_id = e.{_var(j)}"
+                     for j in range(len(names)))
+    binding = positional([f"i{j}.entity_id" for j in range(len(names))])
+    tracks = positional([f"e.{_var(j)}" for j in range(len(names))])
     key = ", ".join(f"i{j}.entity_id" for j in range(len(names)))
     return (f"WITH m AS (SELECT f.frame_id, f.frame_ord, f.frame_pos, f.scene, f.timestamp_us, [{key}] AS key, "
-            f"struct_pack({binding}) AS binding, struct_pack({tracks}) AS tracks "
+            f"{binding} AS binding, {tracks} AS tracks "
             f"FROM r2s_ends{last} e JOIN {POSITIONS} f ON f.scene = e.scene AND f.frame_pos = e.frame_pos {joins})")
+
+
+def estimate_query(pattern: TemporalPattern, config: SynthConfig, fanout: bool, per_frame: bool = False) -> str:
+    """The estimate of sql.estimate_query for a temporal pattern: the steps' one-frame joins run one after another,
+    so a frame's product is the largest of its steps' (sql.estimate_ctes) and the total sums every step's products
+    over every frame, plus a bound on the candidate bindings of the whole pattern in each scene (candidates_sql):
+    for any step j, at most (the step's bindings over the scene's frames) x (for each variable not in step j, the
+    tracks of the scene that one of its statements may bind), the least over the steps. With per_frame, one row per
+    frame and step (frame id, step, product)."""
+    names = pattern.names
+    ctes = [EGO_CTE, ESTIMATE_FRAMES]
+    for k, step in enumerate(pattern.steps):
+        ctes += estimate_ctes(step.pattern, config, fanout, label=f"s{k}")
+    steps = " UNION ALL ".join(f"SELECT {k} AS step, frame_id, rows, p, scene FROM s{k}"
+                               for k in range(len(pattern.steps)))
+    ctes.append(f"p AS ({steps})")
+    if per_frame:
+        return "WITH " + ",\n".join(ctes) + "\nSELECT frame_id, step, p FROM p"
+    # A variable's tracks in a scene: those one step's statement for it may bind (its first step's, the rows CTE
+    # s{k}_t{i} of estimate_ctes).
+    for v, name in enumerate(names):
+        k = next(k for k, s in enumerate(pattern.steps) if name in s.names)
+        rows = f"s{k}_t{pattern.steps[k].names.index(name)}"
+        ctes.append(f"r2s_v{v} AS (SELECT scene, count(DISTINCT track_id)::DOUBLE AS n FROM {rows} GROUP BY scene)")
+    joins = "".join(f" LEFT JOIN r2s_v{v} USING (scene)" for v in range(len(names)))
+    bounds = []
+    for k, step in enumerate(pattern.steps):
+        ctes.append(f"r2s_t{k} AS (SELECT scene, sum(p) AS n FROM s{k} GROUP BY scene)")
+        joins += f" LEFT JOIN r2s_t{k} USING (scene)"
+        bounds.append(" * ".join([f"coalesce(r2s_t{k}.n, 0)"] + [f"coalesce(r2s_v{v}.n, 0)" for v, n in
+                                                                  enumerate(names) if n not in step.names]))
+    least = bounds[0] if len(bounds) == 1 else f"least({', '.join(bounds)})"
+    ctes.append(f"r2s_cand AS (SELECT {least} AS n FROM (SELECT DISTINCT scene FROM r2s_frames) sc{joins})")
+    return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "SELECT coalesce(sum(n), 0) FROM r2s_cand", False)
