@@ -9,8 +9,8 @@ frame id that occurs in two places is refused, never silently split into two fra
 once, dictionary-encoded, and refuses the whole dataset on the first bad row, with the same one-line messages
 as extractors.frames.validate_frames (ids are printed into generated programs, so a bad id refuses the input
 before any frame is synthesized). `runs` streams only the frame_id column and yields where each frame is.
-Workers read their own rows with storage.parquet.read_rows (a file and a row range), so frame data need not pass through the
-process that plans the work.
+Workers read their own rows with read_frame_rows (a file and a row range, through the same footer checks and a
+check of every value as decoded), so frame data need not pass through the process that plans the work.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from storage.parquet import (
     footer,
     null_count,
     open_file,
+    read_rows,
 )
 from synth.scene import EGO_ID, ENTITY_TYPES, SceneError, check_frame_id, check_identifier
 
@@ -72,13 +73,7 @@ class FramesDataset:
         for f in files:
             where = f if len(files) > 1 else str(path)
             meta = footer(pafs, f, where, FramesError)
-            schema = meta.schema.to_arrow_schema()
-            missing = [c for c in FRAMES_COLUMNS if c not in schema.names]
-            if missing:
-                raise FramesError(f"{where} is not a frames file: it lacks column(s) {', '.join(missing)}")
-            check_column_types(schema, FRAMES_SCHEMA, where, FramesError)
-            check_column_types(schema, OPTIONAL_SCHEMA, where, FramesError)  # a speed stored as text, ...
-            check_value_sizes(meta, STRING_COLUMNS, MAX_VALUE_BYTES, where, FramesError)
+            schema = check_footer(meta, where)
             # A row without a frame id belongs to no frame: refused here, where even `r2s scene` (which reads only
             # its frame's rows, and a filter on frame_id never matches a null) sees it.
             nulls = null_count(meta, "frame_id")
@@ -209,6 +204,36 @@ class FramesDataset:
             raise FramesError(f"{self.source} is not a readable frames dataset ({str(exc)[:120]})") from None
         _valid(table, self.source)
         return table if table.num_rows else None
+
+
+def check_footer(meta: pq.FileMetaData, where: str) -> pa.Schema:
+    """What a frames file's footer must say before a value of it is decoded, for every reader of frames: the
+    frames columns, of their types (a speed stored as text is refused), and text columns of bounded size
+    (storage.parquet.check_value_sizes). Returns the file's schema."""
+    try:
+        schema = meta.schema.to_arrow_schema()
+    except (pa.ArrowException, ValueError) as exc:
+        raise FramesError(f"{where} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    missing = [c for c in FRAMES_COLUMNS if c not in schema.names]
+    if missing:
+        raise FramesError(f"{where} is not a frames file: it lacks column(s) {', '.join(missing)}")
+    check_column_types(schema, FRAMES_SCHEMA, where, FramesError)
+    check_column_types(schema, OPTIONAL_SCHEMA, where, FramesError)  # a speed stored as text, ...
+    check_value_sizes(meta, STRING_COLUMNS, MAX_VALUE_BYTES, where, FramesError)
+    return schema
+
+
+def read_frame_rows(url: str, path: str, start: int, stop: int, columns: tuple[str, ...]) -> pa.Table:
+    """Rows [start, stop) of one frames file as a worker of `r2s run` reads them (storage.parquet.read_rows), through
+    the checks of every reader of frames: the footer of the file as opened now (check_footer: the file may have
+    been replaced since the run checked it, and a replaced file is opened afresh), then every value as decoded
+    (UTF-8, dictionary indices). A FramesError names the file."""
+    check_footer(open_file(url, path).metadata, path)
+    try:
+        rows = read_rows(url, path, start, stop, columns)
+    except (pa.ArrowException, OSError) as exc:
+        raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    return _valid(rows, path)
 
 
 def _valid(table: pa.Table, where: str) -> pa.Table:

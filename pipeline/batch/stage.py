@@ -214,7 +214,8 @@ class _Run:
             stopped = False
             return computed
         except ChunkUnreadable as exc:
-            raise UserError(f"{exc} (on a cluster, the frames must be at a path every worker sees)") from None
+            stopped = False  # bad input, not a stop: the same command would meet it again (finished rows are kept)
+            raise UserError(f"{exc}{exc.hint}") from None
         finally:
             if buffer.count:
                 written += _write_part(store, buffer.take())

@@ -1,7 +1,7 @@
 """The worker side of `r2s run`: a chunk of frames in (a file and a row range), one programs row per frame out.
 
-A chunk task reads its own rows (storage.parquet.read_rows), so frame data never passes through the
-process that plans the run, on one machine or on a cluster. Each frame runs under its own time and memory
+A chunk task reads its own rows (extractors.frames_dataset.read_frame_rows: a file and a row range, through the
+checks of every reader of frames), so frame data never passes through the process that plans the run, on one machine or on a cluster. Each frame runs under its own time and memory
 limits (run_frame), and becomes a row whatever happens to it; only a dead worker loses rows. Before each frame
 the task writes the frame's index to its progress marker, so that when a worker dies the run knows which frame
 it was running: that frame is the suspect, the others of the chunk are innocent.
@@ -25,8 +25,8 @@ import pyarrow as pa
 
 from extractors.frame_hash import frame_hashes_of, to_hex
 from extractors.frames import FramesError, frame_to_scene
+from extractors.frames_dataset import read_frame_rows
 from pipeline.programs import failure_row, programs_table, result_row
-from storage.parquet import read_rows
 from synth.config import SynthConfig
 from synth.errors import InternalError
 from synth.scene import Scene
@@ -93,8 +93,10 @@ class ChunkTask:
         (extractors.frame_hash): a row records what it was computed from, as the worker read it."""
         first = min(f[1] for f in self.frames)
         stop = max(f[1] + f[2] for f in self.frames)
-        try:
-            rows = read_rows(self.url, self.path, first, stop, self.columns)
+        try:  # through the checks of every reader of frames: the footer as the file is now, every value decoded
+            rows = read_frame_rows(self.url, self.path, first, stop, self.columns)
+        except FramesError as exc:
+            raise ChunkInvalid(one_line(str(exc), 400)) from None
         except (OSError, pa.ArrowException) as exc:
             raise ChunkUnreadable(one_line(f"cannot read {self.url or ''}{self.path}: {exc}", 400)) from None
         # The span cut at every start and end of the chunk's frames (rows between them are other frames': one
@@ -106,6 +108,15 @@ class ChunkTask:
 
 class ChunkUnreadable(InternalError):
     """A worker could not read its chunk (the file moved, or a cluster worker does not see the path)."""
+
+    hint = " (on a cluster, the frames must be at a path every worker sees)"
+
+
+class ChunkInvalid(ChunkUnreadable):
+    """A chunk's rows fail the frames checks as a worker reads them: the file changed since the run checked it,
+    or a column the check does not read holds a corrupt value."""
+
+    hint = ""
 
 
 def run_chunk(task: ChunkTask) -> pa.Table:

@@ -86,3 +86,47 @@ def test_ids_of_256_characters_are_fine(tmp_path):
     frames = _with_frame_id(tmp_path, "s" * 250 + "/0")
     result = run_bounded("scene", str(frames), fid, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+def _corrupt_category(tmp_path):
+    """A frames file whose `category` (a column the frames check does not read, the workers do) holds one value that
+    is not UTF-8: the bytes of a plain, uncompressed page patched in place, as a damaged disk or a hostile writer
+    leaves them (the footer is intact)."""
+    table = pq.read_table(KEYFRAMES).slice(0, 300)
+    category = table.column("category").to_pylist()
+    k = next(i for i, c in enumerate(category) if c and not table.column("is_ego")[i].as_py())
+    category[k] = "ZZMARKERZZ"
+    table = table.set_column(table.schema.get_field_index("category"), "category", pa.array(category, pa.string()))
+    out = tmp_path / "frames.parquet"
+    pq.write_table(table, out, compression="none", use_dictionary=False, write_statistics=False)
+    data = out.read_bytes()
+    assert data.count(b"ZZMARKERZZ") == 1
+    out.write_bytes(data.replace(b"ZZMARKERZZ", b"ZZ\xff\xfeRKERZZ"))
+    return out
+
+
+def test_run_workers_read_frames_through_the_frames_checks(tmp_path):
+    """Before: the workers decoded the bad value past every check (internal error, exit 1, the bytes printed)."""
+    frames = _corrupt_category(tmp_path)
+    out = tmp_path / "programs"
+    result = run_bounded("run", str(frames), "--out", str(out), timeout=180)
+    assert result.returncode == 2 and result.killed is None, result.stderr
+    lines = result.stderr.strip().splitlines()  # the check's progress line, then the refusal
+    assert "holds corrupt values" in lines[-1] and "Traceback" not in result.stderr, result.stderr
+    assert "resume" not in result.stderr and "\ufffd" not in result.stderr  # bad input, not a stop; no raw bytes
+    assert not out.exists()
+
+
+def test_the_workers_reader_checks_the_footer_of_the_file_as_it_is_now(huge_cell, tmp_path):
+    """A file replaced after the run's check (a huge cell, a speed stored as text) is refused by the workers' own
+    reader from its footer, before a value is decoded."""
+    from extractors.frames_dataset import read_frame_rows
+    from extractors.frames_schema import FramesError
+
+    with pytest.raises(FramesError, match="column frame_id holds"):
+        read_frame_rows("", str(huge_cell), 0, 10, ("frame_id", "x"))
+    table = pq.read_table(KEYFRAMES).slice(0, 50)
+    text = tmp_path / "speed.parquet"
+    pq.write_table(table.append_column("speed", pa.array(["1.0"] * 50)), text)
+    with pytest.raises(FramesError, match="column speed is string"):
+        read_frame_rows("", str(text), 0, 10, ("frame_id", "speed"))
