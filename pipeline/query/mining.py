@@ -35,6 +35,7 @@ from extractors.frames import FramesError, write_frames
 from extractors.frames_dataset import FramesDataset
 from pipeline.errors import UserError
 from pipeline.query.events import events_select
+from pipeline.query.notes import absent_types_note
 from pipeline.query.sql import (
     EXACT_UDF,
     MACROS,
@@ -51,7 +52,7 @@ from pipeline.query.temporal import estimate_query as temporal_estimate_query
 from pipeline.query.temporal import prepare
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
-from synth.pattern import Pattern, binding_holds
+from synth.pattern import Pattern, binding_holds, matched_types
 from synth.scene import EGO_ID, Entity
 from synth.temporal import TemporalPattern, parse_query_pattern
 
@@ -311,6 +312,7 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
                 _require_timestamps(con, frames, "--min-duration")
             if temporal and pattern.needs_timestamps:
                 _require_timestamps(con, frames, "the pattern (its durations or behaviours)")
+            _note_absent_types(con, [s.pattern for s in pattern.steps] if temporal else [pattern], frames, log)
             _check_size(con, lambda fanout: estimate(pattern, config, fanout))
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
@@ -338,6 +340,16 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
         finally:
             con.close()
     return n_events, matched, bindings, check.calls
+
+
+def _note_absent_types(con, patterns: list[Pattern], frames, log: Callable[[str], None]) -> None:
+    """Say (a note on stderr, not an error) when the pattern names a type the frames never hold."""
+    if all(matched_types(st.type) is None for p in patterns for st in p.statements):
+        return  # only `Object`: any type binds, nothing to scan for
+    present = [t for (t,) in con.execute(f"SELECT DISTINCT type FROM {ROWS} WHERE NOT is_ego").fetchall()]
+    note = absent_types_note(patterns, present, frames)
+    if note is not None:
+        log(note)
 
 
 def _require_timestamps(con, frames, what: str) -> None:
