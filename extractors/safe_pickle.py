@@ -26,7 +26,8 @@ stack machine of our own: pickle's pure-Python Unpickler with every opcode that 
   persistent ids and out-of-band buffers, which no ScenarioNet writer uses, are refused.
 
 So whatever the bytes, loading either gives plain data (containers, numbers, strings, numeric arrays, and the
-inert tokens) or raises one ExtractError; what it builds is at most a fixed multiple of the file's size.
+inert tokens) or raises one ExtractError; what it builds is counted as it loads and is at most BUILT_PER_BYTE
+bytes per byte of the file plus BUILT_BASE (_SafeUnpickler._spend; docs/cli.md, "Inputs and their bounds").
 
 One constructor needs more care: ScenarioNet's converters (metadrive's ScenarioDescription.update_summaries)
 store `collections.defaultdict(int)` in every scenario's metadata.number_summary and so in dataset_summary.pkl.
@@ -54,6 +55,28 @@ from storage.regular_files import FileTooLarge, read_regular
 from synth.errors import InputError
 
 MAX_PICKLE_BYTES = 2 * 2**30
+# The memory a pickle may build, counted as it loads (_SafeUnpickler._spend): BUILT_PER_BYTE bytes per byte of
+# the file, plus BUILT_BASE. What is counted bounds what CPython allocates from above: for each opcode what it
+# makes by itself (OPCODE_BYTES: an object, the allocator's block and its stack slot; an empty set is 216 bytes,
+# a memo entry a table slot and its int key), for each byte read DATA_BYTES_PER_BYTE (a str decoded from UTF-8 takes at most 4 bytes
+# a byte), for each item put into a set or dict ITEM_BYTES (its table slot, with the table's growth), and what a
+# constructor makes from objects already built (a set or dict of n items, bytes, an array's copied data). Real
+# ScenarioNet files count 10 to 20 bytes a byte (whole scenarios), up to about 40 (small files); streams of
+# one-byte opcodes that each build an object took 236 bytes a byte before this bound (empty sets), 120 (tuples).
+BUILT_PER_BYTE = 64
+BUILT_BASE = 256 * 2**20
+DATA_BYTES_PER_BYTE = 4
+ITEM_BYTES = 144
+OBJECT_BYTES = 240  # any object a constructor makes, besides its items or data
+OPCODE_BYTES = collections.defaultdict(lambda: 80)  # an object of up to 56 bytes, its allocator block, its slot
+OPCODE_BYTES.update({op[0]: 256 for op in (pickle.EMPTY_SET, pickle.FROZENSET)})
+# a tuple of tuples is also kept with its depth and size (_SafeUnpickler._tuple): an entry and a 3-tuple
+OPCODE_BYTES.update({op[0]: 320 for op in (pickle.TUPLE, pickle.TUPLE1, pickle.TUPLE2, pickle.TUPLE3)})
+OPCODE_BYTES.update({op[0]: 160 for op in (pickle.MEMOIZE, pickle.PUT, pickle.BINPUT, pickle.LONG_BINPUT)})
+OPCODE_BYTES.update({op[0]: 112 for op in (pickle.BINUNICODE, pickle.SHORT_BINUNICODE, pickle.BINUNICODE8,
+                                            pickle.UNICODE, pickle.STRING, pickle.BINSTRING, pickle.SHORT_BINSTRING,
+                                            pickle.BINBYTES, pickle.SHORT_BINBYTES, pickle.BINBYTES8,
+                                            pickle.BYTEARRAY8)})
 MAX_TUPLE_DEPTH = 100
 MAX_ARRAY_DIMS = 32
 # numpy dtype kinds a ScenarioNet file may hold: bool, signed and unsigned ints, floats, complex
@@ -69,6 +92,10 @@ class RefusedGlobal(InputError, pickle.UnpicklingError):
 
 class _Malformed(InputError, pickle.UnpicklingError):
     """A pickle that breaks the rules every pickler follows (memo order, lengths, nesting)."""
+
+
+class _TooBig(InputError, pickle.UnpicklingError):
+    """A pickle that would build more than its budget (BUILT_PER_BYTE x its size + BUILT_BASE)."""
 
 
 class _Token:
@@ -334,21 +361,52 @@ class _SafeUnpickler(_P):
         self._size = len(data)
         self._pending: dict[int, tuple[Any, Callable[[Any, Any], None]]] = {}  # id -> (object, its one BUILD)
         self._deep: dict[int, tuple[int, int, tuple]] = {}  # id -> (depth, size, tuple) of tuples of tuples
+        self.budget = BUILT_PER_BYTE * len(data) + BUILT_BASE
+        self.spent = 0
+
+    def _spend(self, n: int) -> None:
+        self.spent += n
+        if self.spent > self.budget:
+            raise _TooBig(f"it would build more than {self.budget / 2**20:.0f} MB ({BUILT_PER_BYTE} bytes a byte of "
+                          f"its {self._size:,} bytes, plus {BUILT_BASE / 2**20:.0f} MB)")
+
+    def _read(self, n: int = -1) -> bytes:
+        data = self._data.read(n)
+        self._spend(DATA_BYTES_PER_BYTE * len(data))
+        return data
+
+    def _readline(self) -> bytes:
+        data = self._data.readline()
+        self._spend(DATA_BYTES_PER_BYTE * len(data))
+        return data
+
+    def _made(self, obj: Any) -> Any:
+        """Count what a constructor made from objects already built (their own bytes were counted as read)."""
+        if isinstance(obj, np.ndarray):
+            self._spend(OBJECT_BYTES + obj.nbytes)
+        elif isinstance(obj, (bytes, bytearray)):
+            self._spend(OBJECT_BYTES + len(obj))
+        elif isinstance(obj, (set, frozenset, dict)):
+            self._spend(OBJECT_BYTES + ITEM_BYTES * len(obj))
+        else:
+            self._spend(OBJECT_BYTES)
+        return obj
 
     def load(self) -> Any:
         """pickle's loop, reading the bytes directly: frames only group the opcodes that follow them in the same
         bytes (FRAME below checks its length and goes on), and a read cut short by the end of the data is found
         by the next opcode's read (no STOP, EOFError) or by _bytes_of."""
-        self.read, self.readline = self._data.read, self._data.readline
+        self.read, self.readline = self._read, self._readline  # every byte read is counted (_spend)
         self.metastack, self.stack = [], []
         self.append = self.stack.append
         self.proto = 0
-        read, dispatch = self.read, self.dispatch
+        read, dispatch, spend, cost = self.read, self.dispatch, self._spend, OPCODE_BYTES
         try:
             while True:
                 key = read(1)
                 if not key:
                     raise EOFError
+                spend(cost[key[0]])
                 dispatch[key[0]](self)
         except pickle._Stop as stop:  # what the stdlib's STOP raises
             return stop.value
@@ -367,7 +425,7 @@ class _SafeUnpickler(_P):
             raise _Malformed(f"{how} of {_what(func)}, which is not a constructor a pickle may call")
         if type(args) is not tuple:
             raise _Malformed(f"{how} arguments of type {_what(args)}, not a tuple")
-        made = func.make(*args)
+        made = self._made(func.make(*args))
         if func.build is not None:
             self._pending[id(made)] = (made, func.build)
         return made
@@ -436,6 +494,7 @@ class _SafeUnpickler(_P):
         if pending is None or pending[0] is not inst:
             raise RefusedGlobal(f"{_what(inst)} with state set after construction (BUILD)")
         pending[1](inst, state)
+        self._made(inst)  # an array's BUILD copies its data
 
     @_op(pickle.INST)
     def load_inst(self) -> None:
@@ -491,7 +550,9 @@ class _SafeUnpickler(_P):
     @_op(pickle.SETITEM)
     def load_setitem(self) -> None:
         value, key = self.stack.pop(), self.stack.pop()
-        self._into("dict")[key] = value
+        target = self._into("dict")
+        self._spend(ITEM_BYTES)
+        target[key] = value
 
     @_op(pickle.SETITEMS)
     def load_setitems(self) -> None:
@@ -499,13 +560,30 @@ class _SafeUnpickler(_P):
         target = self._into("dict")
         if len(items) % 2:
             raise _Malformed("SETITEMS with an odd number of items")
+        self._spend(ITEM_BYTES * (len(items) // 2))
         for i in range(0, len(items), 2):
             target[items[i]] = items[i + 1]
 
     @_op(pickle.ADDITEMS)
     def load_additems(self) -> None:
         items = self.pop_mark()
-        self._into("set").update(items)
+        target = self._into("set")
+        self._spend(ITEM_BYTES * len(items))
+        target.update(items)
+
+    @_op(pickle.DICT)
+    def load_dict(self) -> None:
+        items = self.pop_mark()
+        if len(items) % 2:
+            raise _Malformed("DICT with an odd number of items")
+        self._spend(ITEM_BYTES * (len(items) // 2))
+        self.append({items[i]: items[i + 1] for i in range(0, len(items), 2)})
+
+    @_op(pickle.FROZENSET)
+    def load_frozenset(self) -> None:
+        items = self.pop_mark()
+        self._spend(ITEM_BYTES * len(items))
+        self.append(frozenset(items))
 
     @_op(pickle.PUT)
     def load_put(self) -> None:
@@ -571,6 +649,8 @@ def load_pickle(path: str | os.PathLike, max_bytes: int = MAX_PICKLE_BYTES) -> A
         raise ExtractError(f"{path}: pickle needs more memory than is available") from None
     except _Malformed as exc:
         raise ExtractError(f"{path} is not a readable pickle ({_one_line(exc, 200)})") from None
+    except _TooBig as exc:
+        raise ExtractError(f"{path}: refused to unpickle: {exc}") from None
     except Exception as exc:  # corrupt or truncated data raises almost anything from inside pickle / numpy
         raise ExtractError(f"{path} is not a readable pickle ({type(exc).__name__}: {_one_line(exc, 100)})") from None
 
