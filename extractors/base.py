@@ -33,6 +33,7 @@ from extractors.categories import ALL, UNKNOWN_CLASS, CategorySelection, Taxonom
 from extractors.frames import FramesError, _dim, frame_rows, known_speed
 from extractors.naming import SceneNames
 from storage.regular_files import check_regular
+from synth.geometry import normalize
 from synth.lane_facts import RoadIndex
 from synth.roadmap import RoadMap
 from synth.scene import DEFAULT_MAX_ENTITIES
@@ -285,10 +286,19 @@ class FrameBuilder:
             )
         self.tally.frame_of(scene)
         ego_entity = _as_entity(ego, "Car")
+        world_places([(ego, ego_entity)] + kept)
         if road is not None:
             road_facts(road, [(ego, ego_entity)] + kept)
         return frame_rows(self.source, scene, frame_index, timestamp_us, ego_entity, [e for _, e in kept], fid,
                           self.names)
+
+
+def world_places(entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
+    """Keep each entity's place in its source's world frame (map_x, map_y, map_heading) where the source gives
+    it, map or no map: the ego's is how a frame goes back to the world (r2s scene's `world`, r2s export)."""
+    for b, e in entities:
+        if b.world is not None:
+            e.update(map_x=float(b.world[0]), map_y=float(b.world[1]), map_heading=normalize(math.degrees(b.world[2])))
 
 
 def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
@@ -298,9 +308,8 @@ def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, A
                        [math.degrees(b.world[2]) % 360.0 for b, _ in placed]) if placed else []
     for _, e in entities:
         e["map_id"] = road.road.map_id
-    for (b, e), f in zip(placed, facts):
-        e.update(map_x=b.world[0], map_y=b.world[1], map_heading=math.degrees(b.world[2]) % 360.0,
-                 lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
+    for (_, e), f in zip(placed, facts):
+        e.update(lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
                  off_road=f.off_road)
 
 

@@ -173,11 +173,33 @@ def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
                 if v is not None and not (isinstance(v, float) and math.isnan(v)):
                     d[key] = v if key == "lane" else bool(v)
         entities.append(d)
+    doc: dict[str, Any] = {"frame_id": fid, "entities": entities}
+    if (world := _world(rows)) is not None:
+        doc["world"] = world
     try:
-        scene = scene_from_dict({"frame_id": fid, "entities": entities})
+        scene = scene_from_dict(doc)
     except SceneError as exc:
         raise FramesError(f"frame {fid!r}: {exc}") from None
     return scene if road is None else replace(scene, road=road)
+
+
+def _world(rows: pd.DataFrame) -> dict[str, Any] | None:
+    """The frame's place in its source's world (scene JSON's `world`, synth.world): the ego row's map_x, map_y,
+    map_heading, with its source, scene, frame index and map; None where the ego row has no world pose."""
+    if "map_x" not in rows.columns:
+        return None
+    ego = rows[rows["is_ego"].astype(bool)]
+    if ego.empty:
+        return None
+    r = ego.iloc[0]
+    pose = [_given(r.get(c)) for c in ("map_x", "map_y", "map_heading")]
+    if None in pose:
+        return None
+    names = {c: r.get(c) for c in ("source", "scene", "map_id")}
+    index = r.get("frame_index")
+    return {"x": pose[0], "y": pose[1], "heading": pose[2],
+            **{c: str(v) for c, v in names.items() if isinstance(v, str) and v},
+            **({"frame_index": int(index)} if index is not None and not pd.isna(index) else {})}
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
@@ -188,8 +210,11 @@ def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
 
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
     """A Scene back as frames rows (ids kept as they are; speeds and measurement sigmas as their optional columns,
-    if any entity has one; lane facts and the road's map id as the road columns)."""
+    if any entity has one; lane facts and the road's map id as the road columns; the scene's world pose as the ego
+    row's map_x, map_y, map_heading)."""
     optional = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
+    world = scene.world
+    map_id = scene.road.map_id if scene.road is not None else world.map_id if world is not None else None
     rows = []
     for e in scene.entities:
         rows.append(
@@ -201,7 +226,9 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
                 **{c: getattr(e, c) for c in optional},
                 **({c: list(e.lanes) if c == "lanes" else getattr(e, c) for c in LANE_FACT_COLUMNS}
                    if e.lanes is not None else {}),
-                **({"map_id": scene.road.map_id} if scene.road is not None else {}),
+                **({"map_id": map_id} if map_id is not None else {}),
+                **({"map_x": world.x, "map_y": world.y, "map_heading": world.heading}
+                   if e.is_ego and world is not None else {}),
             }
         )
     return rows

@@ -373,7 +373,8 @@ def message_frames(
         boxes = to_ego_boxes(cur.raw, cur.t, poses, options, f"{where} message {cur.index}")
         boxes = [b if b.speed is not None else replace(b, speed=_differenced(b.track_id, cur, prev, nxt))
                  for b in boxes]
-        ego = RecordedObject("ego", "ego", 0.0, 0.0, 0.0, speed=poses.speed_at(cur.t))
+        # the ego's pose in the fixed frame, where the log gives one: the frames keep it (map_x, map_y, map_heading)
+        ego = RecordedObject("ego", "ego", 0.0, 0.0, 0.0, speed=poses.speed_at(cur.t), world=poses.at(cur.t))
         return builder.frame(scene, cur.index, cur.t // 1000, ego, boxes)
 
     window: list[_Message] = []  # the previous message, the one whose frame is due, the next one

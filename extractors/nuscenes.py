@@ -181,10 +181,14 @@ def _sample_frame(nusc: Any, scene: str, index: int, sample: dict, builder: Fram
         [float(quaternion_yaw(*a["rotation"])) for a in anns],
     )
     # nuScenes sizes are [width, length, height]
+    # world: the global frame's centre and yaw, which the frames keep (map_x, map_y, map_heading)
     boxes = [RecordedObject(a["instance_token"], a["category_name"], float(x[i]), float(y[i]), float(h[i]),
-                            a["size"][1], a["size"][0], speed=_ground_speed(nusc.box_velocity(a["token"])))
+                            a["size"][1], a["size"][0], speed=_ground_speed(nusc.box_velocity(a["token"])),
+                            world=(float(a["translation"][0]), float(a["translation"][1]),
+                                   float(quaternion_yaw(*a["rotation"]))))
              for i, a in enumerate(anns)]
-    ego = RecordedObject("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=_ground_speed(ego_velocity(nusc, sample)))
+    ego = RecordedObject("ego", EGO_CATEGORY, 0.0, 0.0, 0.0, speed=_ground_speed(ego_velocity(nusc, sample)),
+                         world=(float(pose["translation"][0]), float(pose["translation"][1]), ego_yaw))
     return builder.frame(scene, index, int(sample["timestamp"]), ego, boxes)
 
 

@@ -21,6 +21,7 @@ from synth.errors import InputError
 
 if TYPE_CHECKING:
     from synth.roadmap import RoadMap
+    from synth.world import WorldPose
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
 ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
@@ -170,6 +171,9 @@ class Scene:
     entities: tuple[Entity, ...]
     # The recorded road around ego, in the scene's (ego) frame: the map features within the extraction radius.
     road: RoadMap | None = None
+    # Where the scene is in its source's world (the ego's recorded pose, scenario, map): what an export puts the
+    # scene back into (synth.world); None where the frame's source gives no world pose.
+    world: WorldPose | None = None
 
     def __post_init__(self) -> None:
         ids = [e.id for e in self.entities]
@@ -209,6 +213,8 @@ class Scene:
                     d[key] = list(v) if key == "lanes" else v
             out.append(d)
         doc: dict[str, Any] = {"frame_id": self.frame_id, "entities": out}
+        if self.world is not None:
+            doc["world"] = self.world.to_dict()
         if self.road is not None:
             from synth.roadmap import road_to_dict  # numpy: loaded only for a scene with a road
 
@@ -221,7 +227,7 @@ class Scene:
 
 # Every key scene JSON may hold (docs/formats.md). Anything else is refused: a misspelt optional key would
 # otherwise be silently dropped (`pos_sgima` turning robust synthesis off, `hedding` leaving a default).
-SCENE_KEYS = ("frame_id", "entities", "road")
+SCENE_KEYS = ("frame_id", "entities", "world", "road")
 REQUIRED_ENTITY_KEYS = ("id", "type", "x", "y", "heading")
 LANE_FACT_KEYS = ("lanes", "lane", "in_intersection", "on_crosswalk", "off_road")
 ENTITY_KEYS = (*REQUIRED_ENTITY_KEYS, "length", "width", "speed", *SIGMA_CAPS, *LANE_FACT_KEYS)
@@ -367,10 +373,19 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
             road = road_from_dict(raw["road"])
         except MapError as exc:
             raise SceneError(str(exc)) from None
-    return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)), road)
+    world = None
+    if raw.get("world") is not None:
+        from synth.world import WorldError, world_from_dict
+
+        try:
+            world = world_from_dict(raw["world"])
+        except WorldError as exc:
+            raise SceneError(str(exc)) from None
+    return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)), road, world)
 
 
-def make_scene(frame_id: str, entities: Iterable[Entity], road: RoadMap | None = None) -> Scene:
+def make_scene(frame_id: str, entities: Iterable[Entity], road: RoadMap | None = None,
+               world: WorldPose | None = None) -> Scene:
     """A scene from entities, with headings normalised so equal directions print equal."""
     from synth.geometry import normalize
 
@@ -378,6 +393,7 @@ def make_scene(frame_id: str, entities: Iterable[Entity], road: RoadMap | None =
         frame_id=frame_id,
         entities=tuple(replace(e, heading=normalize(e.heading)) for e in entities),
         road=road,
+        world=world,
     )
 
 

@@ -67,10 +67,14 @@ def test_every_key_written_is_read_back():
          "line": [[-1.75, 0.0], [-1.75, 20.0]], "left": None, "right": "l1", "successors": [], "predecessors": [],
          "is_intersection": False},
         {"id": "w", "kind": "crosswalk", "polygon": [[-3.5, 5.0], [3.5, 5.0], [3.5, 8.0], [-3.5, 8.0]]}]}
-    scene = scene_from_dict({"frame_id": "f", "entities": [EGO, full], "road": road})
+    world = {"source": "scenarionet", "scene": "scene-0061", "frame_index": 3, "map_id": "scene-0061",
+             "x": 411.25, "y": -1163.5, "heading": 271.5}
+    scene = scene_from_dict({"frame_id": "f", "entities": [EGO, full], "road": road, "world": world})
     assert scene.to_dict()["road"] == road
+    assert scene.to_dict()["world"] == world
     assert scene_from_json(scene.to_json()) == scene
     assert set(scene.to_dict()) == set(SCENE_KEYS)
+    assert list(scene.to_dict()) == ["frame_id", "entities", "world", "road"]  # the documented order
 
 
 def test_the_documented_keys_are_the_accepted_keys():
