@@ -32,6 +32,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "render": ("pipeline.cli.render", "bird's-eye view of a scene, its program's references and sampled variants"),
     "sample": ("pipeline.cli.sample", "variants of a recorded scene, sampled from its program, as scene JSON"),
     "eval-frontend": ("pipeline.cli.eval_frontend", "detection metrics of predicted frames against ground truth"),
+    "export": ("pipeline.cli.export", "a frame and its variants as ScenarioNet scenarios or OpenSCENARIO + OpenDRIVE"),
 }
 
 # verb -> an example, one command a line, run from the repository's root on the data shipped there (after
@@ -57,6 +58,10 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                       "r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories vehicles "
                       "--out vehicles.parquet",
                       "r2s eval-frontend vehicles.parquet gt.parquet --out eval --name vehicles-only"),
+    "export": (_EXCERPT, "r2s scene frames.parquet scene-0103/0 --out scene.json",
+               "r2s synth scene.json --format scenic --out scene.scenic",
+               "r2s sample scene.scenic --n 5 --seed 0 --out variants",
+               "r2s export scene.json variants --to scenarionet --out scenarios"),
 }
 
 EXIT_CODES = (f"{ExitCode.OK} done; {ExitCode.BAD_INPUT} bad input or usage (one line on stderr, nothing written); "

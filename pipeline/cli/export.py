@@ -1,0 +1,48 @@
+"""`r2s export SCENE.json [VARIANT.json ... | DIR] --to scenarionet --out DIR`: the recorded frame and
+its variants back in the source's world, as scenarios simulators replay (docs/cli.md, docs/formats.md "Exported
+scenarios").
+
+SCENE.json is what `r2s scene` writes (its `world` and `road`); the variants what `r2s sample` writes (a
+directory of them may be given). `--to scenarionet` writes a ScenarioNet database (MetaDrive replays it). A
+scene without a road exports with an empty map (said on stdout)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pipeline.cli.options import bounded_int
+from pipeline.errors import UserError
+from pipeline.export import TARGETS
+from pipeline.outputs import check_apart
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", metavar="SCENE.json", help="the recorded frame (r2s scene: with its world and road)")
+    p.add_argument("variants", nargs="*", metavar="VARIANT", help="variants (r2s sample's scene JSON), or "
+                   "directories of them (their *.json files)")
+    p.add_argument("--to", required=True, choices=TARGETS, help="scenarionet: a ScenarioNet database")
+    p.add_argument("--out", required=True, metavar="DIR", help="the output directory (replaced whole)")
+    p.add_argument("--program", metavar="P", help="the program the variants were sampled from (.dsl or .scenic): "
+                   "named in every scenario's metadata")
+    p.add_argument("--steps", type=bounded_int(1, 10_000), default=1, metavar="T",
+                   help="steps of 0.1 s per scenario: each entity moves on at its speed along its heading "
+                        "(default 1: the instant)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipeline.cli.inputs import read_scene, read_text_file
+    from pipeline.export.stage import ExportOptions, export, say, variant_files
+
+    out = Path(args.out)
+    check_apart(out, [("scene", args.scene), ("program", args.program)]
+                + [("variant", v) for v in args.variants], directory=True)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {args.out} exists and is not a directory")
+    recorded = read_scene(args.scene)
+    files = variant_files(args.variants)
+    program = read_text_file(args.program, "program") if args.program else None
+    options = ExportOptions(program, Path(args.program).name if args.program else None, args.steps)
+    n, notes = export(recorded, files, args.to, out, options)
+    say(f"wrote {n} scenarios (the frame and {n - 1} variants) to {out}, a ScenarioNet database" + "".join(f"; {x}" for x in notes))
+    return 0

@@ -1,0 +1,125 @@
+"""The export stage: the recorded scene and each variant, read one at a time, put back in the scene's world and
+written by the chosen target into a directory staged beside --out (pipeline.outputs.staged_directory: a reader
+never sees half a database, a failure leaves nothing).
+
+The world of every scenario is the recorded scene's (`world`: the ego's recorded pose; a scene without one is
+exported with its ego frame as the world), and so is its road (a variant may carry its own of each). Variants
+are scene JSON in the same ego frame (r2s sample keeps the program's ego where the recording has it)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from pipeline.errors import UserError
+from synth.roadmap import RoadMap
+from synth.scene import Scene
+from synth.world import WorldPose
+
+MAX_VARIANTS = 10**7
+
+
+@dataclass(frozen=True)
+class Item:
+    """One scenario to write: its scene, its name (unique in the output) and where it came from."""
+
+    scene: Scene
+    name: str
+    variant: str | None  # the variant's file name; None for the recorded frame
+
+
+class Writer(Protocol):
+    """What a target writes into the staged output directory."""
+
+    def add(self, item: Item, world: WorldPose, road: RoadMap | None) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class Target(Protocol):
+    name: str
+    needs_road: bool  # a target that cannot be written without a road (OpenDRIVE) refuses a scene without one
+
+    def open(self, folder: Path, recorded: Scene, options: ExportOptions) -> Writer: ...
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    program_text: str | None = None
+    program_file: str | None = None
+    steps: int = 1
+    radius: float = 50.0
+
+
+def slug(text: str) -> str:
+    """A frame id as a file-name part: runs of other characters than letters, digits, '.', '-' as one '_'."""
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_") or "scene"
+
+
+def variant_files(paths: list[str]) -> list[Path]:
+    """The variant files: each PATH a scene JSON file, or a directory whose *.json files (sorted) are variants."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out += sorted(f for f in p.iterdir() if f.suffix == ".json" and not f.name.startswith("."))
+        elif p.exists():
+            out.append(p)
+        else:
+            raise UserError(f"variant {p} does not exist")
+        if len(out) > MAX_VARIANTS:
+            raise UserError(f"more than {MAX_VARIANTS:,} variants")
+    stems = {}
+    for f in out:
+        if f.stem in stems:
+            raise UserError(f"two variants are named {f.stem} ({stems[f.stem]} and {f}): their scenarios would clash")
+        stems[f.stem] = f
+    return out
+
+
+def items(recorded: Scene, files: list[Path], max_entities: int | None = None) -> Iterator[Item]:
+    """The recorded scene, then each variant as it is read (one in memory at a time)."""
+    from pipeline.cli.inputs import read_scene
+
+    base = slug(recorded.frame_id)
+    yield Item(recorded, base, None)
+    for f in files:
+        yield Item(read_scene(str(f), max_entities), f"{base}-{slug(f.stem)}", f.name)
+
+
+def target(name: str) -> Target:
+    from pipeline.export.scenarionet import TARGET
+
+    return TARGET
+
+
+def export(recorded: Scene, files: list[Path], to: str, out: Path, options: ExportOptions) -> tuple[int, list[str]]:
+    """Write the recorded scene and the variants into `out` (replaced whole); returns the number of scenarios
+    and the notes to tell the user (no world pose, no road)."""
+    from pipeline.outputs import staged_directory
+
+    chosen = target(to)
+    notes = []
+    if recorded.road is None:
+        if chosen.needs_road:
+            raise UserError(f"{to} needs a road (OpenDRIVE is a road network) and the scene {recorded.frame_id!r} has "
+                            "none: export a frame whose source has a map (r2s scene writes its road)")
+        notes.append("the scene has no road: the scenarios have an empty map")
+    if recorded.world is None:
+        notes.append("the scene has no world pose: coordinates are its ego frame's")
+    n = 0
+    with staged_directory(out) as stage:
+        writer = chosen.open(stage, recorded, options)
+        for item in items(recorded, files):
+            scene = item.scene
+            writer.add(item, scene.world or recorded.world or WorldPose.identity(), scene.road or recorded.road)
+            n += 1
+        writer.close()
+    return n, notes
+
+
+def say(line: str) -> None:
+    sys.stdout.write(line + "\n")
