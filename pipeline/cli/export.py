@@ -1,10 +1,12 @@
-"""`r2s export SCENE.json [VARIANT.json ... | DIR] --to scenarionet --out DIR`: the recorded frame and
+"""`r2s export SCENE.json [VARIANT.json ... | DIR] --to scenarionet|openscenario --out DIR`: the recorded frame and
 its variants back in the source's world, as scenarios simulators replay (docs/cli.md, docs/formats.md "Exported
 scenarios").
 
 SCENE.json is what `r2s scene` writes (its `world` and `road`); the variants what `r2s sample` writes (a
-directory of them may be given). `--to scenarionet` writes a ScenarioNet database (MetaDrive replays it). A
-scene without a road exports with an empty map (said on stdout)."""
+directory of them may be given). `--to scenarionet` writes a ScenarioNet database (MetaDrive replays it);
+`--to openscenario` an OpenSCENARIO 1.2 file per scenario and one OpenDRIVE road built from the scene's lanes
+(esmini replays them). A scene without a road exports to ScenarioNet with an empty map (said on stdout) and is
+refused by OpenSCENARIO (one line, exit 2)."""
 
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE.json", help="the recorded frame (r2s scene: with its world and road)")
     p.add_argument("variants", nargs="*", metavar="VARIANT", help="variants (r2s sample's scene JSON), or "
                    "directories of them (their *.json files)")
-    p.add_argument("--to", required=True, choices=TARGETS, help="scenarionet: a ScenarioNet database")
+    p.add_argument("--to", required=True, choices=TARGETS, help="scenarionet: a ScenarioNet database; "
+                   "openscenario: .xosc files and one .xodr road")
     p.add_argument("--out", required=True, metavar="DIR", help="the output directory (replaced whole)")
     p.add_argument("--program", metavar="P", help="the program the variants were sampled from (.dsl or .scenic): "
                    "named in every scenario's metadata")
@@ -44,5 +47,6 @@ def run(args: argparse.Namespace) -> int:
     program = read_text_file(args.program, "program") if args.program else None
     options = ExportOptions(program, Path(args.program).name if args.program else None, args.steps)
     n, notes = export(recorded, files, args.to, out, options)
-    say(f"wrote {n} scenarios (the frame and {n - 1} variants) to {out}, a ScenarioNet database" + "".join(f"; {x}" for x in notes))
+    what = "a ScenarioNet database" if args.to == "scenarionet" else "OpenSCENARIO 1.2 files on one OpenDRIVE road"
+    say(f"wrote {n} scenarios (the frame and {n - 1} variants) to {out}, {what}" + "".join(f"; {x}" for x in notes))
     return 0

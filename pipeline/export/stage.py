@@ -91,8 +91,10 @@ def items(recorded: Scene, files: list[Path], max_entities: int | None = None) -
 
 
 def target(name: str) -> Target:
-    from pipeline.export.scenarionet import TARGET
-
+    if name == "scenarionet":
+        from pipeline.export.scenarionet import TARGET
+    else:
+        from pipeline.export.openscenario import TARGET
     return TARGET
 
 
