@@ -51,11 +51,16 @@ demo: setup
 	$(R2S) run $(DEMO)/excerpt-frames.parquet --motion --out $(DEMO)/motion-programs.parquet --jobs $(JOBS)
 	$(R2S) scene $(DEMO)/excerpt-frames.parquet $(DEMO_FRAME) --out $(DEMO)/moving-scene.json
 	$(R2S) synth $(DEMO)/moving-scene.json --motion --out $(DEMO)/moving-scene.dsl
+	$(R2S) synth $(DEMO)/moving-scene.json --motion --format scenic --out $(DEMO)/moving-scene.scenic
+	$(R2S) sample $(DEMO)/moving-scene.scenic --n 5 --seed 0 --out $(DEMO)/moving-samples
+	$(R2S) export $(DEMO)/moving-scene.json $(DEMO)/moving-samples --to scenarionet --program $(DEMO)/moving-scene.scenic --steps 50 --out $(DEMO)/scenarionet
+	$(R2S) export $(DEMO)/moving-scene.json $(DEMO)/moving-samples --to openscenario --program $(DEMO)/moving-scene.scenic --steps 50 --out $(DEMO)/openscenario
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
 	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet (and a section of the report)"
 	@echo "           motion (who is parked, who drives with whom): $(DEMO)/motion-programs.parquet, moving-scene.dsl"
+	@echo "           that frame and 5 variants for simulators: $(DEMO)/scenarionet (MetaDrive), $(DEMO)/openscenario (esmini)"
 	@echo "next: . $(VENV)/bin/activate   (in each new shell: puts r2s and the venv's python on PATH for the README's examples)"
 
 test: setup
