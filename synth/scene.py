@@ -13,7 +13,7 @@ import keyword
 import math
 import re
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -365,23 +365,32 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
         raise SceneError("'entities' must be a list")
     if len(ents) > max_entities:
         raise SceneError(f"scene has {len(ents)} entities, more than the cap of {max_entities}")
-    road = None
-    if raw.get("road") is not None:
-        from synth.roadmap import MapError, road_from_dict  # numpy: loaded only for a scene with a road
-
-        try:
-            road = road_from_dict(raw["road"])
-        except MapError as exc:
-            raise SceneError(str(exc)) from None
-    world = None
-    if raw.get("world") is not None:
-        from synth.world import WorldError, world_from_dict
-
-        try:
-            world = world_from_dict(raw["world"])
-        except WorldError as exc:
-            raise SceneError(str(exc)) from None
+    road = _part(raw.get("road"), _read_road)
+    world = _part(raw.get("world"), _read_world)
     return make_scene(frame_id, (entity_from_mapping(e, i) for i, e in enumerate(ents)), road, world)
+
+
+def _read_road(value: Any) -> RoadMap:
+    from synth.roadmap import road_from_dict  # numpy: loaded only for a scene with a road
+
+    return road_from_dict(value)
+
+
+def _read_world(value: Any) -> WorldPose:
+    from synth.world import world_from_dict
+
+    return world_from_dict(value)
+
+
+def _part(value: Any, read: Callable[[Any], Any]) -> Any:
+    """An optional part of scene JSON (road, world) read by its own module; its one-line error (an InputError:
+    MapError, WorldError) becomes the scene's."""
+    if value is None:
+        return None
+    try:
+        return read(value)
+    except InputError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def make_scene(frame_id: str, entities: Iterable[Entity], road: RoadMap | None = None,

@@ -15,14 +15,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from synth.errors import InputError
 from synth.geometry import normalize
 
 if TYPE_CHECKING:
     from synth.roadmap import Points, RoadMap
-    from synth.scene import Entity
 
 WORLD_KEYS = ("source", "scene", "frame_index", "map_id", "x", "y", "heading")
 MAX_WORLD_COORDINATE = 1e9  # metres: UTM northings are ~5e6; beyond 1e9 a float's step is past a millimetre
@@ -82,7 +81,20 @@ class WorldEntity:
     speed: float | None
 
 
-def in_world(pose: WorldPose, e: Entity) -> WorldEntity:
+class Placed(Protocol):
+    """What in_world reads of an entity (synth.scene.Entity; not imported: synth.scene reads worlds from here)."""
+
+    id: str
+    type: str
+    x: float
+    y: float
+    heading: float
+    speed: float | None
+
+    def dimensions(self) -> tuple[float, float]: ...
+
+
+def in_world(pose: WorldPose, e: Placed) -> WorldEntity:
     """One entity of a scene in its world (the box is the recorded one, else the type's typical size)."""
     x, y = pose.point(e.x, e.y)
     length, width = e.dimensions()

@@ -4,3 +4,11 @@ the inputs one at a time and writes the output staged (docs/cli.md, docs/formats
 Light: `r2s export --help` reads TARGETS from here."""
 
 TARGETS = ("scenarionet", "openscenario")
+
+
+def slug(text: str) -> str:
+    """A frame id as a file-name part (scenario and file names): each run of characters other than letters,
+    digits, '.' and '-' as one '_'."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_") or "scene"

@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from pipeline.export import slug
 from pipeline.export.scenarionet import HEIGHTS, STEP_S
 from synth.roadmap import LANE, RoadMap
 from synth.scene import Scene
@@ -150,8 +151,6 @@ def _object(eid: str, etype: str, box) -> Any:
 
 class _Writer:
     def __init__(self, folder: Path, recorded: Scene, options) -> None:
-        from pipeline.export.stage import slug
-
         try:
             import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
         except ImportError:

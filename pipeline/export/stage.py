@@ -8,7 +8,6 @@ are scene JSON in the same ego frame (r2s sample keeps the program's ego where t
 
 from __future__ import annotations
 
-import re
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -16,6 +15,7 @@ from pathlib import Path
 from typing import Protocol
 
 from pipeline.errors import UserError
+from pipeline.export import slug
 from synth.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose
@@ -53,11 +53,6 @@ class ExportOptions:
     program_file: str | None = None
     steps: int = 1
     radius: float = 50.0
-
-
-def slug(text: str) -> str:
-    """A frame id as a file-name part: runs of other characters than letters, digits, '.', '-' as one '_'."""
-    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_") or "scene"
 
 
 def variant_files(paths: list[str]) -> list[Path]:
