@@ -133,3 +133,21 @@ def test_the_identity_world_keeps_ego_frame_coordinates():
     pose = WorldPose.identity()
     assert pose.point(3.0, 4.0) == pytest.approx((3.0, 4.0), abs=1e-15)
     assert math.degrees(pose.yaw(0.0)) == pytest.approx(90.0)
+
+
+def test_a_log_s_ego_rows_keep_the_ego_pose_in_the_fixed_frame(tmp_path):
+    """MCAP (ROS 2 markers in the map frame, the ego pose from /tf): no map, the ego's pose in `map` per frame."""
+    from extractors.mcap import extract as extract_mcap
+    from tests.support import logs
+
+    samples = logs.scenes()["scene-0103"]
+    path = tmp_path / "log.mcap"
+    logs.write_ros2_mcap(path, samples)
+    df = _frames(extract_mcap, path, categories=ALL, topics=("/markers",))
+    ego = df[df.is_ego].sort_values("frame_index")
+    assert len(ego) == len(samples) and "map_id" not in ego
+    for r, s in zip(ego.itertuples(), samples):
+        w, x, y, z = s.ego_rotation
+        yaw = math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+        assert math.hypot(r.map_x - s.ego_translation[0], r.map_y - s.ego_translation[1]) < 1e-9
+        assert _angle_gap(r.map_heading, yaw) < 1e-6
