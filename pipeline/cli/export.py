@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene, read_text_file
-    from pipeline.export.stage import ExportOptions, export, say, variant_files
+    from pipeline.export.stage import ExportOptions, export, variant_files
 
     out = Path(args.out)
     check_apart(out, [("scene", args.scene), ("program", args.program)]
@@ -48,5 +48,5 @@ def run(args: argparse.Namespace) -> int:
     options = ExportOptions(program, Path(args.program).name if args.program else None, args.steps)
     n, notes = export(recorded, files, args.to, out, options)
     what = "a ScenarioNet database" if args.to == "scenarionet" else "OpenSCENARIO 1.2 files on one OpenDRIVE road"
-    say(f"wrote {n} scenarios (the frame and {n - 1} variants) to {out}, {what}" + "".join(f"; {x}" for x in notes))
+    print(f"wrote {n} scenarios (the frame and {n - 1} variants) to {out}, {what}" + "".join(f"; {x}" for x in notes))
     return 0

@@ -3,12 +3,12 @@ written by the chosen target into a directory staged beside --out (pipeline.outp
 never sees half a database, a failure leaves nothing).
 
 The world of every scenario is the recorded scene's (`world`: the ego's recorded pose; a scene without one is
-exported with its ego frame as the world), and so is its road (a variant may carry its own of each). Variants
-are scene JSON in the same ego frame (r2s sample keeps the program's ego where the recording has it)."""
+exported with its ego frame as the world), and so is its road (a variant may carry its own of each; OpenSCENARIO
+files all stand on the one OpenDRIVE road of the recorded scene). Variants are scene JSON in the same ego frame
+(r2s sample keeps the program's ego where the recording has it)."""
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,10 +49,9 @@ class Target(Protocol):
 
 @dataclass(frozen=True)
 class ExportOptions:
-    program_text: str | None = None
+    program_text: str | None = None  # --program's text and file name, which every scenario names
     program_file: str | None = None
-    steps: int = 1
-    radius: float = 50.0
+    steps: int = 1  # steps of STEP_S per scenario
 
 
 def variant_files(paths: list[str]) -> list[Path]:
@@ -116,7 +115,3 @@ def export(recorded: Scene, files: list[Path], to: str, out: Path, options: Expo
             n += 1
         writer.close()
     return n, notes
-
-
-def say(line: str) -> None:
-    sys.stdout.write(line + "\n")
