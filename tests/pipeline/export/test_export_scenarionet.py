@@ -191,7 +191,7 @@ _types = sorted(ENTITY_TYPES)
 @st.composite
 def _scenes(draw):
     n = draw(st.integers(0, 8))
-    coord = st.floats(-200, 200, allow_nan=False)
+    coord = st.floats(-200, 200, allow_nan=False, allow_subnormal=False)
     entities = [{"id": "ego", "type": "Car", "x": 0.0, "y": 0.0, "heading": 0.0,
                  "speed": draw(st.floats(0, 40))}]
     for k in range(n):
