@@ -199,7 +199,7 @@ def _world(rows: pd.DataFrame) -> dict[str, Any] | None:
     index = r.get("frame_index")
     return {"x": pose[0], "y": pose[1], "heading": pose[2],
             **{c: str(v) for c, v in names.items() if isinstance(v, str) and v},
-            **({"frame_index": int(index)} if index is not None and not pd.isna(index) else {})}
+            **({"frame_index": int(_given(index))} if _given(index) is not None else {})}
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
