@@ -81,6 +81,10 @@ def main() -> None:
                 shutil.rmtree(out)
             shutil.rmtree(folder)
     info = machine()
+    write_results("export", {"machine": info, "rows": rows}, markdown(info, rows))
+
+
+def markdown(info: dict, rows: list[dict]) -> str:
     lines = ["# r2s export: time per variant and memory", "",
              f"Machine: {info['cpu']}, {info['cores']} cores, Python {info['python']}; commit {info['commit']}, "
              f"{info['date']}. {info['note']}.", "",
@@ -92,11 +96,18 @@ def main() -> None:
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['target']} | {r['variants']:,} | {r['cpu_ms_per_scenario']:.2f} | {r['wall_ms_per_scenario']:.2f} "
               f"| {r['peak_rss_mb']:.0f} | {r['output_mb']:.1f} | {r['load']:.1f} |" for r in rows]
-    lines += ["", "Peak memory is the same for N and 10 N variants: every scenario is built, written and dropped, and "
-              "the ScenarioNet summary and mapping are written item by item (pipeline/export/scenarionet.py); what "
-              "grows with N is the list of variant file names and the set of scenario names (a few hundred bytes "
-              "each)."]
-    write_results("export", {"machine": info, "rows": rows}, "\n".join(lines) + "\n")
+    growth = []
+    for to in ("scenarionet", "openscenario"):
+        mine = sorted((r for r in rows if r["target"] == to), key=lambda r: r["variants"])
+        if len(mine) >= 2:
+            a, b = mine[0], mine[-1]
+            per = (b["peak_rss_mb"] - a["peak_rss_mb"]) * 2**20 / (b["variants"] - a["variants"])
+            growth.append(f"{to} {a['peak_rss_mb']:.0f} -> {b['peak_rss_mb']:.0f} MB from {a['variants']:,} to "
+                          f"{b['variants']:,} variants ({per:.0f} bytes a variant)")
+    lines += ["", "Memory does not grow with the scenarios: each is built, written and dropped, and the ScenarioNet "
+              "summary and mapping are written item by item (pipeline/export/scenarionet.py). What grows is the "
+              "list of variant file names and the set of scenario names: " + "; ".join(growth) + "."]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
