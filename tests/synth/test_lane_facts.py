@@ -11,7 +11,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.lane_facts import PolygonIndex, RoadIndex, SceneRoad, contains, orientation
+from synth.lane_facts import Banded, PolygonIndex, RoadIndex, SceneRoad, contains, orientation
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
@@ -175,3 +175,18 @@ def test_a_scene_placed_on_its_road_carries_the_facts_of_where_its_entities_now_
     got = [(e.lanes, e.lane, e.in_intersection, e.on_crosswalk, e.off_road) for e in placed.entities]
     assert got == [(("a",), "a", False, False, False), (("b",), "b", False, True, False),
                    ((), None, False, False, True)]
+
+
+@given(st.builds(star_polygon, st.lists(st.floats(0.5, 50), min_size=3, max_size=90), coord, coord), st.data())
+@settings(max_examples=120, deadline=None)
+def test_a_banded_polygon_answers_as_contains_does(ring, data):
+    """Banded (the edges of the point's band only) against contains (every edge) and the rational brute force:
+    random points, every vertex, edge midpoints, and points on the band boundaries."""
+    banded = Banded(ring)
+    xs, ys = zip(*ring)
+    points = [(data.draw(st.floats(min(xs) - 5, max(xs) + 5)), data.draw(st.floats(min(ys) - 5, max(ys) + 5)))
+              for _ in range(25)]
+    points += list(ring) + [((a[0] + b[0]) / 2, (a[1] + b[1]) / 2) for a, b in zip(ring, ring[1:] + ring[:1])]
+    points += [(data.draw(st.floats(min(xs), max(xs))), banded.box[1] + k * banded.h) for k in range(banded.n + 1)]
+    for px, py in points:
+        assert banded.contains(px, py) == contains(ring, px, py) == rational_covers(ring, px, py), (ring, px, py)
