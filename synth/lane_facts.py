@@ -257,6 +257,26 @@ class Banded:
         return inside
 
 
+CELL = 10.0  # metres: the side of a Cells cell
+
+
+class Cells:
+    """Polygons filed by the square cells (CELL metres) their bounding boxes touch, so that a point meets only the
+    few whose boxes may hold it. A point's cell is floor(x / CELL), monotonic in floats like the boxes' cells, so a
+    polygon whose box holds the point is always filed under the point's cell."""
+
+    def __init__(self, items: list[tuple[Banded, MapFeature]]) -> None:
+        self.cells: dict[tuple[int, int], list[tuple[Banded, MapFeature]]] = {}
+        for ring, f in items:
+            x0, y0, x1, y1 = ring.box
+            for i in range(math.floor(x0 / CELL), math.floor(x1 / CELL) + 1):
+                for j in range(math.floor(y0 / CELL), math.floor(y1 / CELL) + 1):
+                    self.cells.setdefault((i, j), []).append((ring, f))
+
+    def near(self, x: float, y: float) -> list[tuple[Banded, MapFeature]]:
+        return self.cells.get((math.floor(x / CELL), math.floor(y / CELL)), [])
+
+
 class SceneRoad:
     """A scene's road (in its ego frame) and the lane facts of entities placed in it, headings as scenes give them
     (degrees counter-clockwise from +y, where the facts' directions are from +x): what the variant sampler asks
@@ -267,12 +287,12 @@ class SceneRoad:
         self.index = RoadIndex(road)
         # One pose at a time in plain Python (the sampler asks for one per move; numpy's per-call cost would
         # dominate): bounding boxes, then the exact crossing test over the edges of the point's band (Banded).
-        self.areas = {kind: [(Banded(f.polygon), f) for f in road.of_kind(kind)]
+        self.areas = {kind: Cells([(Banded(f.polygon), f) for f in road.of_kind(kind)])
                       for kind in (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)}
         self._facts: dict[tuple[float, float, float], LaneFacts] = {}
 
     def _containing(self, kind: str, x: float, y: float) -> list[MapFeature]:
-        return [f for ring, f in self.areas[kind] if ring.contains(x, y)]
+        return [f for ring, f in self.areas[kind].near(x, y) if ring.contains(x, y)]
 
     def facts(self, x: float, y: float, heading: float) -> LaneFacts:
         """The lane facts of one pose: RoadIndex.facts's, for one point (remembered: a chain asks for the same
