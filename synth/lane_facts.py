@@ -50,10 +50,15 @@ def orientation(ax: float, ay: float, bx: float, by: float, px: float, py: float
 def contains(ring: tuple[tuple[float, float], ...], px: float, py: float) -> bool:
     """Whether the closed polygon `ring` (vertices in order, without the closing repeat) contains (px, py):
     exactly, one edge at a time (the reference the vectorised PolygonIndex must agree with)."""
-    inside = False
     n = len(ring)
-    for i in range(n):
-        (ax, ay), (bx, by) = ring[i], ring[(i + 1) % n]
+    return covers(((*ring[i], *ring[(i + 1) % n]) for i in range(n)), px, py)
+
+
+def covers(edges, px: float, py: float) -> bool:
+    """The crossing-number test of (px, py) over edges (ax, ay, bx, by): on one of them, or inside. Every edge
+    whose y-range holds py must be among them (`contains` gives all; Banded those of one band)."""
+    inside = False
+    for ax, ay, bx, by in edges:
         if min(ax, bx) <= px <= max(ax, bx) and min(ay, by) <= py <= max(ay, by) \
                 and orientation(ax, ay, bx, by, px, py) == 0:
             return True  # on the edge
@@ -243,18 +248,7 @@ class Banded:
 
     def contains(self, px: float, py: float) -> bool:
         x0, y0, x1, y1 = self.box
-        if not (x0 <= px <= x1 and y0 <= py <= y1):
-            return False
-        inside = False
-        for ax, ay, bx, by in self.bands[self._band(py)]:
-            if min(ax, bx) <= px <= max(ax, bx) and min(ay, by) <= py <= max(ay, by) \
-                    and orientation(ax, ay, bx, by, px, py) == 0:
-                return True  # on the edge
-            if (ay > py) != (by > py):
-                o = orientation(ax, ay, bx, by, px, py)
-                if (o > 0) if by > ay else (o < 0):
-                    inside = not inside
-        return inside
+        return x0 <= px <= x1 and y0 <= py <= y1 and covers(self.bands[self._band(py)], px, py)
 
 
 CELL = 10.0  # metres: the side of a Cells cell
