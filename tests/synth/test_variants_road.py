@@ -44,6 +44,18 @@ def facts(scene):
     return [(f.lanes, f.lane, f.in_intersection, f.on_crosswalk, f.off_road) for f in got]
 
 
+def overlapping(scene) -> set[frozenset[str]]:
+    """Pairs of ids whose boxes meet, by shapely (Scenic's `intersects` for planar boxes)."""
+    import itertools
+
+    import shapely
+
+    from pipeline.variants.render import ego_frame
+
+    polys = {b.id: shapely.Polygon(b.corners()) for b in ego_frame(scene).values()}
+    return {frozenset((a, b)) for a, b in itertools.combinations(polys, 2) if polys[a].intersects(polys[b])}
+
+
 def carried(scene):
     return [(e.lanes, e.lane, e.in_intersection, e.on_crosswalk, e.off_road) for e in scene.entities]
 
@@ -113,4 +125,6 @@ def test_the_chain_keeps_every_variant_where_the_requirements_that_read_the_road
     monkeypatch.setattr(gibbs, "parameterise", with_requirements)
     kept = sample_variants(program, scene, SynthConfig(), 40, seed=2, allow_collisions=allow_collisions)
     assert all(meets(s) for s in kept.scenes)
+    if not allow_collisions:  # the collision rule stays
+        assert all(overlapping(s) <= overlapping(scene) for s in kept.scenes)
     assert len({(s.by_id()["car2"].x, s.by_id()["ped1"].y) for s in kept.scenes}) == 40  # it still moves
