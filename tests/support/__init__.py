@@ -84,3 +84,16 @@ def assert_one_line_error(proc, code: int = 2, contains: str | None = None) -> N
     assert proc.stdout == ""
     if contains:
         assert contains.lower() in lines[0].lower(), lines[0]
+
+
+def overlapping(scene) -> set[frozenset[str]]:
+    """Pairs of ids whose boxes meet, by shapely (what Scenic's `intersects` uses for planar boxes): the collision
+    rule's independent check."""
+    import itertools
+
+    import shapely
+
+    from pipeline.variants.render import ego_frame
+
+    polys = {b.id: shapely.Polygon(b.corners()) for b in ego_frame(scene).values()}
+    return {frozenset((a, b)) for a, b in itertools.combinations(polys, 2) if polys[a].intersects(polys[b])}

@@ -19,6 +19,7 @@ from synth.gibbs import sample_variants
 from synth.lane_facts import RoadIndex
 from synth.parameters import parameterise
 from synth.scene import scene_from_dict
+from tests.support import overlapping
 
 ROAD = {"map_id": "hand-made", "features": [
     {"id": "north", "kind": "lane", "polygon": [[0, -30], [4, -30], [4, 30], [0, 30]], "line": [[2, -30], [2, 30]]},
@@ -42,18 +43,6 @@ def facts(scene):
     got = RoadIndex(scene.road).facts(np.array([e.x for e in ents]), np.array([e.y for e in ents]),
                                       np.array([(e.heading + 90) % 360 for e in ents]))
     return [(f.lanes, f.lane, f.in_intersection, f.on_crosswalk, f.off_road) for f in got]
-
-
-def overlapping(scene) -> set[frozenset[str]]:
-    """Pairs of ids whose boxes meet, by shapely (Scenic's `intersects` for planar boxes)."""
-    import itertools
-
-    import shapely
-
-    from pipeline.variants.render import ego_frame
-
-    polys = {b.id: shapely.Polygon(b.corners()) for b in ego_frame(scene).values()}
-    return {frozenset((a, b)) for a, b in itertools.combinations(polys, 2) if polys[a].intersects(polys[b])}
 
 
 def carried(scene):
