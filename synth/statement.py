@@ -75,10 +75,17 @@ def _choose_from_table(oracle: RelationOracle, order: tuple[int, ...]) -> list[t
 
 def build_program(oracle: RelationOracle, order: tuple[int, ...], config: SynthConfig) -> Program:
     """The program Alg. 4 writes for `order` (oracle indices of the entities to declare, ego excluded)."""
+    return Program(tuple(write_statements(oracle, order, choose_references(oracle, order), config)))
+
+
+def write_statements(oracle: RelationOracle, order: tuple[int, ...], choices: list[tuple[Choice, ...]],
+                     config: SynthConfig) -> list[Statement]:
+    """Alg. 4's statements for `order` once its references are chosen (one (reference, code) per part and entity,
+    oracle indices): each clause with its Ranges measured on the oracle's scene. A window (synth.window) chooses
+    its references on the window's table and writes each frame's statements here."""
     ents = oracle.entities()
     parts = oracle.parts
     robust = robust_parts(oracle.scene, config, parts)
-    choices = choose_references(oracle, order)
     # Plain parts' Ranges are centred on measured values: one request per statement, all answered at once.
     requests = [
         MeasureRequest(ents[i], tuple(Want(p, q, ents[r]) for p, (r, c) in zip(parts, row)
@@ -101,4 +108,4 @@ def build_program(oracle: RelationOracle, order: tuple[int, ...], config: SynthC
             else:
                 clauses[part.name] = part.clause(c, ents[r].id, values.pop(0) if part.quantity(c) else (), config)
         statements.append(Statement(e.id, e.type, **clauses))
-    return Program(tuple(statements))
+    return statements

@@ -23,6 +23,7 @@ model questions get the exact one (z3). A new part registers in synth.parts (doc
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from fractions import Fraction
@@ -34,7 +35,7 @@ from synth.config import SynthConfig
 from synth.perturbation import Bounds, bounds_of
 from synth.scene import Entity, Scene
 from synth.smt.backend import ExactBackend, Formula, Measured, SolverBackend
-from synth.syntax import DslError, Line
+from synth.syntax import DslError, Line, Range
 from synth.tables import SceneArrays
 
 if TYPE_CHECKING:
@@ -237,6 +238,26 @@ class Clause(ABC):
         if cls.label_field is None:
             return (ClauseKind(cls.labels[0], cls, cls.drawn_as),)
         return tuple(ClauseKind(label, cls, cls.drawn_as, (cls.label_field, label)) for label in cls.labels)
+
+    # ------------------------------------------------------------------------------- windows
+    def widened(self, other: Clause) -> Clause | None:
+        """The clause a window writes for two of its frames' clauses (synth.window): the same form with each Range
+        field the hull of both (every clause's semantics only grow with its Ranges, so it holds wherever either
+        does); None where they differ in anything else (kind, reference, direction), which a window never joins."""
+        if type(other) is not type(self):
+            return None
+        wider = {}
+        for f in dataclasses.fields(self):
+            mine, theirs = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(mine, Range):
+                wider[f.name] = self.hull(mine, theirs)
+            elif mine != theirs:
+                return None
+        return dataclasses.replace(self, **wider)
+
+    def hull(self, mine: Range, theirs: Range) -> Range:
+        """The least Range holding both (a Range of a quantity on a line; angles override it)."""
+        return Range(min(mine.lo, theirs.lo), max(mine.hi, theirs.hi))
 
     # ------------------------------------------------------------------------------- semantics
     @abstractmethod

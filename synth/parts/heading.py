@@ -147,6 +147,14 @@ class AngleClause(HeadingClause):
     def draws(self, config: SynthConfig) -> AngleDraws:
         return AngleDraws(self.ref, (self.angle.lo,), (self.angle.hi,))
 
+    def hull(self, mine: Range, theirs: Range) -> Range:
+        """Angles are on a circle: `theirs` is first turned by whole turns to lie nearest `mine` (an offset near
+        180 deg is measured as 179 in one frame and -179 in the next: one Range of 12 deg holds both, where the
+        hull on a line would span the circle)."""
+        turns = round(((mine.lo + mine.hi) - (theirs.lo + theirs.hi)) / 720.0)
+        lo, hi = theirs.lo + 360.0 * turns, theirs.hi + 360.0 * turns
+        return Range(min(mine.lo, lo), max(mine.hi, hi))
+
 
 @dataclass(frozen=True)
 class RelativeHeading(AngleClause):

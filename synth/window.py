@@ -1,0 +1,273 @@
+"""Programs over a window: one minimum-cost program for several consecutive frames of one scene (issue 25).
+
+The search is the paper's (Alg. 1 over Alg. 4), on the window's relation table: a relation of target e with
+reference r holds for the window iff it holds in every frame of the window where e is present, with r present in
+each of those frames too (the per-frame tables intersected, part by part). An entity present in only part of the
+window is declared once and describes the frames it is in: a frame's program is the window program's statements
+of the entities present in that frame (frame_program), which is why a reference must be present wherever its
+target is (its statement would otherwise name an entity the frame lacks). Each frame's statements are written by
+Alg. 4 on that frame with the window's choice of reference and relation, and the window's clause of an entity is
+the widening of its frames' clauses (Clause.widened: Ranges become the hull of the frames' Ranges, so they cover
+every frame's measure). Every frame's program is certified on its frame. docs/dsl.md, "Programs over a window".
+
+How windows tile a scene's frames (tile) is here too: it is arithmetic on timestamps, values in and out.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from synth.config import ConfigError, SynthConfig, as_config
+from synth.scene import Scene, SceneError, as_scene
+from synth.synthesize import SynthStats, require_speeds
+from synth.version import __version__
+
+if TYPE_CHECKING:
+    from synth.dsl import Program
+    from synth.semantics import CheckResult
+
+# Marks of the window table while frames are intersected (relation codes are >= 0, NONE is -1).
+_UNSET = -4  # no frame with the target seen yet
+_ABSENT = -3  # the reference is missing from a frame that has the target
+
+
+class WindowError(SceneError):
+    """A clip that is not frames of one scene: no frame, a frame id twice, an id of two types. One line."""
+
+
+@dataclass(frozen=True)
+class WindowResult:
+    """The program synthesized for a window of frames: its cost, status and certificate, as SynthResult's, and the
+    frames it covers (`frame_ids`, in order). `frame_program(scene)` is what it says of one of them."""
+
+    frame_ids: tuple[str, ...]
+    status: str  # optimal | feasible | timeout | memout (for the window's search)
+    cost: int
+    lower_bound: int
+    n_entities: int  # entities declared (ego excluded): every entity present in some frame of the window
+    program: Program
+    scenic: str
+    certified: bool  # every frame's program certified on its frame
+    stats: SynthStats
+    config: SynthConfig
+
+    @property
+    def first_frame(self) -> str:
+        return self.frame_ids[0]
+
+    @property
+    def last_frame(self) -> str:
+        return self.frame_ids[-1]
+
+    def frame_program(self, scene: Scene) -> Program:
+        return frame_program(self.program, scene)
+
+    def to_json_dict(self) -> dict:
+        """The `r2s synth --format json` document of a clip: the single-frame keys (frame_id: the first frame),
+        then the window's frames."""
+        from synth.synthesize import RESULT_FIELDS
+
+        result = {f.name: getattr(self, f.name) for f in RESULT_FIELDS if f.source == "result" and f.name not in
+                  ("frame_id", "program")}
+        return {"frame_id": self.first_frame, **result, "program": str(self.program),
+                "first_frame": self.first_frame, "last_frame": self.last_frame, "frames": len(self.frame_ids),
+                "stats": {f.name: getattr(self.stats, f.name) for f in RESULT_FIELDS if f.source == "stats"}}
+
+
+def frame_program(program: Program, scene: Scene) -> Program:
+    """The window program's statements of the entities present in `scene`, in the program's order: what the
+    window program says of that frame (checked with r2s check's semantics as any program is)."""
+    from synth.dsl import Program
+
+    present = {e.id for e in scene.others}
+    return Program(tuple(st for st in program.statements if st.id in present))
+
+
+def check_window(program: Program | str, scenes: Sequence[Scene | Mapping[str, Any]],
+                 config: SynthConfig | Mapping[str, Any] | None = None) -> tuple[CheckResult, ...]:
+    """r2s check's verdict on every frame of a window: `check(frame_program(program, scene), scene)` per frame."""
+    from synth.dsl import parse_program
+    from synth.semantics import check
+
+    if isinstance(program, str):
+        program = parse_program(program)
+    config = as_config(config)
+    return tuple(check(frame_program(program, s), s, config) for s in map(as_scene, scenes))
+
+
+def clip_entities(scenes: Sequence[Scene]) -> tuple[tuple[str, ...], dict[str, list[int]]]:
+    """The entities of a clip to declare, in order of first appearance (scene order within a frame), and the
+    frames (indices) each is present in. Refuses what is not frames of one scene."""
+    if not scenes:
+        raise WindowError("a window needs at least one frame")
+    seen_frames: set[str] = set()
+    types: dict[str, tuple[str, str]] = {}
+    frames: dict[str, list[int]] = {}
+    for k, scene in enumerate(scenes):
+        if scene.frame_id in seen_frames:
+            raise WindowError(f"frame {scene.frame_id!r} is in the window twice")
+        seen_frames.add(scene.frame_id)
+        for e in scene.others:
+            first = types.setdefault(e.id, (e.type, scene.frame_id))
+            if first[0] != e.type:
+                raise WindowError(f"entity {e.id!r} is a {first[0]} in frame {first[1]!r} and a {e.type} in frame "
+                                  f"{scene.frame_id!r}: a window needs one id per object (stable ids, docs/formats.md)")
+            frames.setdefault(e.id, []).append(k)
+    return tuple(frames), frames
+
+
+def window_table(tables: Sequence[Any], ids: tuple[str, ...]):
+    """The window's relation table (ids: ego, then the clip's entities): per part, the code every frame with the
+    target agrees on, where the reference is present in each of them; NONE otherwise."""
+    import numpy as np
+
+    from synth.tables import NONE, RelationTable
+
+    n = len(ids)
+    where = {i: k for k, i in enumerate(ids)}
+    codes = {}
+    for name in tables[0].codes:
+        window = np.full((n, n), _UNSET, dtype=np.int8)
+        for table in tables:
+            # The frame's table spread over the window's ids; rows of references absent from the frame: _ABSENT.
+            at = np.array([where[i] for i in table.ids])
+            frame = np.full((n, len(table.ids)), _ABSENT, dtype=np.int8)
+            frame[at, :] = table[name]
+            cols = at[1:]  # the frame's targets (ego is never declared)
+            old, new = window[:, cols], frame[:, 1:]
+            window[:, cols] = np.where(old == _UNSET, new, np.where(old == new, old, NONE))
+        window[(window == _UNSET) | (window == _ABSENT)] = NONE
+        codes[name] = window
+    return RelationTable(ids, codes)
+
+
+def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
+                      config: SynthConfig | Mapping[str, Any] | None = None) -> WindowResult:
+    """A minimum-cost program whose every clause holds in every frame of the window (docs/dsl.md, "Programs over
+    a window"). `scenes`: the window's frames of one scene, in time order, with stable ids (Scenes or decoded
+    scene JSON). `config` as synthesize takes it. Bad input raises SceneError / WindowError / ConfigError (one
+    line); a frame program the solver cannot certify raises CertificationError. Deterministic."""
+    from synth.dsl import Program, Statement
+    from synth.emit_scenic import render_scenic
+    from synth.oracle import RelationOracle, make_oracle
+    from synth.parts import parts_for
+    from synth.search import Budget, CostModel, search
+    from synth.search.budget import peak_rss_mb
+    from synth.smt.certify import certify
+    from synth.statement import choose_references, write_statements
+    from synth.synthesize import CertificationError
+
+    scenes = [as_scene(s) for s in scenes]
+    config = as_config(config)
+    if config.strategy == "monolithic":
+        raise ConfigError("strategy 'monolithic' encodes one frame; a window is searched on its relation table "
+                          "(any other strategy)")
+    ids, present = clip_entities(scenes)
+    if config.motion:
+        for scene in scenes:
+            require_speeds(scene)
+    started = time.perf_counter()
+    budget = Budget(config.time_limit, config.memory_limit)
+    oracles = [make_oracle(scene, config) for scene in scenes]
+    tables = [oracle.full_table() for oracle in oracles]
+    # The window's entities stand where they are first seen: Alg. 4's "nearest reference" is measured there.
+    first = {e.id: e for scene in reversed(scenes) for e in scene.others}
+    shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road)
+    all_ids = (shown.ego.id,) + ids
+    window = RelationOracle(shown, config, all_ids, window_table(tables, all_ids), parts=parts_for(config))
+    t = time.perf_counter()
+    oracle_s = t - started
+    found = search(config.strategy, CostModel(window), budget)
+    search_s = time.perf_counter() - t
+    t = time.perf_counter()
+    order = tuple(i + 1 for i in found.order)  # window oracle indices (0 is ego)
+    choices = dict(zip(order, choose_references(window, order)))
+    clauses: dict[str, dict[str, Any]] = {}
+    for oracle in oracles:
+        at = {i: k for k, i in enumerate(oracle.ids)}  # window id -> the frame oracle's index
+        mine = [i for i in order if all_ids[i] in at]
+        rows = [tuple((at[all_ids[r]], c) for r, c in choices[i]) for i in mine]
+        for st in write_statements(oracle, tuple(at[all_ids[i]] for i in mine), rows, config):
+            held = clauses.setdefault(st.id, {})
+            for part, clause in st.parts:
+                wider = held[part].widened(clause) if part in held else clause
+                if wider is None:
+                    raise AssertionError(f"{st.id}: frames disagree on its {part} clause ({held[part]}, {clause})")
+                held[part] = wider
+    program = Program(tuple(Statement(all_ids[i], first[all_ids[i]].type, parts=tuple(clauses[all_ids[i]].items()))
+                            for i in order))
+    if program.cost != found.cost:
+        raise AssertionError(f"window program cost {program.cost} differs from the search's {found.cost}")
+    ranges_s = time.perf_counter() - t
+    t = time.perf_counter()
+    certified = False
+    if all(oracle.backend is not None for oracle in oracles):
+        for oracle, scene in zip(oracles, scenes):
+            failed = certify(oracle.backend, frame_program(program, scene), scene)
+            if failed:
+                raise CertificationError(f"frame {scene.frame_id}: the solver refutes the statements of "
+                                         f"{', '.join(failed)}")
+        certified = True
+    certify_s = time.perf_counter() - t
+    t = time.perf_counter()
+    header = (f"frames {scenes[0].frame_id} to {scenes[-1].frame_id} ({len(scenes)} frames): cost {program.cost} "
+              f"({found.status}), r2sgen {__version__}")
+    scenic = render_scenic(program, shown, config, header=header)
+    render_s = time.perf_counter() - t
+    smt = [o.backend.stats for o in oracles if o.backend is not None]
+    return WindowResult(
+        frame_ids=tuple(s.frame_id for s in scenes),
+        status=found.status,
+        cost=found.cost,
+        lower_bound=found.lower_bound,
+        n_entities=len(ids),
+        program=program,
+        scenic=scenic,
+        certified=certified,
+        stats=SynthStats(
+            runtime_s=time.perf_counter() - started,
+            search_s=search_s,
+            smt_s=sum(s.seconds for s in smt),
+            smt_queries=sum(s.queries for s in smt),
+            nodes_expanded=found.nodes_expanded,
+            peak_rss_mb=peak_rss_mb(),
+            oracle_s=oracle_s,
+            ranges_s=ranges_s,
+            certify_s=certify_s,
+            render_s=render_s,
+        ),
+        config=config,
+    )
+
+
+def tile(timestamps_us: Sequence[int], window_us: int, stride_us: int | None = None,
+         max_gap_us: int | None = None) -> list[tuple[int, int]]:
+    """The windows of one scene's frames (timestamps in microseconds, in order, strictly increasing), as
+    (first, last) frame indices, inclusive. A gap of more than `max_gap_us` between consecutive frames cuts the
+    scene into segments that no window spans; in a segment, a window starts at its first frame and holds the
+    frames less than `window_us` after its start; the next starts at the first frame at least `stride_us` after
+    that start (default: the window, so windows are consecutive and do not overlap), until the segment ends."""
+    if window_us <= 0 or (stride_us is not None and stride_us <= 0) or (max_gap_us is not None and max_gap_us < 0):
+        raise ValueError("window, stride and gap must be positive durations")
+    stride = window_us if stride_us is None else stride_us
+    out: list[tuple[int, int]] = []
+    n, start = len(timestamps_us), 0
+    while start < n:
+        end = start  # the segment: start .. end
+        while end + 1 < n and (max_gap_us is None or timestamps_us[end + 1] - timestamps_us[end] <= max_gap_us):
+            end += 1
+        first = start
+        while first <= end:
+            last = first
+            while last + 1 <= end and timestamps_us[last + 1] - timestamps_us[first] < window_us:
+                last += 1
+            out.append((first, last))
+            nxt = first + 1
+            while nxt <= end and timestamps_us[nxt] - timestamps_us[first] < stride:
+                nxt += 1
+            first = nxt
+        start = end + 1
+    return out
