@@ -73,6 +73,25 @@ class RelationOracle:
                 return code
         return NONE
 
+    def holds(self, k: int, code: int, r: int, e: int) -> bool:
+        """Does relation `code` of part k hold between r and e, not only the one the table records? A part's
+        relations are disjoint but for one that needs no reference (Part.refless), recorded in ego's row over the
+        others (stationary over `moving like ego`): only there is another one asked (synth.window needs it, as a
+        window's frames may agree on the masked one alone)."""
+        part = self.parts[k]
+        found = self.relation(k, r, e)
+        if found == code or found == NONE:
+            return found == code
+        if found not in part.refless or r != 0:
+            return False
+        ents = self.entities()
+        if self.backend is None:  # closed form: exact, or conservative for a robust part (settle_conservatively)
+            return not part.is_robust(self.scene, self.config) and part.exact(code, ents[r], ents[e], self.config)
+        key = (part.relations[code], e, r)
+        if key not in self.cache:
+            self.cache[key] = part.ask(self.backend, code, ents[r], ents[e])
+        return self.cache[key]
+
     def full_table(self) -> RelationTable:
         """Every pair answered (the smt oracle asks the solver for each one it has not asked yet)."""
         if self.table is not None:

@@ -29,11 +29,6 @@ if TYPE_CHECKING:
     from synth.dsl import Program
     from synth.semantics import CheckResult
 
-# Marks of the window table while frames are intersected (relation codes are >= 0, NONE is -1).
-_UNSET = -4  # no frame with the target seen yet
-_ABSENT = -3  # the reference is missing from a frame that has the target
-
-
 class WindowError(SceneError):
     """A clip that is not frames of one scene: no frame, a frame id twice, an id of two types. One line."""
 
@@ -55,6 +50,11 @@ class WindowResult:
     config: SynthConfig
 
     @property
+    def frame_id(self) -> str:
+        """The window's first frame: what the single-frame outputs' frame_id holds."""
+        return self.frame_ids[0]
+
+    @property
     def first_frame(self) -> str:
         return self.frame_ids[0]
 
@@ -65,16 +65,20 @@ class WindowResult:
     def frame_program(self, scene: Scene) -> Program:
         return frame_program(self.program, scene)
 
+    def value(self, result_field: Any) -> Any:
+        """The value of a result field that is not the batch stage's own (RESULT_FIELDS), as SynthResult.value."""
+        holder = {"result": self, "stats": self.stats, "config": self.config}[result_field.source]
+        value = getattr(holder, result_field.name)
+        return str(value) if result_field.name == "program" else value
+
     def to_json_dict(self) -> dict:
-        """The `r2s synth --format json` document of a clip: the single-frame keys (frame_id: the first frame),
-        then the window's frames."""
+        """The `r2s synth --format json` document of a clip: the single-frame document (frame_id: the first
+        frame), then the window's first and last frame and its number of frames."""
         from synth.synthesize import RESULT_FIELDS
 
-        result = {f.name: getattr(self, f.name) for f in RESULT_FIELDS if f.source == "result" and f.name not in
-                  ("frame_id", "program")}
-        return {"frame_id": self.first_frame, **result, "program": str(self.program),
+        return {**{f.name: self.value(f) for f in RESULT_FIELDS if f.source == "result"},
                 "first_frame": self.first_frame, "last_frame": self.last_frame, "frames": len(self.frame_ids),
-                "stats": {f.name: getattr(self.stats, f.name) for f in RESULT_FIELDS if f.source == "stats"}}
+                "stats": {f.name: self.value(f) for f in RESULT_FIELDS if f.source == "stats"}}
 
 
 def frame_program(program: Program, scene: Scene) -> Program:
@@ -119,9 +123,10 @@ def clip_entities(scenes: Sequence[Scene]) -> tuple[tuple[str, ...], dict[str, l
     return tuple(frames), frames
 
 
-def window_table(tables: Sequence[Any], ids: tuple[str, ...]):
-    """The window's relation table (ids: ego, then the clip's entities): per part, the code every frame with the
-    target agrees on, where the reference is present in each of them; NONE otherwise."""
+def window_table(oracles: Sequence[Any], ids: tuple[str, ...]):
+    """The window's relation table (ids: ego, then the clip's entities): per part, a relation holds between r and
+    e iff it holds in every frame where e is present, r present in each (RelationOracle.holds, relation by
+    relation); where several hold, the first a reference is asked in (Part.codes_from), as the oracles record."""
     import numpy as np
 
     from synth.tables import NONE, RelationTable
@@ -129,18 +134,25 @@ def window_table(tables: Sequence[Any], ids: tuple[str, ...]):
     n = len(ids)
     where = {i: k for k, i in enumerate(ids)}
     codes = {}
-    for name in tables[0].codes:
-        window = np.full((n, n), _UNSET, dtype=np.int8)
-        for table in tables:
-            # The frame's table spread over the window's ids; rows of references absent from the frame: _ABSENT.
-            at = np.array([where[i] for i in table.ids])
-            frame = np.full((n, len(table.ids)), _ABSENT, dtype=np.int8)
-            frame[at, :] = table[name]
-            cols = at[1:]  # the frame's targets (ego is never declared)
-            old, new = window[:, cols], frame[:, 1:]
-            window[:, cols] = np.where(old == _UNSET, new, np.where(old == new, old, NONE))
-        window[(window == _UNSET) | (window == _ABSENT)] = NONE
-        codes[name] = window
+    for k, part in enumerate(oracles[0].parts):
+        holds = {c: np.ones((n, n), dtype=bool) for c in range(len(part.relations))}
+        for oracle in oracles:
+            at = np.array([where[i] for i in oracle.ids])
+            cells = oracle.table[part.name]
+            masked = np.flatnonzero(np.isin(cells[0], list(part.refless)))  # ego's row: others may hold too
+            for c, window in holds.items():
+                frame = np.zeros((n, len(at)), dtype=bool)  # references absent from the frame: never
+                frame[at, :] = cells == c
+                for e in masked:
+                    frame[0, e] = oracle.holds(k, c, 0, int(e))
+                window[:, at[1:]] &= frame[:, 1:]
+        table = np.full((n, n), NONE, dtype=np.int8)
+        for c in reversed(part.codes_from(True)):
+            table[holds[c]] = c
+        table[1:][np.isin(table[1:], list(part.refless))] = NONE  # refless codes live in ego's row only
+        table[:, 0] = NONE
+        np.fill_diagonal(table, NONE)
+        codes[part.name] = table
     return RelationTable(ids, codes)
 
 
@@ -172,12 +184,13 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     started = time.perf_counter()
     budget = Budget(config.time_limit, config.memory_limit)
     oracles = [make_oracle(scene, config) for scene in scenes]
-    tables = [oracle.full_table() for oracle in oracles]
+    for oracle in oracles:
+        oracle.full_table()
     # The window's entities stand where they are first seen: Alg. 4's "nearest reference" is measured there.
     first = {e.id: e for scene in reversed(scenes) for e in scene.others}
     shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road)
     all_ids = (shown.ego.id,) + ids
-    window = RelationOracle(shown, config, all_ids, window_table(tables, all_ids), parts=parts_for(config))
+    window = RelationOracle(shown, config, all_ids, window_table(oracles, all_ids), parts=parts_for(config))
     t = time.perf_counter()
     oracle_s = t - started
     found = search(config.strategy, CostModel(window), budget)

@@ -22,7 +22,7 @@ from synth.version import __version__
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
-    "synth": ("pipeline.cli.synth", "synthesize a minimum-cost program for one scene JSON"),
+    "synth": ("pipeline.cli.synth", "synthesize a minimum-cost program for one scene JSON (or a clip of frames)"),
     "check": ("pipeline.cli.check", "does a DSL program contain a scene? (the semantics checker)"),
     "extract": ("pipeline.cli.extract", "recorded data (nuScenes, ScenarioNet, AV2, MCAP, ROS bags) to frames.parquet"),
     "scene": ("pipeline.cli.scene", "print one frame of a frames.parquet as scene JSON"),
@@ -41,7 +41,9 @@ VERBS: dict[str, tuple[str, str]] = {
 _SCENE = "r2s scene data/nuscenes-mini-keyframes/frames.parquet scene-0103/0 --out scene.json"
 _EXCERPT = "r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --out frames.parquet"
 EXAMPLES: dict[str, tuple[str, ...]] = {
-    "synth": (_SCENE, "r2s synth scene.json --format json --out result.json"),
+    "synth": (_SCENE, "r2s synth scene.json --format json --out result.json",
+              "r2s scene data/nuscenes-mini-keyframes/frames.parquet scene-0103/1 --out next.json",
+              "r2s synth scene.json next.json --out clip.dsl"),
     "check": (_SCENE, "r2s synth scene.json --out scene.dsl", "r2s check scene.json scene.dsl"),
     "extract": ("r2s extract scenarionet data/nuscenes-mini-excerpt/scenarionet --categories all --out frames",),
     "scene": (_SCENE,),

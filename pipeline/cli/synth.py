@@ -1,4 +1,6 @@
-"""`r2s synth SCENE.json`: one scene in, its minimum-cost program out (DSL, Scenic or JSON)."""
+"""`r2s synth SCENE.json`: one scene in, its minimum-cost program out (DSL, Scenic or JSON). Several scene JSON
+files (frames of one scene, in time order): one program over the clip, which holds in each of them
+(synth.window)."""
 
 from __future__ import annotations
 
@@ -7,12 +9,15 @@ import json
 import sys
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
+from pipeline.errors import UserError
 from pipeline.outputs import check_apart
 from synth.synthesize import synthesize
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene JSON file, or - for standard input (format: docs/formats.md)")
+    p.add_argument("scene", nargs="+",
+                   help="scene JSON file, or - for standard input (format: docs/formats.md); several files: frames "
+                        "of one scene in time order (r2s scene writes them), one program for the clip")
     p.add_argument("--format", choices=("dsl", "scenic", "json"), default="dsl", help="output (default: dsl)")
     p.add_argument("--out", metavar="F", help="write to this file (atomically) instead of stdout")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
@@ -24,10 +29,17 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene
     from storage.atomic import write_text_atomic
 
-    check_apart(args.out, [("input scene", args.scene), ("config", args.config)])
+    check_apart(args.out, [*(("input scene", s) for s in args.scene), ("config", args.config)])
+    if len(args.scene) > 1 and "-" in args.scene:
+        raise UserError("a clip is read from files: standard input (-) holds one scene")
     config = synthesis_config(args)
-    scene = read_scene(args.scene, max_entities=args.max_entities)
-    result = synthesize(scene, config)
+    scenes = [read_scene(path, max_entities=args.max_entities) for path in args.scene]
+    if len(scenes) == 1:
+        result = synthesize(scenes[0], config)
+    else:
+        from synth.window import synthesize_window
+
+        result = synthesize_window(scenes, config)
     if args.format == "json":
         text = json.dumps(result.to_json_dict(), indent=1) + "\n"
     elif args.format == "scenic":

@@ -149,3 +149,30 @@ def test_entity_cap_on_the_command_line(tmp_path):
     p.write_text(json.dumps(doc))
     assert_one_line_error(run_r2s("synth", str(p), "--max-entities", "3"), 2, "cap of 3")
     assert run_r2s("synth", str(p), "--max-entities", "10").returncode == 0
+
+
+def test_a_clip_is_one_program_for_its_frames(tmp_path):
+    """`r2s synth A.json B.json`: one program over the clip, the same as synthesize_window's, holding in each frame
+    by `r2s check` (each frame checked with its own entities' statements); bad clips: one line, exit 2."""
+    from synth import frame_program, scene_from_json, synthesize_window
+
+    paths = []
+    for k in range(3):
+        path = tmp_path / f"f{k}.json"
+        proc = run_r2s("scene", "data/nuscenes-mini-keyframes/frames.parquet", f"scene-0103/{k}", "--out", str(path))
+        assert proc.returncode == 0, proc.stderr
+        paths.append(str(path))
+    proc = run_r2s("synth", *paths, "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert (doc["frame_id"], doc["first_frame"], doc["last_frame"], doc["frames"]) == \
+        ("scene-0103/0", "scene-0103/0", "scene-0103/2", 3)
+    scenes = [scene_from_json(open(p).read()) for p in paths]
+    assert doc["program"] == str(synthesize_window(scenes).program)
+    for path, scene in zip(paths, scenes):
+        program = tmp_path / "frame.dsl"
+        program.write_text(str(frame_program(synthesize_window(scenes).program, scene)))
+        assert run_r2s("check", path, str(program)).returncode == 0
+    assert_one_line_error(run_r2s("synth", paths[0], paths[0]), 2, "twice")
+    assert_one_line_error(run_r2s("synth", paths[0], "-", input="{}"), 2, "standard input")
+    assert_one_line_error(run_r2s("synth", *paths, "--strategy", "monolithic"), 2, "monolithic")
