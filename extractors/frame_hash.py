@@ -139,9 +139,12 @@ class FrameHasher:
 
     columns = HASHED_COLUMNS  # what the tables fed must hold (those a file has; the rest hash as null)
 
-    def __init__(self) -> None:
+    def __init__(self, keep_lanes: bool = False) -> None:
         self._keys: list[tuple[np.ndarray, np.ndarray]] = []
         self._open: tuple[str, np.uint64, np.uint64, int] | None = None  # (id, sum0, sum1, rows so far)
+        # With keep_lanes, each frame's hash itself too (32 bytes a frame), for hashes over several frames
+        # (r2s run --window): lanes() looks them up by frame id.
+        self._lanes: list[tuple[np.ndarray, ...]] | None = [] if keep_lanes else None
 
     def feed(self, table: pa.Table, starts: np.ndarray, ids: np.ndarray) -> None:
         """A table and its frames (first row and id of each run of equal frame ids)."""
@@ -175,7 +178,23 @@ class FrameHasher:
 
     def _emit(self, ids, sum0, sum1, lengths) -> None:
         if len(ids):
-            self._keys.append(frame_keys(*frame_hashes(ids), *_finish(sum0, sum1, lengths)))
+            id_hi, id_lo = frame_hashes(ids)
+            lane0, lane1 = _finish(sum0, sum1, lengths)
+            self._keys.append(frame_keys(id_hi, id_lo, lane0, lane1))
+            if self._lanes is not None:
+                self._lanes.append((id_hi, id_lo, lane0, lane1))
+
+    def lanes(self, ids) -> tuple[np.ndarray, np.ndarray]:
+        """The hash (lane0, lane1) of each of these frames (ids as fed; a FrameHasher(keep_lanes=True))."""
+        self.end_part()
+        hi, lo, lane0, lane1 = (np.concatenate(a) for a in zip(*self._lanes))
+        order = np.lexsort((lo, hi))
+        hi, lo, lane0, lane1 = hi[order], lo[order], lane0[order], lane1[order]
+        want_hi, want_lo = frame_hashes(ids)
+        at = np.searchsorted(hi, want_hi)  # frame ids are unique in a checked dataset; hi alone almost always
+        for i in np.flatnonzero(lo[np.minimum(at, len(lo) - 1)] != want_lo):  # a 64-bit collision of hi: step on
+            at[i] += int(np.flatnonzero(lo[at[i]:] == want_lo[i])[0])
+        return lane0[at], lane1[at]
 
     def keys(self) -> FrameIndex:
         self.end_part()

@@ -25,6 +25,11 @@ PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
 # (a row without a frame_hash is recomputed on resume: what it was computed from is unknown).
 LATER_COLUMNS = ("frame_hash",)
 STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
+# `r2s run --window`: one row per window (docs/formats.md, "Window programs"), the programs columns (frame_id: the
+# window's first frame; frame_hash: the hash of all its frames' rows) and then these.
+WINDOW_FIELDS = (("scene", pa.string()), ("last_frame", pa.string()), ("first_timestamp_us", pa.int64()),
+                 ("last_timestamp_us", pa.int64()), ("n_frames", pa.int32()), ("window_s", pa.float64()))
+WINDOW_SCHEMA = pa.schema(list(PROGRAMS_SCHEMA) + [pa.field(n, t) for n, t in WINDOW_FIELDS])
 
 
 class ProgramsError(InputError, ValueError):
@@ -56,8 +61,8 @@ def _run_fields(error: str | None, config: Any, frame_hash: str | None) -> dict[
     return {"error": error, "config_hash": config.hash, "version": __version__, "frame_hash": frame_hash}
 
 
-def programs_table(rows: list[dict[str, Any]]) -> pa.Table:
-    return pa.Table.from_pylist([{c: r.get(c) for c in PROGRAMS_COLUMNS} for r in rows], schema=PROGRAMS_SCHEMA)
+def programs_table(rows: list[dict[str, Any]], schema: pa.Schema = PROGRAMS_SCHEMA) -> pa.Table:
+    return pa.Table.from_pylist([{c: r.get(c) for c in schema.names} for r in rows], schema=schema)
 
 
 def check_programs_schema(schema: pa.Schema, where: str) -> None:
@@ -68,14 +73,15 @@ def check_programs_schema(schema: pa.Schema, where: str) -> None:
     check_column_types(schema, PROGRAMS_SCHEMA, where, ProgramsError)
 
 
-def as_programs(table: pa.Table | pa.RecordBatch) -> pa.Table | pa.RecordBatch:
-    """A programs table or batch in exactly PROGRAMS_SCHEMA: the columns in order, an older writer's int64
-    where the schema has int32, null for a column added later (LATER_COLUMNS) that the file lacks."""
+def as_programs(table: pa.Table | pa.RecordBatch, schema: pa.Schema = PROGRAMS_SCHEMA) -> pa.Table | pa.RecordBatch:
+    """A programs table or batch in exactly `schema` (PROGRAMS_SCHEMA, or WINDOW_SCHEMA for window rows): the
+    columns in order, an older writer's int64 where the schema has int32, null for a column added later
+    (LATER_COLUMNS) that the file lacks."""
     for name in LATER_COLUMNS:
         if name not in table.schema.names:
-            field = PROGRAMS_SCHEMA.field(name)
+            field = schema.field(name)
             table = table.append_column(field, pa.nulls(table.num_rows, field.type))
-    return table.select(list(PROGRAMS_COLUMNS)).cast(PROGRAMS_SCHEMA)
+    return table.select(schema.names).cast(schema)
 
 
 def check_programs_values(table: pa.Table, where: str) -> None:

@@ -30,6 +30,20 @@ class RunOptions:
     log_every_s: float = 30.0
     terminal: bool | None = None
     synthesizer: Callable | None = None
+    # r2s run --window: one program per window of `window_s` seconds of a scene's frames (pipeline.batch.windows),
+    # the next starting `stride_s` after (None: consecutive), no window across a gap of more than `max_gap_s`.
+    window_s: float | None = None
+    stride_s: float | None = None
+    max_gap_s: float | None = None
+
+    @property
+    def window(self):
+        """The window options as a WindowSpec, or None for one program per frame."""
+        if self.window_s is None:
+            return None
+        from pipeline.batch.windows import WindowSpec
+
+        return WindowSpec(self.window_s, self.stride_s, self.max_gap_s)
 
     def check(self) -> None:
         """Refuse values no run can use (UserError: one line, exit 2), before anything is read or written."""
@@ -45,3 +59,9 @@ class RunOptions:
             raise UserError(f"unknown backend {self.backend!r} (backends: {', '.join(BACKENDS)})")
         if self.scheduler and self.backend != "dask":
             raise UserError("--scheduler needs --backend dask")
+        if self.window_s is None and (self.stride_s is not None or self.max_gap_s is not None):
+            raise UserError("--stride and --max-gap need --window")
+        if self.window is not None:
+            self.window.check()
+            if self.synthesizer is not None:
+                raise UserError("a synthesizer replaces one frame's synthesis; --window synthesizes windows")

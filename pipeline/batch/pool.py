@@ -1,7 +1,9 @@
 """Workers of `r2s run`: a loky process pool (joblib's) or a dask.distributed cluster, and the rule that keeps
 a run going when a worker dies.
 
-The unit of work is a chunk of frames (pipeline.batch.task.ChunkTask); the unit of blame is still one frame.
+The unit of work is a chunk of frames (pipeline.batch.task.ChunkTask; with --window, a chunk of windows:
+pipeline.batch.window_task.WindowTask, which answers the same members); the unit of blame is still one frame (one
+window).
 When a worker dies (killed at its memory limit, by the OOM killer, a segfault in a native library), the chunks
 it ran fail with it and nobody says which frame was to blame. Each chunk's progress marker names the frame it
 was running: the frames before it (finished, rows lost) and after it (not started) are innocent and go back
@@ -26,7 +28,7 @@ from typing import Any, Protocol
 
 import pyarrow as pa
 
-from pipeline.batch.task import ChunkTask, one_line, run_chunk
+from pipeline.batch.task import ChunkTask, one_line, run_task
 from synth.errors import InternalError
 
 
@@ -236,7 +238,7 @@ class LokyPool:
             executor.shutdown(wait=False, kill_workers=True)
 
         yield from _bounded(queue, self.jobs, _Hooks(
-            submit=lambda t: executor.submit(run_chunk, t), wait_first=wait_first, death=_loky_death,
+            submit=lambda t: executor.submit(run_task, t), wait_first=wait_first, death=_loky_death,
             started=_started, frame_since=_frame_since, guard_s=self.guard_s, kill=kill, abandon=abandon))
 
 
@@ -287,7 +289,7 @@ class DaskPool:
         from distributed import wait as dask_wait
 
         def submit(task: ChunkTask) -> Any:
-            return self.client.submit(run_chunk, task, key=f"r2s-run-{self.run_id}-{task.key}", pure=False)
+            return self.client.submit(run_task, task, key=f"r2s-run-{self.run_id}-{task.key}", pure=False)
 
         def wait_first(futures: list, timeout: float | None) -> Iterable:
             try:
@@ -342,12 +344,12 @@ def compute(pool: Pool, tasks: Iterable[ChunkTask], log: Callable[[str], None]) 
                         queue.retry(rest)
                     if task.key in lost.blamed:
                         log(f"frame {culprit.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
-                        yield _lost_rows(culprit, lost.status, lost.reason)
+                        yield culprit.lost_rows(lost.status, lost.reason)
                     else:
                         suspects.append(culprit)
             if len(suspects) == 1:
                 log(f"frame {suspects[0].frames[0][0]}: {lost.reason}; recorded as {lost.status}")
-                yield _lost_rows(suspects[0], lost.status, lost.reason)
+                yield suspects[0].lost_rows(lost.status, lost.reason)
             elif suspects:
                 log(f"{lost.reason} with {len(suspects)} frames in flight; retrying them one at a time")
                 for task in suspects:
@@ -357,7 +359,7 @@ def compute(pool: Pool, tasks: Iterable[ChunkTask], log: Callable[[str], None]) 
 def _pinned(lost: Lost, queue: TaskQueue, log: Callable[[str], None]) -> Iterator[pa.Table]:
     if len(lost.task.frames) == 1:
         log(f"frame {lost.task.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
-        yield _lost_rows(lost.task, lost.status, lost.reason)
+        yield lost.task.lost_rows(lost.status, lost.reason)
         return
     log(f"a chunk of {len(lost.task.frames)} frames: {lost.reason}; retrying its frames one by one")
     for single in lost.task.singles():
@@ -367,21 +369,7 @@ def _pinned(lost: Lost, queue: TaskQueue, log: Callable[[str], None]) -> Iterato
 def _alone(pool: Pool, task: ChunkTask, log: Callable[[str], None]) -> Iterator[pa.Table | None]:
     try:
         for item in pool.map_unordered(TaskQueue([task])):
-            yield _lost_rows(item.task, item.status, item.reason) if isinstance(item, Lost) else item
+            yield item.task.lost_rows(item.status, item.reason) if isinstance(item, Lost) else item
     except WorkerLost as lost:
         log(f"frame {task.frames[0][0]}: {lost.reason}; recorded as {lost.status}")
-        yield _lost_rows(task, lost.status, lost.reason)
-
-
-def _lost_rows(task: ChunkTask, status: str, reason: str) -> pa.Table:
-    """The rows of frames whose worker died, with the hash of their rows (read here: a rare event, one frame
-    usually) so that a resume keeps the verdict for the same rows; None if they cannot be read (recomputed)."""
-    from pipeline.batch.task import ChunkUnreadable
-    from pipeline.programs import failure_row, programs_table
-
-    try:
-        hashes = task.read()[2]
-    except ChunkUnreadable:
-        hashes = [None] * len(task.frames)
-    return programs_table([failure_row(fid, status, reason, n - 1, task.config, frame_hash=h)
-                           for (fid, _, n), h in zip(task.frames, hashes)])
+        yield task.lost_rows(lost.status, lost.reason)

@@ -26,21 +26,22 @@ class Summary:
     seconds: float
     first_result_s: float | None = None  # seconds from the start to the first finished frame
     changed: int = 0  # of the computed, frames recomputed because their rows changed since their stored program
+    unit: str = "frames"  # what a row is of: frames, or windows (r2s run --window)
 
     def line(self) -> str:
         counts = dict(self.statuses)
         optimal = 100.0 * counts.get("optimal", 0) / self.frames if self.frames else 0.0
         others = ", ".join(f"{counts.get(s, 0)} {s}" for s in ("feasible", "timeout", "memout"))
         changed = f"; {self.changed} recomputed because their rows changed" if self.changed else ""
-        return (f"{self.frames} frames ({self.computed} computed, {self.kept} kept), {optimal:.1f}% optimal, "
+        return (f"{self.frames} {self.unit} ({self.computed} computed, {self.kept} kept), {optimal:.1f}% optimal, "
                 f"{others}, {counts.get('error', 0)} errors, {self.seconds:.1f} s{changed}")
 
 
 def summarize(counts: Mapping[str, int], computed: int, seconds: float, first_result_s: float | None = None,
-              changed: int = 0) -> Summary:
+              changed: int = 0, unit: str = "frames") -> Summary:
     frames = sum(counts.values())
     return Summary(frames, computed, frames - computed, tuple(sorted((s, int(n)) for s, n in counts.items())),
-                   seconds, first_result_s, changed)
+                   seconds, first_result_s, changed, unit)
 
 
 def status_counts(table: pa.Table) -> dict[str, int]:

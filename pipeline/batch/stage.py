@@ -50,14 +50,19 @@ def run_frames(
     log_every_s: float = 30.0,
     terminal: bool | None = None,
     synthesizer: Callable | None = None,
+    window_s: float | None = None,
+    stride_s: float | None = None,
+    max_gap_s: float | None = None,
 ) -> Summary:
     """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
     (a dataset directory, or one file if the name ends in .parquet); frames already in `out` from the same rows
     with the same config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults
-    (docs/api.md). Returns the summary; raises UserError / FramesError / ProgramsError / ConfigError on bad input
-    (nothing written then). `log` receives one line at a time (default: stderr); the other keywords are the
+    (docs/api.md). With `window_s`, one program per window of a scene's frames instead (docs/dsl.md, "Programs over
+    a window"; rows: docs/formats.md, "Window programs"). Returns the summary; raises UserError / FramesError /
+    ProgramsError / ConfigError on bad input (nothing written then). `log` receives one line at a time (default: stderr); the other keywords are the
     fields of RunOptions (pipeline.batch.options), which says what each means."""
-    options = RunOptions(jobs, backend, scheduler, chunk_size, part_rows, log_every_s, terminal, synthesizer)
+    options = RunOptions(jobs, backend, scheduler, chunk_size, part_rows, log_every_s, terminal, synthesizer, window_s,
+                         stride_s, max_gap_s)
     return run(frames, out, as_config(config), options, log or _stderr)
 
 
@@ -70,6 +75,10 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
         check_apart(f"{out}.parts", [("input frames", frames)], directory=True)
+    if options.window is not None:
+        from pipeline.batch.window_run import WindowRun
+
+        return WindowRun(str(frames), Path(out), config, options, log).go()
     return _Run(str(frames), Path(out), config, options, log).go()
 
 
@@ -96,23 +105,38 @@ class _Run:
         else:
             self._log(message)
 
+    unit = "frames"  # what a row is of (log lines, the summary)
+
     def go(self) -> Summary:
-        from extractors.frame_hash import FrameHasher
         from extractors.frames_dataset import FramesDataset
         from pipeline.batch.store import RunStore
 
-        store = RunStore(self.out)
+        store = RunStore(self.out, self.schema)
         store.check_writable()
         dataset = FramesDataset.open(self.frames)  # bad input is refused before even the lock file is made
-        hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
-        n_frames, index = dataset.check(hasher)
+        n_units, index, contents, config_hash = self._units(dataset)
         store.lock()
         try:
-            plan = store.plan(index, hasher.keys(), self.config.hash)
-            del index, hasher  # 16 + 16 bytes a frame: not kept while the frames run
-            return self._locked(store, dataset, n_frames, plan)
+            plan = store.plan(index, contents, config_hash)
+            del index, contents  # 16 + 16 bytes a frame: not kept while the frames run
+            return self._locked(store, dataset, n_units, plan)
         finally:
             store.unlock()
+
+    @property
+    def schema(self):
+        from pipeline.programs import PROGRAMS_SCHEMA
+
+        return PROGRAMS_SCHEMA
+
+    def _units(self, dataset) -> tuple[int, Any, Any, str]:
+        """Check the input (streaming) and say what rows the run makes: how many, the index of their keys (frame
+        ids), their keys with what each is computed from (the rows' hash: store.plan), and the config hash."""
+        from extractors.frame_hash import FrameHasher
+
+        hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
+        n_frames, index = dataset.check(hasher)
+        return n_frames, index, hasher.keys(), self.config.hash
 
     def _locked(self, store, dataset, n_frames: int, plan) -> Summary:
         todo = n_frames - len(plan.done)
@@ -127,27 +151,28 @@ class _Run:
             computed = self._compute(store, pool, dataset, plan.done, n_frames, todo) if todo else 0
         store.finish()
         summary = summarize(store.status_counts(), computed, time.monotonic() - self.started, self.first_result_s,
-                            plan.changed)
+                            plan.changed, self.unit)
         self.log(f"{summary.line()} -> {self.out}")
         return summary
 
     def _log_plan(self, plan, n_frames: int, dataset) -> None:
         files = f" in {len(dataset.parts)} files" if len(dataset.parts) > 1 else ""
-        self.log(f"{n_frames:,} frames{files} checked in {time.monotonic() - self.started:.1f} s")
+        unit, one = self.unit, f"{self.unit[:-1]}(s)"
+        self.log(f"{n_frames:,} {unit}{files} checked in {time.monotonic() - self.started:.1f} s")
         if len(plan.done):
-            self.log(f"resuming: {len(plan.done)} of {n_frames} frames already done from the same rows with this "
+            self.log(f"resuming: {len(plan.done)} of {n_frames} {unit} already done from the same rows with this "
                      "config")
         if plan.changed:
-            self.log(f"recomputing {plan.changed} frame(s) whose rows changed since their program was made "
+            self.log(f"recomputing {plan.changed} {one} whose rows changed since their program was made "
                      f"(e.g. {plan.changed_example}); their rows are replaced")
         if plan.unhashed:
-            self.log(f"recomputing {plan.unhashed} frame(s) whose rows were written without a frame_hash "
+            self.log(f"recomputing {plan.unhashed} {one} whose rows were written without a frame_hash "
                      "(by an older r2s): what they were computed from is unknown")
         if plan.stale:
-            self.log(f"recomputing {plan.stale} frame(s) whose rows have another config hash "
+            self.log(f"recomputing {plan.stale} {one} whose rows have another config hash "
                      f"(e.g. {plan.stale_example}); their rows are replaced")
         if plan.foreign:
-            self.log(f"dropping {plan.foreign} row(s) of frames that are not in {self.frames}")
+            self.log(f"dropping {plan.foreign} row(s) of {unit} that are not in {self.frames}")
 
     def _pool(self, todo: int):
         """A context that yields the pool (None when there is nothing to compute)."""
@@ -202,7 +227,7 @@ class _Run:
                     if self.first_result_s is None:
                         self.first_result_s = now - self.started
                         if not self._progress.has_bar:
-                            self.log(f"first frame done after {self.first_result_s:.1f} s")
+                            self.log(f"first {self.unit[:-1]} done after {self.first_result_s:.1f} s")
                     counts = status_counts(table)
                     computed += table.num_rows
                     buffer.add(table, now)
@@ -222,7 +247,7 @@ class _Run:
             if stopped:
                 saved = n_frames - todo + written
                 where = self.out if not store.single_file else store.parts
-                self.log(f"stopped: {saved:,} of {n_frames:,} frames are saved in {where}; "
+                self.log(f"stopped: {saved:,} of {n_frames:,} {self.unit} are saved in {where}; "
                          "run the same command again to resume")
             self._progress.close()
             self._progress = None

@@ -34,7 +34,14 @@ import pyarrow.parquet as pq
 
 from extractors.frame_hash import frame_keys, from_hex
 from pipeline.errors import UserError
-from pipeline.programs import PROGRAMS_SCHEMA, ProgramsError, as_programs, check_programs_schema, check_programs_values
+from pipeline.programs import (
+    LATER_COLUMNS,
+    PROGRAMS_SCHEMA,
+    ProgramsError,
+    as_programs,
+    check_programs_schema,
+    check_programs_values,
+)
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 
@@ -65,8 +72,9 @@ def is_single_file(out: str | os.PathLike) -> bool:
 
 
 class RunStore:
-    def __init__(self, out: str | os.PathLike) -> None:
+    def __init__(self, out: str | os.PathLike, schema: pa.Schema = PROGRAMS_SCHEMA) -> None:
         self.out = Path(out)
+        self.schema = schema  # the rows' (PROGRAMS_SCHEMA, or WINDOW_SCHEMA for r2s run --window)
         self.single_file = is_single_file(out)
         self.parts = Path(f"{self.out}.parts") if self.single_file else self.out
         self._next = 0
@@ -130,6 +138,11 @@ class RunStore:
         for s, path in enumerate(sources):
             try:
                 table = _read_keys(path)
+                missing = [n for n in self.schema.names if n not in pq.read_schema(path).names
+                           and n not in LATER_COLUMNS]
+                if missing:  # rows of the other kind (per frame, per window) are never mixed in one output
+                    raise ProgramsError(f"{path} holds rows without column(s) {', '.join(missing)}: "
+                                        f"{'per-frame' if 'n_frames' in missing else 'other'} programs")
             except ProgramsError as exc:
                 # Never overwrite or delete a file we may not have written: an unreadable output file, or a part
                 # of a dataset directory, refuses the run. Parts beside a single file are ours alone (they
@@ -193,7 +206,7 @@ class RunStore:
                 path.unlink()
                 continue
             with _writing(path), atomic_path(path) as tmp:
-                _copy_rows(path, tmp, keep)
+                _copy_rows(path, tmp, keep, self.schema)
 
     def remove_temporaries(self) -> None:
         """Temporary files of a killed run: only our own names, inside the parts directory."""
@@ -222,9 +235,9 @@ class RunStore:
         if sources == [self.out]:
             return
         with _writing(self.out), atomic_path(self.out) as tmp:
-            with pq.ParquetWriter(tmp, PROGRAMS_SCHEMA, compression="zstd") as writer:
+            with pq.ParquetWriter(tmp, self.schema, compression="zstd") as writer:
                 for path in sources:
-                    for batch in _batches(path):
+                    for batch in _batches(path, self.schema):
                         writer.write_batch(batch, row_group_size=MERGE_BATCH_ROWS)
         if self.parts.is_dir():
             shutil.rmtree(self.parts)
@@ -291,17 +304,17 @@ def _read_keys(path: Path) -> pa.Table:
     return table
 
 
-def _batches(path: Path):
+def _batches(path: Path, schema: pa.Schema):
     pf = pq.ParquetFile(path)
-    names = [c for c in PROGRAMS_SCHEMA.names if c in pf.schema_arrow.names]
+    names = [c for c in schema.names if c in pf.schema_arrow.names]
     for batch in pf.iter_batches(batch_size=MERGE_BATCH_ROWS, columns=names):
-        yield as_programs(batch)
+        yield as_programs(batch, schema)
 
 
-def _copy_rows(source: Path, target: Path, keep: np.ndarray) -> None:
-    with pq.ParquetWriter(target, PROGRAMS_SCHEMA, compression="zstd") as writer:
+def _copy_rows(source: Path, target: Path, keep: np.ndarray, schema: pa.Schema) -> None:
+    with pq.ParquetWriter(target, schema, compression="zstd") as writer:
         offset = 0
-        for batch in _batches(source):
+        for batch in _batches(source, schema):
             mask = keep[offset: offset + batch.num_rows]
             offset += batch.num_rows
             if mask.any():

@@ -106,6 +106,26 @@ class ChunkTask:
         return rows, first, [hashes[f[1] - first] for f in self.frames]
 
 
+    def run(self) -> pa.Table:
+        """What a worker runs (run_task): a row per frame, in order."""
+        return run_chunk(self)
+
+    def lost_rows(self, status: str, reason: str) -> pa.Table:
+        """The rows of frames whose worker died, with the hash of their rows (read here: a rare event, one frame
+        usually) so that a resume keeps the verdict for the same rows; None if they cannot be read (recomputed)."""
+        try:
+            hashes = self.read()[2]
+        except ChunkUnreadable:
+            hashes = [None] * len(self.frames)
+        return programs_table([failure_row(fid, status, reason, n - 1, self.config, frame_hash=h)
+                               for (fid, _, n), h in zip(self.frames, hashes)])
+
+
+def run_task(task) -> pa.Table:
+    """What the pool submits: the task's own run (a ChunkTask, or a window task: pipeline.batch.window_task)."""
+    return task.run()
+
+
 class ChunkUnreadable(InternalError):
     """A worker could not read its chunk (the file moved, or a cluster worker does not see the path)."""
 

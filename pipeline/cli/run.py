@@ -1,5 +1,6 @@
-"""`r2s run FRAMES --out PROGRAMS`: one program per frame, in parallel, each frame under its own time and memory
-limit, written in atomic part files so that a stopped run resumes where it stopped.
+"""`r2s run FRAMES --out PROGRAMS`: one program per frame (with --window, per window of a scene's frames), in
+parallel, each frame under its own time and memory limit, written in atomic part files so that a stopped run
+resumes where it stopped.
 
 The verb only reads its options; the work is pipeline.batch.stage.run_frames (the Python API). Heavy modules (pandas,
 pyarrow, joblib, dask) are imported inside run(), so that the other verbs do not pay for them.
@@ -46,6 +47,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "first row, so a kill loses at most the frames in flight and the last 30 s of rows")
     p.add_argument("--log-every", type=float, default=30.0, metavar="S",
                    help="without a terminal, a progress line every S seconds (default 30)")
+    g = p.add_argument_group("programs over a window (docs/dsl.md, \"Programs over a window\")")
+    g.add_argument("--window", type=float, metavar="S",
+                   help="one program per window of S seconds of a scene's frames (by timestamp_us), holding in each "
+                        "of its frames, instead of one per frame; rows: docs/formats.md, \"Window programs\"")
+    g.add_argument("--stride", type=float, metavar="S",
+                   help="seconds from one window's start to the next (default: the window: consecutive windows)")
+    g.add_argument("--max-gap", type=float, metavar="S",
+                   help="no window spans a gap of more than S seconds between consecutive frames (default: none)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,5 +65,6 @@ def run(args: argparse.Namespace) -> int:
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))
     run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
-               chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every)
+               chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every,
+               window_s=args.window, stride_s=args.stride, max_gap_s=args.max_gap)
     return 0

@@ -1,0 +1,142 @@
+"""Window programs (issue 25) against single-frame programs on the shipped scenes. Writes bench/results/window.json
+and window.md.
+
+Frames: the shipped nuScenes-mini keyframes (data/nuscenes-mini-keyframes: 6 scenes at 2 Hz) and the shipped
+Argoverse 2 log excerpt (data/argoverse2-log-excerpt: one log at 10 Hz). Each scene is tiled into windows of 1 s
+and of 2 s (synth.window.tile: consecutive, not overlapping, no gap limit) and each window synthesized with the
+default configuration (auto, hybrid, z3 certification, frame by frame); every frame is also synthesized alone.
+Reported per dataset and window: time per window against the time of its frames alone, the window's cost
+against its frames' own optima, and how long programs stay the same (the share of consecutive windows of a scene
+whose programs are identical, as text).
+
+    .venv/bin/python bench/bench_window.py
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from common import machine, write_results  # noqa: E402
+
+from extractors.frames import frame_to_scene  # noqa: E402
+from synth import synthesize, synthesize_window, tile  # noqa: E402
+from synth.window import check_window  # noqa: E402
+
+DATASETS = {
+    "nuScenes-mini keyframes (2 Hz)": ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet",
+    "Argoverse 2 log excerpt (10 Hz)": ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet",
+}
+WINDOWS_S = (1.0, 2.0)
+
+
+def scenes_of(path: Path):
+    """(scene name, [(timestamp_us, Scene)] in frame order) for each scene of a frames file."""
+    import pyarrow.parquet as pq
+
+    df = pq.read_table(path).to_pandas()
+    for name, rows in df.groupby("scene", sort=True):
+        rows = rows.sort_values(["frame_index"], kind="stable")
+        frames = [(int(g.timestamp_us.iloc[0]), frame_to_scene(g)) for _, g in rows.groupby("frame_id", sort=False)]
+        yield str(name), frames
+
+
+def measure(path: Path) -> dict:
+    out = {"frames": 0, "scenes": 0, "windows": {}}
+    for name, frames in scenes_of(path):
+        out["scenes"] += 1
+        out["frames"] += len(frames)
+        alone = []
+        for _, scene in frames:
+            t = time.perf_counter()
+            result = synthesize(scene)
+            alone.append((time.perf_counter() - t, result.cost))
+        for window_s in WINDOWS_S:
+            rows = out["windows"].setdefault(str(window_s), [])
+            previous = None
+            for first, last in tile([t for t, _ in frames], int(window_s * 1e6)):
+                scenes = [s for _, s in frames[first:last + 1]]
+                t = time.perf_counter()
+                result = synthesize_window(scenes)
+                seconds = time.perf_counter() - t
+                ok = all(v.ok for v in check_window(result.program, scenes))
+                text = str(result.program)
+                rows.append({"scene": name, "first": first, "last": last, "n_frames": len(scenes), "seconds": seconds,
+                             "alone_seconds": sum(a for a, _ in alone[first:last + 1]), "cost": result.cost,
+                             "frame_costs": [c for _, c in alone[first:last + 1]], "optimal": result.status == "optimal",
+                             "certified": result.certified, "consistent": ok, "entities": result.n_entities,
+                             "same_as_previous": None if previous is None else text == previous})
+                previous = text
+    return out
+
+
+def summary(rows: list[dict]) -> dict:
+    multi = [r for r in rows if r["n_frames"] > 1]
+    pairs = [r["same_as_previous"] for r in rows if r["same_as_previous"] is not None]
+    return {
+        "windows": len(rows),
+        "frames_per_window": statistics.mean(r["n_frames"] for r in rows),
+        "all_optimal": all(r["optimal"] for r in rows),
+        "all_certified": all(r["certified"] for r in rows),
+        "all_consistent": all(r["consistent"] for r in rows),
+        "ms_per_window_median": 1000 * statistics.median(r["seconds"] for r in rows),
+        "ms_per_frame_alone_median": 1000 * statistics.median(r["alone_seconds"] / r["n_frames"] for r in rows),
+        "window_over_its_frames_alone": sum(r["seconds"] for r in rows) / sum(r["alone_seconds"] for r in rows),
+        "mean_window_cost": statistics.mean(r["cost"] for r in rows),
+        "mean_max_frame_cost": statistics.mean(max(r["frame_costs"]) for r in rows),
+        "mean_frame_cost": statistics.mean(c for r in rows for c in r["frame_costs"]),
+        "window_over_max_frame_cost": (sum(r["cost"] for r in multi) / max(1, sum(max(r["frame_costs"]) for r in multi))),
+        "windows_costing_more_than_every_frame": sum(r["cost"] > max(r["frame_costs"]) for r in multi),
+        "multi_frame_windows": len(multi),
+        "consecutive_pairs": len(pairs),
+        "identical_share": (sum(pairs) / len(pairs)) if pairs else None,
+    }
+
+
+def main() -> None:
+    load0 = os.getloadavg()[0]
+    started = time.perf_counter()
+    results = {name: measure(path) for name, path in DATASETS.items()}
+    total = time.perf_counter() - started
+    load1 = os.getloadavg()[0]
+    m = machine()
+    payload = {"machine": m, "load_start": load0, "load_end": load1, "total_s": total, "datasets": {
+        name: {"scenes": r["scenes"], "frames": r["frames"],
+               "windows": {w: {"summary": summary(rows), "rows": rows} for w, rows in r["windows"].items()}}
+        for name, r in results.items()}}
+    lines = ["# Window programs against single-frame programs", "",
+             f"Machine: {m['cpu']} ({m['cores']} cores), commit {m['commit']}, {m['date']}; load average "
+             f"{load0:.2f} at the start, {load1:.2f} at the end; total {total:.0f} s. Command: "
+             "`.venv/bin/python bench/bench_window.py`.", "",
+             "Each scene tiled into consecutive windows of W seconds (synth.window.tile), each window synthesized "
+             "with the default configuration (auto, hybrid, z3 certification frame by frame), every frame also "
+             "synthesized alone. Cost: the window program's against the largest of its frames' own optimal costs "
+             "(a lower bound on it). Identical: the share of consecutive windows of a scene with the same program "
+             "text.", "",
+             "| data | W | windows | frames/window | optimal, certified, consistent | ms per window (median) | "
+             "ms per frame alone (median) | window time / its frames alone | mean window cost | mean max frame "
+             "cost | mean frame cost | windows costing more than every frame | identical consecutive |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, r in payload["datasets"].items():
+        for w, data in r["windows"].items():
+            s = data["summary"]
+            ok = "yes" if s["all_optimal"] and s["all_certified"] and s["all_consistent"] else "NO"
+            same = "n/a" if s["identical_share"] is None else \
+                f"{100 * s['identical_share']:.0f}% of {s['consecutive_pairs']}"
+            lines.append(f"| {name} ({r['frames']} frames) | {w} s | {s['windows']} | {s['frames_per_window']:.1f} | "
+                         f"{ok} | {s['ms_per_window_median']:.0f} | {s['ms_per_frame_alone_median']:.0f} | "
+                         f"x{s['window_over_its_frames_alone']:.2f} | {s['mean_window_cost']:.2f} | "
+                         f"{s['mean_max_frame_cost']:.2f} | {s['mean_frame_cost']:.2f} | "
+                         f"{s['windows_costing_more_than_every_frame']} of {s['multi_frame_windows']} | {same} |")
+    write_results("window", payload, "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,157 @@
+"""`r2s run --window W`: one program per window of consecutive frames of a scene (synth.window), in the batch
+stage's workers, parts, resume and progress.
+
+The coordinator reads four short columns of every frame (frame_id, scene, frame_index, timestamp_us) once, after
+the check, and keeps per frame its place (file, first row, rows), its scene and timestamp and its rows' hash
+(extractors.frame_hash, from the checking pass): ~100 bytes a frame, never a frame's rows. It orders each scene's
+frames by frame_index, cuts them into windows (synth.window.tile) and hands windows to the workers
+(pipeline.batch.window_task), which read their frames' rows themselves. A window's row is keyed by its first frame
+(frame_id) and records the hash of all its frames' rows (frame_hash), so a resumed run
+keeps a window's program only for the same frames with the same rows, and the config hash covers the window
+options: another W is another configuration.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.errors import UserError
+from synth.config import SynthConfig
+
+PLACE_COLUMNS = ("frame_id", "scene", "frame_index", "timestamp_us")
+
+
+@dataclass(frozen=True)
+class WindowSpec:
+    """How windows tile a scene (docs/dsl.md, "Programs over a window"), in seconds: their length, the time
+    between two windows' starts (None: the length, consecutive windows), the longest gap between consecutive
+    frames that a window may span (None: any)."""
+
+    window_s: float
+    stride_s: float | None = None
+    max_gap_s: float | None = None
+
+    def check(self) -> None:
+        """Refuse values no run can use (UserError: one line), before anything is read."""
+        import math
+
+        for name, value in (("--window", self.window_s), ("--stride", self.stride_s), ("--max-gap", self.max_gap_s)):
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise UserError(f"{name} must be a positive number of seconds, got {value}")
+        if self.window_s > 3600 or (self.stride_s or 0) > 3600:
+            raise UserError("--window and --stride are at most 3600 s")
+
+    def us(self, seconds: float | None) -> int | None:
+        return None if seconds is None else max(1, round(seconds * 1e6))
+
+    def tile(self, timestamps_us) -> list[tuple[int, int]]:
+        from synth.window import tile
+
+        return tile(timestamps_us, self.us(self.window_s), self.us(self.stride_s), self.us(self.max_gap_s))
+
+    @property
+    def text(self) -> str:
+        return f"window={self.window_s!r} stride={self.stride_s!r} max_gap={self.max_gap_s!r}"
+
+    def config_hash(self, config: SynthConfig) -> str:
+        """The config_hash of a window row: the configuration's and the window options' (16 hex digits, as
+        SynthConfig.hash)."""
+        return hashlib.sha256(f"{config.hash} {self.text}".encode()).hexdigest()[:16]
+
+
+class FramePlace(NamedTuple):
+    part: int  # index into the dataset's parts
+    frame_id: str
+    start: int  # first row in its file
+    rows: int
+
+
+class WindowUnit(NamedTuple):
+    """One window to compute: `label` names it in log lines (its first and last frame), `frames` its frames in
+    order, `frame_hash` the hash the coordinator expects of them (resume)."""
+
+    label: str
+    scene: str
+    frames: tuple[FramePlace, ...]
+    first_timestamp_us: int
+    last_timestamp_us: int
+
+
+def window_hash(frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
+    """What a window's program is computed from: its frames (ids, in order) with their rows' hashes
+    (extractors.frame_hash); 32 hex digits, as a frame's hash. (The window options are in the config hash.)"""
+    h = hashlib.blake2b(digest_size=16)
+    for fid, a, b in zip(frame_ids, lane0, lane1):
+        h.update(b"\0" + str(fid).encode() + b"\0" + int(a).to_bytes(8, "little") + int(b).to_bytes(8, "little"))
+    return h.hexdigest()
+
+
+def frame_places(dataset) -> Iterator[tuple[FramePlace, str, int, int | None]]:
+    """(place, scene, frame_index, timestamp_us) of every frame of a checked dataset, in file order, reading only
+    the columns PLACE_COLUMNS (a frame continued from one row group into the next is one frame)."""
+    for k, part in enumerate(dataset.parts):
+        offset = 0
+        pending = None  # the last frame of the previous row group: it may go on in this one
+        for table in dataset.row_groups(part, PLACE_COLUMNS):
+            n = table.num_rows
+            if n == 0:
+                continue
+            ids = table.column("frame_id").combine_chunks()
+            codes = ids.indices.to_numpy(zero_copy_only=False) if pa.types.is_dictionary(ids.type) else \
+                np.unique(ids.to_numpy(zero_copy_only=False), return_inverse=True)[1]
+            starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+            heads = table.take(pa.array(starts)).to_pylist()
+            lengths = np.diff(np.r_[starts, n])
+            for head, start, rows in zip(heads, starts, lengths):
+                if pending is not None and start == 0 and head["frame_id"] == pending[0].frame_id:
+                    place = pending[0]
+                    pending = (place._replace(rows=place.rows + int(rows)),) + pending[1:]
+                    continue
+                if pending is not None:
+                    yield pending
+                pending = (FramePlace(k, head["frame_id"], offset + int(start), int(rows)), head["scene"],
+                           head["frame_index"], head["timestamp_us"])
+            offset += n
+        if pending is not None:
+            yield pending
+
+
+def plan_windows(dataset, hasher, spec: WindowSpec) -> tuple[list[WindowUnit], list[str]]:
+    """The windows of every scene (scenes in name order, windows in time order) and the hash each is expected to
+    have. A frame without a scene or a timestamp, or two frames of a scene at one timestamp or out of order,
+    refuses the run (UserError)."""
+    scenes: dict[str, list[tuple[int, int, int, FramePlace]]] = {}
+    for n, (place, scene, index, stamp) in enumerate(frame_places(dataset)):
+        if scene is None:
+            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no scene; --window cuts scenes")
+        if stamp is None:
+            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no timestamp_us; --window needs the "
+                            "frames' timestamps")
+        scenes.setdefault(scene, []).append((-1 if index is None else index, n, stamp, place))
+    units: list[WindowUnit] = []
+    for scene in sorted(scenes):
+        frames = sorted(scenes[scene])  # by frame_index, then file order
+        stamps = [f[2] for f in frames]
+        bad = next((i for i in range(1, len(stamps)) if stamps[i] <= stamps[i - 1]), None)
+        if bad is not None:
+            a, b = frames[bad - 1][3].frame_id, frames[bad][3].frame_id
+            raise UserError(f"{dataset.source}: scene {scene!r}: frame {b!r} is not later than {a!r} "
+                            f"(timestamps {stamps[bad - 1]}, {stamps[bad]}); --window needs increasing timestamps")
+        for first, last in spec.tile(stamps):
+            places = tuple(f[3] for f in frames[first:last + 1])
+            units.append(WindowUnit(f"{places[0].frame_id}..{places[-1].frame_id}", scene, places, stamps[first],
+                                    stamps[last]))
+    ids = [p.frame_id for unit in units for p in unit.frames]
+    lane0, lane1 = hasher.lanes(ids) if ids else (np.zeros(0, np.uint64), np.zeros(0, np.uint64))
+    hashes, at = [], 0
+    for unit in units:
+        k = len(unit.frames)
+        hashes.append(window_hash(ids[at:at + k], lane0[at:at + k], lane1[at:at + k]))
+        at += k
+    return units, hashes
