@@ -15,6 +15,7 @@ whose programs are identical, as text).
 from __future__ import annotations
 
 import os
+import re
 import statistics
 import sys
 import time
@@ -60,7 +61,7 @@ def measure(path: Path) -> dict:
             alone.append((time.perf_counter() - t, result.cost))
         for window_s in WINDOWS_S:
             rows = out["windows"].setdefault(str(window_s), [])
-            previous = None
+            previous = previous_shape = None
             for first, last in tile([t for t, _ in frames], int(window_s * 1e6)):
                 scenes = [s for _, s in frames[first:last + 1]]
                 t = time.perf_counter()
@@ -68,18 +69,21 @@ def measure(path: Path) -> dict:
                 seconds = time.perf_counter() - t
                 ok = all(v.ok for v in check_window(result.program, scenes))
                 text = str(result.program)
+                shape = re.sub(r"Range\([^)]*\)", "Range", text)  # the relations, Range values aside
                 rows.append({"scene": name, "first": first, "last": last, "n_frames": len(scenes), "seconds": seconds,
                              "alone_seconds": sum(a for a, _ in alone[first:last + 1]), "cost": result.cost,
                              "frame_costs": [c for _, c in alone[first:last + 1]], "optimal": result.status == "optimal",
                              "certified": result.certified, "consistent": ok, "entities": result.n_entities,
-                             "same_as_previous": None if previous is None else text == previous})
-                previous = text
+                             "same_as_previous": None if previous is None else text == previous,
+                             "same_relations_as_previous": None if previous_shape is None else shape == previous_shape})
+                previous, previous_shape = text, shape
     return out
 
 
 def summary(rows: list[dict]) -> dict:
     multi = [r for r in rows if r["n_frames"] > 1]
     pairs = [r["same_as_previous"] for r in rows if r["same_as_previous"] is not None]
+    shapes = [r["same_relations_as_previous"] for r in rows if r["same_relations_as_previous"] is not None]
     return {
         "windows": len(rows),
         "frames_per_window": statistics.mean(r["n_frames"] for r in rows),
@@ -97,6 +101,7 @@ def summary(rows: list[dict]) -> dict:
         "multi_frame_windows": len(multi),
         "consecutive_pairs": len(pairs),
         "identical_share": (sum(pairs) / len(pairs)) if pairs else None,
+        "same_relations_share": (sum(shapes) / len(shapes)) if shapes else None,
     }
 
 
@@ -119,22 +124,25 @@ def main() -> None:
              "with the default configuration (auto, hybrid, z3 certification frame by frame), every frame also "
              "synthesized alone. Cost: the window program's against the largest of its frames' own optimal costs "
              "(a lower bound on it). Identical: the share of consecutive windows of a scene with the same program "
-             "text.", "",
+             "text; same relations: the same text once every Range is blanked (as `r2s report` counts them).", "",
              "| data | W | windows | frames/window | optimal, certified, consistent | ms per window (median) | "
              "ms per frame alone (median) | window time / its frames alone | mean window cost | mean max frame "
-             "cost | mean frame cost | windows costing more than every frame | identical consecutive |",
-             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "cost | mean frame cost | windows costing more than every frame | identical consecutive | same "
+             "relations |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in payload["datasets"].items():
         for w, data in r["windows"].items():
             s = data["summary"]
             ok = "yes" if s["all_optimal"] and s["all_certified"] and s["all_consistent"] else "NO"
             same = "n/a" if s["identical_share"] is None else \
                 f"{100 * s['identical_share']:.0f}% of {s['consecutive_pairs']}"
+            shape = "n/a" if s["same_relations_share"] is None else f"{100 * s['same_relations_share']:.0f}%"
             lines.append(f"| {name} ({r['frames']} frames) | {w} s | {s['windows']} | {s['frames_per_window']:.1f} | "
                          f"{ok} | {s['ms_per_window_median']:.0f} | {s['ms_per_frame_alone_median']:.0f} | "
                          f"x{s['window_over_its_frames_alone']:.2f} | {s['mean_window_cost']:.2f} | "
                          f"{s['mean_max_frame_cost']:.2f} | {s['mean_frame_cost']:.2f} | "
-                         f"{s['windows_costing_more_than_every_frame']} of {s['multi_frame_windows']} | {same} |")
+                         f"{s['windows_costing_more_than_every_frame']} of {s['multi_frame_windows']} | {same} | "
+                         f"{shape} |")
     write_results("window", payload, "\n".join(lines) + "\n")
 
 

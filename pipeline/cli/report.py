@@ -24,16 +24,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "`r2s query` reads it; needs --frames): the match count, the frames with the most bindings and the longest events")
     p.add_argument("--query-top", type=int, default=10, metavar="N",
                    help="matching frames listed with their programs (default 10)")
+    p.add_argument("--frame-programs", metavar="PATH",
+                   help="for window programs (r2s run --window): the per-frame programs of the same frames (r2s run "
+                        "without --window; needs --frames), to compare each window's cost with its frames' own")
 
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.report.output import check_replaceable
     from pipeline.report.stats import ProgramsDB
 
-    check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query)], directory=True)
+    check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query),
+                           ("frame programs", args.frame_programs)], directory=True)
+    if args.frame_programs is not None and args.frames is None:
+        raise UserError("--frame-programs needs --frames: the frames both programs came from (where each frame is)")
     if args.max_table_rows < 2:
         raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
-    extra = _query_sections(args)  # a bad pattern or option: exit 2 before anything is read or written
+    from pipeline.report.window_section import window_section
+
+    # A bad pattern or option: exit 2 before anything is read or written. The windows' section is there for
+    # window programs only (r2s run --window).
+    extra = (*_query_sections(args), window_section(args.frames, args.frame_programs))
     target = Path(args.out)
     with ProgramsDB(args.programs) as db:  # ProgramsError (exit 2) before anything is written
         if db.rows == 0:
