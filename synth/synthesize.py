@@ -39,6 +39,17 @@ class SynthStats:
     certify_s: float = 0.0
     render_s: float = 0.0
 
+    @classmethod
+    def since(cls, started: float, smt: list, nodes_expanded: int, search_s: float, oracle_s: float, ranges_s: float,
+              certify_s: float, render_s: float) -> SynthStats:
+        """The stats of a synthesis that started at `started` (perf_counter), its solvers' stats summed (`smt`:
+        one per solver backend asked, a window's frames each have one)."""
+        from synth.search.budget import peak_rss_mb
+
+        return cls(runtime_s=time.perf_counter() - started, search_s=search_s, smt_s=sum(s.seconds for s in smt),
+                   smt_queries=sum(s.queries for s in smt), nodes_expanded=nodes_expanded, peak_rss_mb=peak_rss_mb(),
+                   oracle_s=oracle_s, ranges_s=ranges_s, certify_s=certify_s, render_s=render_s)
+
 
 @dataclass(frozen=True)
 class ResultField:
@@ -125,7 +136,6 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     from synth.parts import MOTION
     from synth.robust import is_robust
     from synth.search import Budget, CostModel, search
-    from synth.search.budget import peak_rss_mb
     from synth.smt.certify import certify
     from synth.statement import build_program
 
@@ -175,17 +185,7 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
         program=program,
         scenic=scenic,
         certified=certified,
-        stats=SynthStats(
-            runtime_s=time.perf_counter() - started,
-            search_s=search_s,
-            smt_s=stats.seconds if stats else 0.0,
-            smt_queries=stats.queries if stats else 0,
-            nodes_expanded=found.nodes_expanded,
-            peak_rss_mb=peak_rss_mb(),
-            oracle_s=oracle_s,
-            ranges_s=ranges_s,
-            certify_s=certify_s,
-            render_s=render_s,
-        ),
+        stats=SynthStats.since(started, [stats] if stats else [], found.nodes_expanded, search_s, oracle_s, ranges_s,
+                               certify_s, render_s),
         config=config,
     )

@@ -167,7 +167,6 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     from synth.oracle import RelationOracle, make_oracle
     from synth.parts import parts_for
     from synth.search import Budget, CostModel, search
-    from synth.search.budget import peak_rss_mb
     from synth.smt.certify import certify
     from synth.statement import choose_references, write_statements
     from synth.synthesize import CertificationError
@@ -240,18 +239,7 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
         program=program,
         scenic=scenic,
         certified=certified,
-        stats=SynthStats(
-            runtime_s=time.perf_counter() - started,
-            search_s=search_s,
-            smt_s=sum(s.seconds for s in smt),
-            smt_queries=sum(s.queries for s in smt),
-            nodes_expanded=found.nodes_expanded,
-            peak_rss_mb=peak_rss_mb(),
-            oracle_s=oracle_s,
-            ranges_s=ranges_s,
-            certify_s=certify_s,
-            render_s=render_s,
-        ),
+        stats=SynthStats.since(started, smt, found.nodes_expanded, search_s, oracle_s, ranges_s, certify_s, render_s),
         config=config,
     )
 

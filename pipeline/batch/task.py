@@ -55,8 +55,28 @@ class FrameTask:
     frame_hash: str | None = None  # the hash of the rows the scene came from (extractors.frame_hash)
 
 
+class Units:
+    """What the pool asks of a task besides running it (pipeline.batch.pool): its units in `frames` (frames, or
+    windows: pipeline.batch.window_task), taken apart to retry or blame one, and its progress marker. A frozen
+    dataclass with `key`, `frames` and `progress_dir` fields."""
+
+    def only(self, indices, tag: str):
+        return replace(self, key=f"{self.key}.{tag}", frames=tuple(self.frames[i] for i in indices))
+
+    def split_at(self, i: int):
+        """(unit i alone, the other units or None)."""
+        rest = [k for k in range(len(self.frames)) if k != i]
+        return self.only([i], f"s{i}"), (self.only(rest, f"r{i}") if rest else None)
+
+    def singles(self) -> list:
+        return [self.only([i], f"s{i}") for i in range(len(self.frames))]
+
+    def marker(self) -> str | None:
+        return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
+
+
 @dataclass(frozen=True)
-class ChunkTask:
+class ChunkTask(Units):
     """Frames of one file to synthesize in one go: frame i is `frames[i] = (frame_id, first row, rows)`."""
 
     key: str  # unique within the run: names the progress marker and the dask task
@@ -72,20 +92,6 @@ class ChunkTask:
     @property
     def frame_ids(self) -> list[str]:
         return [f[0] for f in self.frames]
-
-    def only(self, indices, tag: str) -> ChunkTask:
-        return replace(self, key=f"{self.key}.{tag}", frames=tuple(self.frames[i] for i in indices))
-
-    def split_at(self, i: int) -> tuple[ChunkTask, ChunkTask | None]:
-        """(frame i alone, the other frames or None)."""
-        rest = [k for k in range(len(self.frames)) if k != i]
-        return self.only([i], f"s{i}"), (self.only(rest, f"r{i}") if rest else None)
-
-    def singles(self) -> list[ChunkTask]:
-        return [self.only([i], f"s{i}") for i in range(len(self.frames))]
-
-    def marker(self) -> str | None:
-        return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
 
     def read(self) -> tuple[pa.Table, int, list[str]]:
         """The rows of the chunk's span (whole frames, from its first frame's first row to its last frame's last

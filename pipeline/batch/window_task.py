@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
 
 from extractors.frame_hash import frame_hashes_of
 from extractors.frames import FramesError, frame_to_scene
-from pipeline.batch.task import ChunkUnreadable, _hard_memory_cap, _reset_peak_rss, one_line
+from pipeline.batch.task import ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, one_line
 from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
 from storage.parquet import read_rows
@@ -28,7 +28,7 @@ from synth.window import synthesize_window
 
 
 @dataclass(frozen=True)
-class WindowTask:
+class WindowTask(Units):
     """Windows to synthesize in one go: `frames[i]` is window i (a WindowUnit; the pool's unit of blame)."""
 
     key: str
@@ -40,19 +40,6 @@ class WindowTask:
     config_hash: str  # the rows' (WindowSpec.config_hash)
     hard_cap: bool = False
     progress_dir: str | None = None
-
-    def only(self, indices, tag: str) -> WindowTask:
-        return replace(self, key=f"{self.key}.{tag}", frames=tuple(self.frames[i] for i in indices))
-
-    def split_at(self, i: int) -> tuple[WindowTask, WindowTask | None]:
-        rest = [k for k in range(len(self.frames)) if k != i]
-        return self.only([i], f"s{i}"), (self.only(rest, f"r{i}") if rest else None)
-
-    def singles(self) -> list[WindowTask]:
-        return [self.only([i], f"s{i}") for i in range(len(self.frames))]
-
-    def marker(self) -> str | None:
-        return None if self.progress_dir is None else os.path.join(self.progress_dir, self.key)
 
     def read(self, unit: WindowUnit) -> tuple[list, str]:
         """The window's frames' rows (one DataFrame each, in order) and the window's hash of them as read."""
