@@ -9,6 +9,7 @@ robust ones they widen to cover every scene within the measurement error (Part.r
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,20 +23,25 @@ from synth.tables import NONE
 Choice = tuple[int, int]  # (reference index, relation code or NONE for the fallback)
 
 
-def choose_references(oracle: RelationOracle, order: tuple[int, ...]) -> list[tuple[Choice, ...]]:
+Distance = Callable[[int, int], float]  # (reference, target), oracle indices: how far apart they are
+
+
+def choose_references(oracle: RelationOracle, order: tuple[int, ...],
+                      distance: Distance | None = None) -> list[tuple[Choice, ...]]:
     """Per entity in order (oracle indices, 0 = ego): one (reference, code) per part of the oracle.
 
     A relation that needs no reference (Part.refless, found in ego's row) comes first; then references are
-    tried nearest first (ties: lower index, ego being 0); with none, the fallback is ego.
+    tried nearest first (ties: lower index, ego being 0); with none, the fallback is ego. `distance`: centre
+    distance in the oracle's scene by default (a window measures it in the frame its target is first seen in).
     """
-    if oracle.complete:
-        return _choose_from_table(oracle, order)
     ents = oracle.entities()
+    distance = distance or (lambda r, i: math.hypot(ents[r].x - ents[i].x, ents[r].y - ents[i].y))
+    if oracle.complete:
+        return _choose_from_table(oracle, order, distance)
     out = []
     available = [0]
     for i in order:
-        e = ents[i]
-        refs = sorted(available, key=lambda r: (math.hypot(ents[r].x - e.x, ents[r].y - e.y), r))
+        refs = sorted(available, key=lambda r: (distance(r, i), r))
         row = []
         for k, part in enumerate(oracle.parts):
             if part.refless and (c := oracle.relation(k, 0, i)) in part.refless:
@@ -47,16 +53,14 @@ def choose_references(oracle: RelationOracle, order: tuple[int, ...]) -> list[tu
     return out
 
 
-def _choose_from_table(oracle: RelationOracle, order: tuple[int, ...]) -> list[tuple[Choice, ...]]:
+def _choose_from_table(oracle: RelationOracle, order: tuple[int, ...], distance: Distance) -> list[tuple[Choice, ...]]:
     """choose_references when every pair is known: the nearest available witness is the least (distance, index)
     among the witnesses already declared, so only those are measured (not every declared entity, sorted)."""
-    ents = oracle.entities()
     codes = [oracle.table[p.name] for p in oracle.parts]
-    witnesses = [[np.flatnonzero(c[:, i] != NONE).tolist() for i in range(len(ents))] for c in codes]
+    witnesses = [[np.flatnonzero(c[:, i] != NONE).tolist() for i in range(len(oracle.ids))] for c in codes]
     declared = {0}
     out = []
     for i in order:
-        e = ents[i]
         row = []
         for k, part in enumerate(oracle.parts):
             if part.refless and (c := int(codes[k][0, i])) in part.refless:
@@ -66,7 +70,7 @@ def _choose_from_table(oracle: RelationOracle, order: tuple[int, ...]) -> list[t
             if not refs:
                 row.append((0, NONE))
                 continue
-            r = min(refs, key=lambda r: (math.hypot(ents[r].x - e.x, ents[r].y - e.y), r))
+            r = min(refs, key=lambda r: (distance(r, i), r))
             row.append((r, int(codes[k][r, i])))
         out.append(tuple(row))
         declared.add(i)

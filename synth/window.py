@@ -15,6 +15,7 @@ How windows tile a scene's frames (tile) is here too: it is arithmetic on timest
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -185,7 +186,7 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     oracles = [make_oracle(scene, config) for scene in scenes]
     for oracle in oracles:
         oracle.full_table()
-    # The window's entities stand where they are first seen: Alg. 4's "nearest reference" is measured there.
+    # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen.
     first = {e.id: e for scene in reversed(scenes) for e in scene.others}
     shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road)
     all_ids = (shown.ego.id,) + ids
@@ -196,7 +197,17 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     search_s = time.perf_counter() - t
     t = time.perf_counter()
     order = tuple(i + 1 for i in found.order)  # window oracle indices (0 is ego)
-    choices = dict(zip(order, choose_references(window, order)))
+    # Alg. 4's nearest reference, measured in the frame where the target is first seen (where every reference
+    # that witnesses it for the window is too).
+    places = [{e.id: (e.x, e.y) for e in scene.entities} for scene in scenes]
+    seen = {i: present[i][0] for i in ids}
+
+    def distance(r: int, i: int) -> float:
+        at = places[seen[all_ids[i]]]
+        (rx, ry), (x, y) = at[all_ids[r]], at[all_ids[i]]
+        return math.hypot(rx - x, ry - y)
+
+    choices = dict(zip(order, choose_references(window, order, distance)))
     clauses: dict[str, dict[str, Any]] = {}
     for oracle in oracles:
         at = {i: k for k, i in enumerate(oracle.ids)}  # window id -> the frame oracle's index
