@@ -75,9 +75,18 @@ def measure(path: Path) -> dict:
                              "frame_costs": [c for _, c in alone[first:last + 1]], "optimal": result.status == "optimal",
                              "certified": result.certified, "consistent": ok, "entities": result.n_entities,
                              "same_as_previous": None if previous is None else text == previous,
-                             "same_relations_as_previous": None if previous_shape is None else shape == previous_shape})
+                             "same_relations_as_previous": None if previous_shape is None else shape == previous_shape,
+                             "statements_in_both": None if previous_shape is None else len(common(previous_shape, shape)),
+                             "statements_kept": None if previous_shape is None else
+                             sum(a == b for a, b in common(previous_shape, shape))})
                 previous, previous_shape = text, shape
     return out
+
+
+def common(before: str, after: str) -> list[tuple[str, str]]:
+    """The statements (Range values blanked) of the entities two programs both declare, paired."""
+    a, b = ({ln.split(" = new ")[0]: ln for ln in t.splitlines()} for t in (before, after))
+    return [(a[i], b[i]) for i in sorted(a.keys() & b.keys())]
 
 
 def summary(rows: list[dict]) -> dict:
@@ -102,6 +111,8 @@ def summary(rows: list[dict]) -> dict:
         "consecutive_pairs": len(pairs),
         "identical_share": (sum(pairs) / len(pairs)) if pairs else None,
         "same_relations_share": (sum(shapes) / len(shapes)) if shapes else None,
+        "statements_kept_share": (sum(r["statements_kept"] or 0 for r in rows)
+                                  / max(1, sum(r["statements_in_both"] or 0 for r in rows))),
     }
 
 
@@ -124,12 +135,14 @@ def main() -> None:
              "with the default configuration (auto, hybrid, z3 certification frame by frame), every frame also "
              "synthesized alone. Cost: the window program's against the largest of its frames' own optimal costs "
              "(a lower bound on it). Identical: the share of consecutive windows of a scene with the same program "
-             "text; same relations: the same text once every Range is blanked (as `r2s report` counts them).", "",
+             "text; same relations: the same text once every Range is blanked; statements kept: of the entities "
+             "declared in two consecutive windows, those whose statement is the same, Range values aside (as `r2s "
+             "report` counts them).", "",
              "| data | W | windows | frames/window | optimal, certified, consistent | ms per window (median) | "
              "ms per frame alone (median) | window time / its frames alone | mean window cost | mean max frame "
              "cost | mean frame cost | windows costing more than every frame | identical consecutive | same "
-             "relations |",
-             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "relations | statements kept |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in payload["datasets"].items():
         for w, data in r["windows"].items():
             s = data["summary"]
@@ -142,7 +155,7 @@ def main() -> None:
                          f"x{s['window_over_its_frames_alone']:.2f} | {s['mean_window_cost']:.2f} | "
                          f"{s['mean_max_frame_cost']:.2f} | {s['mean_frame_cost']:.2f} | "
                          f"{s['windows_costing_more_than_every_frame']} of {s['multi_frame_windows']} | {same} | "
-                         f"{shape} |")
+                         f"{shape} | {100 * s['statements_kept_share']:.0f}% |")
     write_results("window", payload, "\n".join(lines) + "\n")
 
 

@@ -49,23 +49,33 @@ def stability(ctx: ReportContext) -> tuple:
         WITH w AS ({_WINDOWS}),
         s AS (SELECT *, lag(program) OVER k AS prev_program, lag(shape) OVER k AS prev_shape,
                      lag(frame_id) OVER k AS prev_frame
-              FROM w WINDOW k AS (PARTITION BY config_hash, scene ORDER BY first_timestamp_us, frame_id))
-        SELECT window_s, config_hash, count(*), avg(n_frames), count(*) FILTER (status = 'optimal'), avg(cost),
+              FROM w WINDOW k AS (PARTITION BY config_hash, scene ORDER BY first_timestamp_us, frame_id)),
+        st AS (SELECT frame_id, config_hash, split_part(line, ' = new ', 1) AS id, line
+               FROM w, unnest(string_split(coalesce(shape, ''), chr(10))) AS t(line) WHERE contains(line, ' = new ')),
+        kept AS (SELECT s.config_hash, count(*) AS both, count(*) FILTER (a.line = b.line) AS same
+                 FROM s JOIN st a ON a.frame_id = s.frame_id AND a.config_hash = s.config_hash
+                 JOIN st b ON b.frame_id = s.prev_frame AND b.config_hash = s.config_hash AND b.id = a.id
+                 GROUP BY s.config_hash)
+        SELECT window_s, s.config_hash, count(*), avg(n_frames), count(*) FILTER (status = 'optimal'), avg(cost),
                count(prev_frame), count(*) FILTER (program = prev_program), count(*) FILTER (shape = prev_shape),
-               count(DISTINCT scene)
-        FROM s GROUP BY window_s, config_hash ORDER BY window_s, config_hash""")
+               count(DISTINCT scene), any_value(kept.both), any_value(kept.same)
+        FROM s LEFT JOIN kept USING (config_hash)
+        GROUP BY window_s, s.config_hash ORDER BY window_s, s.config_hash""")
     table = []
-    for window_s, config, n, frames, optimal, cost, pairs, same, shape, scenes in rows:
+    for window_s, config, n, frames, optimal, cost, pairs, same, shape, scenes, both, kept in rows:
         # Runs of windows with the same relations: each scene starts one, each change another.
         runs = scenes + (pairs - shape)
         table.append((f"{fmt_float(window_s)} s", config, str(n), fmt_float(frames, 1), fmt_pct(100 * optimal / n),
-                      fmt_float(cost), str(pairs), _share(same, pairs), _share(shape, pairs), fmt_float(n / runs, 1)))
+                      fmt_float(cost), str(pairs), _share(same, pairs), _share(shape, pairs), fmt_float(n / runs, 1),
+                      _share(kept or 0, both or 0)))
     text = ("Consecutive windows: a scene's windows under one configuration, in time order. Identical: the same "
             "program text; same relations: the same text once every Range is blanked (entities, references and "
-            "relations alike, Range values aside). A run is a stretch of consecutive windows with the same relations.")
+            "relations alike, Range values aside). A run is a stretch of consecutive windows with the same "
+            "relations. Statements kept: of the entities declared in two consecutive windows, those whose statement "
+            "is the same, Range values aside (the same reference and relation in every part).")
     return (text, Table(("window", "config hash", "windows", "frames per window", "optimal", "mean cost",
-                         "consecutive pairs", "identical", "same relations", "windows per run"), tuple(table),
-                        "rlrrrrrrrr"))
+                         "consecutive pairs", "identical", "same relations", "windows per run", "statements kept"),
+                        tuple(table), "rlrrrrrrrrr"))
 
 
 def costs(ctx: ReportContext, frames: str | None, frame_programs: str) -> tuple:

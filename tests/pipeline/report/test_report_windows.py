@@ -51,17 +51,23 @@ def test_the_windows_section_says_what_the_files_say(runs, tmp_path):
                    str(singles))
     assert proc.returncode == 0, proc.stderr
     w = pq.read_table(windows).to_pandas().sort_values(["scene", "first_timestamp_us"])
-    pairs = same = shape = 0
+    pairs = same = shape = both = kept = 0
     for _, g in w.groupby("scene"):
         texts = g.program.tolist()
         shapes = [re.sub(r"Range\([^)]*\)", "Range", t) for t in texts]
         pairs += len(texts) - 1
         same += sum(a == b for a, b in zip(texts, texts[1:]))
         shape += sum(a == b for a, b in zip(shapes, shapes[1:]))
+        statements = [{ln.split(" = new ")[0]: ln for ln in t.splitlines()} for t in shapes]
+        for a, b in zip(statements, statements[1:]):
+            common = a.keys() & b.keys()
+            both += len(common)
+            kept += sum(a[i] == b[i] for i in common)
     [row] = section_rows(out / "report.md", "window")
     assert row[2] == str(len(w)) and row[3] == f"{w.n_frames.mean():.1f}" and row[5] == f"{w.cost.mean():.2f}"
     assert row[6] == str(pairs)
     assert row[7] == f"{100 * same / pairs:.1f}% ({same})" and row[8] == f"{100 * shape / pairs:.1f}% ({shape})"
+    assert row[10] == f"{100 * kept / both:.1f}% ({kept})" and 0 < kept < both
     # Costs: each window beside its frames' own optimal costs, placed by scene and timestamp.
     f = read_frames(frames).drop_duplicates("frame_id")[["frame_id", "scene", "timestamp_us"]]
     s = pq.read_table(singles).to_pandas().set_index("frame_id").cost
