@@ -132,3 +132,17 @@ def test_bad_window_runs_are_one_line_and_write_nothing(clips, tmp_path):
     frames_out = tmp_path / "per-frame"
     assert run_r2s("run", str(clips), "--out", str(frames_out), "--jobs", "2").returncode == 0
     assert_one_line_error(run_r2s("run", str(clips), "--out", str(frames_out), "--window", "1"), 2, "per-frame")
+
+
+def test_a_bad_frame_is_an_error_row_for_its_window_and_the_run_goes_on(clips, tmp_path):
+    df = read_frames(clips)
+    victim = df[(df.frame_id == "scene-0103/1") & ~df.is_ego].index[0]
+    df.loc[victim, "x"] = 5e6  # beyond the supported range: the frame's scene is refused
+    bad = tmp_path / "bad.parquet"
+    write_frames(df, bad)
+    out = tmp_path / "w"
+    proc = _run(bad, out, "--window", "1")
+    rows = pq.read_table(out).to_pandas().set_index("frame_id")
+    assert rows.loc["scene-0103/0", "status"] == "error" and "scene-0103/1" in rows.loc["scene-0103/0", "error"]
+    assert (rows.drop("scene-0103/0").status == "optimal").all()
+    assert "1 errors" in _summary(proc.stderr)
