@@ -75,11 +75,8 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
         check_apart(f"{out}.parts", [("input frames", frames)], directory=True)
-    if options.window is not None:
-        from pipeline.batch.window_run import WindowRun
-
-        return WindowRun(str(frames), Path(out), config, options, log).go()
-    return _Run(str(frames), Path(out), config, options, log).go()
+    run = _WindowRun if options.window is not None else _Run
+    return run(str(frames), Path(out), config, options, log).go()
 
 
 def _stderr(line: str) -> None:
@@ -264,3 +261,51 @@ def _write_part(store, table) -> int:
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
     return table.num_rows
+
+
+class _WindowRun(_Run):
+    """The run with --window: the rows are windows', planned by pipeline.batch.windows and computed by
+    pipeline.batch.window_task; parts, resume, the pool, progress and the summary are _Run's own."""
+
+    unit = "windows"
+
+    @property
+    def schema(self):
+        from pipeline.programs import WINDOW_SCHEMA
+
+        return WINDOW_SCHEMA
+
+    def _units(self, dataset) -> tuple[int, Any, Any, str]:
+        import pyarrow as pa
+
+        from extractors.frame_hash import FrameHasher, frame_keys, from_hex
+        from pipeline.batch.windows import plan_windows
+        from storage.frame_index import FrameIndex
+
+        spec = self.options.window
+        hasher = FrameHasher(keep_lanes=True)
+        dataset.check(hasher)  # refuses bad input; the hasher keeps each frame's hash
+        self._windows, hashes = plan_windows(dataset, hasher, spec)
+        firsts = [w.frames[0].frame_id for w in self._windows]
+        hi, lo = frame_hashes(firsts)
+        lane0, lane1, _ = from_hex(pa.array(hashes, pa.string()))
+        return len(firsts), FrameIndex(hi, lo), FrameIndex(*frame_keys(hi, lo, lane0, lane1)), \
+            spec.config_hash(self.config)
+
+    def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
+        from pipeline.batch.window_task import WindowTask
+
+        spec = self.options.window
+        parts = tuple((p.path, p.columns) for p in dataset.parts)
+        windows = self._windows
+        if len(done):
+            windows = [w for w, kept in zip(windows, done.contains(*frame_hashes([w.frames[0].frame_id
+                                                                                  for w in windows]))) if not kept]
+        slots = pool.slots()
+        sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.options.chunk_size))
+        at, n = 0, 0
+        while at < len(windows):
+            size = next(sizes)
+            yield WindowTask(f"w{n}", dataset.url, parts, tuple(windows[at:at + size]), self.config, spec,
+                             spec.config_hash(self.config), hard_cap=pool.own_processes, progress_dir=progress_dir)
+            at, n = at + size, n + 1

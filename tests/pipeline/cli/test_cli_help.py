@@ -109,7 +109,7 @@ def test_an_unknown_preset_names_the_closest(tmp_path):
 @pytest.mark.parametrize("verb", ["extract", "scene", "synth", "check"])
 def test_help_does_not_load_pandas(verb):
     # `r2s VERB --help` builds the verb's parser only; pandas (~0.2 s of CPU) loads where rows are read.
-    code = ("import sys\nfrom pipeline.cli import build_parser\nbuild_parser(%r).format_help()\n"
-            "print('pandas' in sys.modules)" % verb)
+    code = (f"import sys\nfrom pipeline.cli import build_parser\nbuild_parser({verb!r}).format_help()\n"
+            "print('pandas' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "False", verb
