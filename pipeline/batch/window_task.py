@@ -18,10 +18,10 @@ import pyarrow as pa
 
 from extractors.frame_hash import frame_hashes_of
 from extractors.frames import FramesError, frame_to_scene
-from pipeline.batch.task import ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, one_line
+from extractors.frames_dataset import read_frame_rows
+from pipeline.batch.task import ChunkInvalid, ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, one_line
 from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
-from storage.parquet import read_rows
 from synth.config import SynthConfig
 from synth.search.budget import peak_rss_mb
 from synth.window import synthesize_window
@@ -48,8 +48,10 @@ class WindowTask(Units):
             path, columns = self.parts[k]
             mine = [p for p in unit.frames if p.part == k]
             first, stop = min(p.start for p in mine), max(p.start + p.rows for p in mine)
-            try:
-                rows = read_rows(self.url, path, first, stop, columns)
+            try:  # through the checks of every reader of frames, as a chunk task reads (pipeline.batch.task)
+                rows = read_frame_rows(self.url, path, first, stop, columns)
+            except FramesError as exc:
+                raise ChunkInvalid(one_line(str(exc), 400)) from None
             except (OSError, pa.ArrowException) as exc:
                 raise ChunkUnreadable(one_line(f"cannot read {self.url or ''}{path}: {exc}", 400)) from None
             for p in mine:
