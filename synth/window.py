@@ -188,7 +188,7 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
         oracle.full_table()
     # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen.
     first = {e.id: e for scene in reversed(scenes) for e in scene.others}
-    shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road)
+    shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road, scenes[0].world)
     all_ids = (shown.ego.id,) + ids
     window = RelationOracle(shown, config, all_ids, window_table(oracles, all_ids), parts=parts_for(config))
     t = time.perf_counter()
