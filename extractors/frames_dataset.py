@@ -55,6 +55,7 @@ class FramesPart:
     rows: int
     row_groups: tuple[int, ...]  # rows per row group
     optional: tuple[str, ...]  # optional columns this file has
+    road: tuple[str, ...] = ()  # road columns this file has (its frames name their map: r2s run --lanes reads them)
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -87,8 +88,10 @@ class FramesDataset:
             if nulls:
                 raise FramesError(f"{where}: column frame_id has {nulls} missing value(s): every row belongs to a frame")
             optional = tuple(c for c in OPTIONAL_COLUMNS if c in schema.names)
+            road = tuple(c for c in ROAD_COLUMNS if c in schema.names)
             parts.append(FramesPart(f, meta.num_rows,
-                                    tuple(meta.row_group(i).num_rows for i in range(meta.num_row_groups)), optional))
+                                    tuple(meta.row_group(i).num_rows for i in range(meta.num_row_groups)), optional,
+                                    road))
         return cls(str(path), tuple(parts))
 
     @property

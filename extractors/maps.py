@@ -139,3 +139,41 @@ def read_maps(path: str | os.PathLike, map_ids: set[str] | None = None) -> Itera
         for map_id, features in by_map.items():
             yield RoadMap.of(map_id, features)
 
+
+
+# What a frame's road is, for every verb that builds scenes from frames (r2s scene; r2s run --lanes): the map
+# features within this many metres of ego (r2s scene's default --radius, so that `r2s scene` writes the scene a
+# `r2s run --lanes` program was synthesized on).
+SCENE_RADIUS = 50.0
+
+
+class FrameRoads:
+    """The roads of frames, read from the maps beside them (one map read once, however many frames name it)."""
+
+    def __init__(self, where: str | os.PathLike, radius: float = SCENE_RADIUS) -> None:
+        self.where = Path(where)
+        self.radius = radius
+        self._maps: dict[str, RoadMap | None] = {}
+
+    def map_named(self, map_id: str) -> RoadMap | None:
+        if map_id not in self._maps:
+            found = list(read_maps(self.where, {map_id})) if self.where.exists() else []
+            self._maps[map_id] = found[0] if found else None
+        return self._maps[map_id]
+
+    def road(self, rows) -> tuple[RoadMap | None, str | None]:
+        """(the frame's road in its ego frame, None) or (None, the map it names that is missing) for the rows of
+        one frame (a DataFrame); (None, None) when the frame names no map."""
+        from synth.roadmap import in_ego_frame
+
+        if "map_id" not in rows.columns:
+            return None, None
+        ego = rows[rows["is_ego"]].iloc[0]
+        if ego["map_id"] is None or not all(v == v and v is not None for v in (ego["map_x"], ego["map_y"],
+                                                                               ego["map_heading"])):
+            return None, None
+        road = self.map_named(ego["map_id"])
+        if road is None:
+            return None, ego["map_id"]
+        return in_ego_frame(road, float(ego["map_x"]), float(ego["map_y"]), float(ego["map_heading"]),
+                            self.radius), None

@@ -68,6 +68,9 @@ class SynthConfig:
     dv: float = 1.0
     c_speed: float = 2.0
     speed_uncertainty: float = 0.0
+    # Lanes (beyond the paper; `--lanes`): every statement also says where its entity is on the recorded road
+    # (the LANE part, synth.parts.lane), from the scene's road and each entity's lane facts.
+    lanes: bool = False
 
     def __post_init__(self) -> None:
         for name in ("delta1", "delta2"):
@@ -102,6 +105,8 @@ class SynthConfig:
         if not (_number(self.speed_uncertainty) and 0.0 <= self.speed_uncertainty < MAX_SPEED_SIGMA):
             raise ConfigError(f"speed_uncertainty must be a number of m/s in [0, {MAX_SPEED_SIGMA:g}), "
                               f"got {self.speed_uncertainty!r}")
+        if not isinstance(self.lanes, bool):
+            raise ConfigError(f"lanes must be true or false, got {self.lanes!r}")
         if self.speed_uncertainty and not self.motion:
             raise ConfigError("a speed uncertainty needs motion (--motion, or motion = true)")
         _one_of("strategy", self.strategy, STRATEGIES)
@@ -126,8 +131,8 @@ class SynthConfig:
 
         Two runs with the same hash on the same frame produce the same row, so the pipeline may skip one.
         The uncertainty fields enter only when non-zero, and the motion fields only with motion on: plain static
-        synthesis keeps the hashes it always had, so programs.parquet files written before robust synthesis or
-        motion existed still resume.
+        synthesis keeps the hashes it always had, so programs.parquet files written before robust synthesis,
+        motion or lanes existed still resume.
         """
         # 10 in a TOML file and 10.0 on the command line are one setting: hash numbers as floats.
         values = {k: float(v) if isinstance(v, int) and not isinstance(v, bool) else v
@@ -138,6 +143,8 @@ class SynthConfig:
         if not self.motion:
             for name in MOTION_FIELDS:
                 values.pop(name, None)
+        if not self.lanes:
+            values.pop("lanes")
         import hashlib  # here, not at the top: `import synth` (which loads this module) stays light
 
         blob = json.dumps(values, sort_keys=True).encode()

@@ -14,12 +14,13 @@ import math
 import re
 import sys
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from synth.errors import InputError
 
 if TYPE_CHECKING:
+    from synth.lane_relations import LaneGraph
     from synth.roadmap import RoadMap
     from synth.world import WorldPose
 
@@ -151,6 +152,10 @@ class Entity:
     in_intersection: bool | None = None
     on_crosswalk: bool | None = None
     off_road: bool | None = None
+    # The lane graph of its scene's road (synth.lane_relations), set by Scene for each entity of a scene with a
+    # road: how a LANE clause naming this entity as its reference reads the lanes related to its lane. Neither
+    # scene JSON nor compared: a fact of the scene, not of the entity.
+    lane_graph: LaneGraph | None = field(default=None, compare=False, repr=False)
 
     @property
     def is_ego(self) -> bool:
@@ -182,6 +187,12 @@ class Scene:
             raise SceneError(f"duplicate entity id {dup!r}")
         if ids.count(EGO_ID) != 1:
             raise SceneError("a scene needs exactly one entity with id 'ego'")
+        if self.road is not None and any(e.lane_graph is None or e.lane_graph.road is not self.road
+                                         for e in self.entities):
+            from synth.lane_relations import LaneGraph  # numpy: loaded only for a scene with a road
+
+            graph = LaneGraph(self.road)
+            object.__setattr__(self, "entities", tuple(replace(e, lane_graph=graph) for e in self.entities))
 
     @property
     def ego(self) -> Entity:

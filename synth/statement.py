@@ -110,6 +110,6 @@ def write_statements(oracle: RelationOracle, order: tuple[int, ...], choices: li
             if part.name in robust:
                 clauses[part.name] = part.robust_clause(c, e, ents[r], config)
             else:
-                clauses[part.name] = part.clause(c, ents[r].id, values.pop(0) if part.quantity(c) else (), config)
+                clauses[part.name] = part.clause_for(c, e, ents[r], values.pop(0) if part.quantity(c) else (), config)
         statements.append(Statement(e.id, e.type, **clauses))
     return statements

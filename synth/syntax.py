@@ -50,9 +50,11 @@ def printed(v: float) -> Fraction:
 
 # The DSL is ASCII: digits are 0-9 (not Arabic-Indic or full-width digits, which \d and float() would read as
 # numbers), blanks are spaces and tabs, and a line ends at \n, \r\n or \r only (str.splitlines would also end one
-# at U+2028, U+0085, a form feed...). Any other character is "unexpected", with its line and column.
+# at U+2028, U+0085, a form feed...). A string (a lane id) is printable ASCII in double quotes, without a quote or a
+# backslash or a # (which begins a comment). Any other character is "unexpected", with its line and column.
 _TOKEN = re.compile(
-    r"[ \t]*(?:(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/]))",
+    r"[ \t]*(?:(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/])"
+    r'|(?P<str>"[ !$-\[\]-~]*"))',
     re.ASCII,
 )
 _LINE_END = re.compile(r"\r\n|\r|\n")

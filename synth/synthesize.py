@@ -127,7 +127,8 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     `scene`: a Scene, or a decoded scene JSON document (a dict, validated as scene_from_dict validates it).
     `config`: a SynthConfig, a dict of its fields (or {"synth": {...}}, as a TOML file decodes), or None for the
     defaults. Bad input raises SceneError / ConfigError (ValueErrors with one-line messages); with motion, a scene
-    entity without a speed raises SpeedMissing. A program the solver cannot certify raises CertificationError (a
+    entity without a speed raises SpeedMissing; with lanes, a scene without a road (or an entity without lane facts)
+    raises LanesMissing. A program the solver cannot certify raises CertificationError (a
     bug, never a silent result). Deterministic: the same scene and config give the same program and Scenic text.
     """
     from synth.dsl import fmt_number
@@ -143,6 +144,10 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     config = as_config(config)
     if config.motion:
         require_speeds(scene)
+    if config.lanes:
+        from synth.parts.lane import require_lanes
+
+        require_lanes(scene)
     started = time.perf_counter()
     budget = Budget(config.time_limit, config.memory_limit)
     oracle = make_oracle(scene, config)

@@ -18,7 +18,7 @@ from fractions import Fraction
 import numpy as np
 
 from synth.geometry import heading_vector
-from synth.scene import Scene
+from synth.scene import Entity, Scene
 
 NONE = -1
 UNDECIDED = -2
@@ -35,6 +35,7 @@ class SceneArrays:
     y: np.ndarray
     heading: np.ndarray
     speed: np.ndarray  # m/s; NaN where an entity has no speed
+    entities: tuple[Entity, ...] = ()  # the entities themselves, same order (parts whose questions are lookups)
 
 
 def scene_arrays(scene: Scene) -> SceneArrays:
@@ -45,6 +46,7 @@ def scene_arrays(scene: Scene) -> SceneArrays:
         np.array([e.y for e in ents], dtype=np.float64),
         np.array([e.heading for e in ents], dtype=np.float64),
         np.array([np.nan if e.speed is None else e.speed for e in ents], dtype=np.float64),
+        ents,
     )
 
 

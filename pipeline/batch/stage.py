@@ -185,6 +185,7 @@ class _Run:
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
+        from extractors.maps import maps_dir
         from pipeline.batch.task import ChunkTask
 
         def runs():
@@ -192,13 +193,16 @@ class _Run:
                 mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
                 yield r.part, r.starts, r.lengths, r.ids, mask
 
+        # With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only)
+        maps = str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
         slots = pool.slots()
         sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.options.chunk_size))
         for n, (k, frames) in enumerate(chunks(runs(), sizes, MAX_SPAN_ROWS)):
             part = dataset.parts[k]
-            yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.columns, self.config,
+            columns = part.columns + (part.road if maps is not None else ())
+            yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), columns, self.config,
                             hard_cap=pool.own_processes, synthesizer=self.options.synthesizer,
-                            progress_dir=progress_dir)
+                            progress_dir=progress_dir, maps=maps)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
         from pipeline.batch.pool import compute

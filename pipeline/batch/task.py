@@ -26,6 +26,7 @@ import pyarrow as pa
 from extractors.frame_hash import frame_hashes_of, to_hex
 from extractors.frames import FramesError, frame_to_scene
 from extractors.frames_dataset import read_frame_rows
+from extractors.maps import FrameRoads
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.errors import InternalError
@@ -88,6 +89,7 @@ class ChunkTask(Units):
     hard_cap: bool = False
     synthesizer: Synthesizer | None = None  # None: synth.synthesize
     progress_dir: str | None = None  # where the marker goes; None: progress is not tracked (remote workers)
+    maps: str | None = None  # with lanes: the maps beside the frames (extractors.maps), whence each frame's road
 
     @property
     def frame_ids(self) -> list[str]:
@@ -150,6 +152,7 @@ def run_chunk(task: ChunkTask) -> pa.Table:
     cannot be read at all (ChunkUnreadable)."""
     table, first, hashes = task.read()
     rows = table.to_pandas()
+    roads = FrameRoads(task.maps) if task.maps is not None else None
     marker = task.marker()
     out = []
     for i, ((frame_id, start, n), frame_hash) in enumerate(zip(task.frames, hashes)):
@@ -157,7 +160,8 @@ def run_chunk(task: ChunkTask) -> pa.Table:
             with open(marker, "w") as f:  # its mtime is when this frame started (the wall-clock guard reads it)
                 f.write(str(i))
         try:
-            scene = frame_to_scene(rows.iloc[start - first: start - first + n])
+            frame_rows = rows.iloc[start - first: start - first + n]
+            scene = frame_to_scene(frame_rows, _road(roads, frame_rows) if roads is not None else None)
         except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
             out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, frame_hash=frame_hash))
             continue
@@ -168,6 +172,14 @@ def run_chunk(task: ChunkTask) -> pa.Table:
         except FileNotFoundError:
             pass
     return programs_table(out)
+
+
+def _road(roads: FrameRoads, rows):
+    """A frame's road (what r2s scene gives it); a map the frame names but the maps lack is a FramesError."""
+    road, missing = roads.road(rows)
+    if missing is not None:
+        raise FramesError(f"the frame names map {missing!r}, which is not in {roads.where}")
+    return road
 
 
 def run_frame(task: FrameTask) -> dict:

@@ -29,6 +29,9 @@ SYNTHESIS_HELP = {
     "memory_limit": "stop the search (status memout) past this RSS (default: no limit)",
     "motion": "every statement also says how fast its entity moves (stationary, moving like REF, moving Range m/s "
               "[relative to REF]); every entity needs a speed (config: motion = true)",
+    "lanes": "every statement also says where its entity is on the recorded road (in lane of REF, in lane left / "
+             "right of REF, in oncoming lane of REF, in intersection, on crosswalk, off road, off lane, in lane "
+             "\"ID\"); the scene needs its road and lane facts (r2s scene writes them; config: lanes = true)",
     "uncertainty": "robust synthesis: the program contains every scene whose entities (not ego) are within POS_M "
                    "metres and HEAD_DEG degrees (and, with --motion, SPEED_MPS m/s) of the record (an entity's "
                    "pos_sigma / heading_sigma / speed_sigma overrides); default 0,0 = plain synthesis",
@@ -42,7 +45,7 @@ def add_config_option(p: argparse.ArgumentParser, uses: str) -> None:
 
 
 def add_synthesis_options(p: argparse.ArgumentParser, helps: Mapping[str, str] | None = None) -> None:
-    """--strategy, --oracle, --solver, --time-limit, --memory-limit, --config, --motion, --uncertainty: what a
+    """--strategy, --oracle, --solver, --time-limit, --memory-limit, --config, --motion, --lanes, --uncertainty: what a
     synthesis runs with, read back by synthesis_config. `helps` rewords options for the verb, by dest."""
     words = {**SYNTHESIS_HELP, **(helps or {})}
     p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: auto)")
@@ -52,6 +55,7 @@ def add_synthesis_options(p: argparse.ArgumentParser, helps: Mapping[str, str] |
     p.add_argument("--memory-limit", type=float, metavar="MB", help=words["memory_limit"])
     add_config_option(p, "; the options here override it")
     p.add_argument("--motion", action="store_const", const=True, default=None, help=words["motion"])
+    p.add_argument("--lanes", action="store_const", const=True, default=None, help=words["lanes"])
     p.add_argument("--uncertainty", type=uncertainty_arg, metavar="POS_M,HEAD_DEG[,SPEED_MPS]",
                    help=words["uncertainty"])
 
@@ -62,7 +66,7 @@ def synthesis_config(args: argparse.Namespace):
 
     return load_config(args.config).with_(
         strategy=args.strategy, oracle=args.oracle, solver=args.solver,
-        time_limit=args.time_limit, memory_limit=args.memory_limit, motion=args.motion, **(args.uncertainty or {}),
+        time_limit=args.time_limit, memory_limit=args.memory_limit, motion=args.motion, lanes=args.lanes, **(args.uncertainty or {}),
     )
 
 

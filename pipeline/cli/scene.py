@@ -21,6 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("frames", help="frames Parquet file or directory (from r2s extract)")
     p.add_argument("frame_id", help="frame id, e.g. scene-0061/3")
     p.add_argument("--out", metavar="F", help="write the JSON to this file (atomically) instead of stdout")
+    # the default is extractors.maps.SCENE_RADIUS (the roads r2s run --lanes synthesizes on), written out here so
+    # that `r2s scene --help` does not load pyarrow
     p.add_argument("--radius", type=float, default=50.0, metavar="M",
                    help="the road: map features within M metres of ego (default 50, r2s extract's radius)")
 
@@ -49,22 +51,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _road(frames: str, rows, radius: float):
     """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
-    from extractors.maps import maps_dir, read_maps
-    from synth.roadmap import in_ego_frame
+    from extractors.maps import FrameRoads, maps_dir
 
-    if "map_id" not in rows.columns:
-        return None
-    ego = rows[rows["is_ego"]].iloc[0]
-    if ego["map_id"] is None or not all(v == v and v is not None for v in (ego["map_x"], ego["map_y"],
-                                                                           ego["map_heading"])):
-        return None
-    where = maps_dir(frames)
-    found = list(read_maps(where, {ego["map_id"]})) if where.exists() else []
-    if not found:
-        sys.stderr.write(f"r2s scene: warning: the frame names map {ego['map_id']!r}, which is not in {where}; "
+    road, missing = FrameRoads(maps_dir(frames), radius).road(rows)
+    if missing is not None:
+        sys.stderr.write(f"r2s scene: warning: the frame names map {missing!r}, which is not in {maps_dir(frames)}; "
                          "the scene has no road\n")
-        return None
-    return in_ego_frame(found[0], float(ego["map_x"]), float(ego["map_y"]), float(ego["map_heading"]), radius)
+    return road
 
 
 def _hint(dataset, frame_id: str) -> str:

@@ -1,4 +1,5 @@
-"""The statement parts: position and heading (the paper's), motion (beyond it, with `--motion`), and any part
+"""The statement parts: position and heading (the paper's), motion and lane (beyond it, with `--motion`,
+`--lanes`), and any part
 registered after them. Each is one module (synth.parts.base says what a part and a clause kind are); this
 module is the registry, in statement order: the order clauses print in, and the order every module asks its
 questions in. docs/layout.md has the recipes for a new clause kind and a new part.
@@ -9,12 +10,13 @@ from __future__ import annotations
 from synth.config import SynthConfig
 from synth.parts.base import Clause, ClauseKind, Part, Relations
 from synth.parts.heading import HEADING
+from synth.parts.lane import LANE
 from synth.parts.motion import MOTION
 from synth.parts.position import POSITION
 from synth.smt.backend import MeasureRequest, Want
 
 # The registry: a new part is one more entry here (or a register() call), after the parts it may follow.
-_PARTS: list[Part] = [POSITION, HEADING, MOTION]
+_PARTS: list[Part] = [POSITION, HEADING, MOTION, LANE]
 
 
 def register(part: Part) -> None:
@@ -53,5 +55,5 @@ def clause_kinds() -> tuple[ClauseKind, ...]:
 # The built-in parts' clause kinds, as the report's tables and plots name them (registered parts: clause_kinds()).
 CLAUSE_KINDS: tuple[ClauseKind, ...] = clause_kinds()
 
-__all__ = ["CLAUSE_KINDS", "HEADING", "MOTION", "POSITION", "Clause", "ClauseKind", "MeasureRequest", "Part",
+__all__ = ["CLAUSE_KINDS", "HEADING", "LANE", "MOTION", "POSITION", "Clause", "ClauseKind", "MeasureRequest", "Part",
            "Relations", "Want", "all_parts", "clause_kinds", "part_named", "parts_for", "register", "unregister"]

@@ -146,6 +146,17 @@ class Part(Relations, Measured):
     def clause(self, code: int, ref_id: str, values: tuple[Fraction, ...], config: SynthConfig) -> Clause:
         """The clause of Alg. 4: relation `code` with ref, or the fallback (NONE), Ranges centred on values."""
 
+    def clause_for(self, code: int, target: Entity, ref: Entity, values: tuple[Fraction, ...],
+                   config: SynthConfig) -> Clause:
+        """The clause Alg. 4 writes for `target` (what `clause` writes; a part whose fallback depends on the
+        target itself, as the lane part's does, overrides it)."""
+        return self.clause(code, ref.id, values, config)
+
+    def fallback_cost(self, e: Entity, config: SynthConfig) -> int:
+        """What the part costs for e without a witness (its fallback's cost; 1 for the paper's parts). The search
+        weighs each part of each entity by it (synth.search.costs)."""
+        return 1
+
     @abstractmethod
     def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
         """The same with Ranges that cover every perturbation (robust synthesis)."""

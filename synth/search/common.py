@@ -48,14 +48,14 @@ def greedy_completion(cost_model: CostModel, order: tuple[int, ...], declared: i
 def finish(cost_model: CostModel, order: tuple[int, ...], lower_bound: int, nodes: int,
            stopped: str | None) -> SearchResult:
     """The anytime answer: optimal when the bound meets the cost; else feasible, or timeout / memout when the
-    best program found is no better than declaring everything by fallback (cost 1 per part and entity)."""
+    best program found is no better than declaring everything by fallback (CostModel.ceiling)."""
     cost = cost_model.order_cost(order)
     lower_bound = min(lower_bound, cost)
     if cost == lower_bound:
         status = "optimal"
     elif stopped == "memout":
         status = "memout"
-    elif stopped and cost >= cost_model.kinds * cost_model.n:
+    elif stopped and cost >= cost_model.ceiling:
         status = "timeout"
     else:
         status = "feasible"

@@ -1,8 +1,9 @@
 """c(e, E): the cost of declaring entity e when the set E (plus ego) is already declared.
 
 Each statement part costs 0 when some declared reference is a witness of e for it (for position: e is ahead
-of / behind / left of / right of it; for heading: e faces toward / away from it), else 1 (its fallback relative
-to ego); c(e, E) is the sum over the parts. It depends only on the set E, never on its order (the paper's
+of / behind / left of / right of it; for heading: e faces toward / away from it), else its fallback's cost (1,
+relative to ego, for the paper's parts; the lane part's depends on e: Part.fallback_cost); c(e, E) is the sum
+over the parts. It depends only on the set E, never on its order (the paper's
 Common Prefix Abstraction), and only falls as E grows. Sets are Python ints used as bitsets over the entities to
 declare, numbered 0..n-1 in scene order.
 """
@@ -24,28 +25,40 @@ class CostModel:
         self.oracle = oracle
         self.n = len(oracle.ids) - 1
         self.all = (1 << self.n) - 1
-        # Parts per statement: also the cost of an entity no one witnesses (every part at its fallback).
-        self.kinds = len(oracle.parts)
-        n, kinds = self.n, range(self.kinds)
+        n = self.n
+        # Units: a part whose fallback costs w for an entity (Part.fallback_cost; 1 for the paper's parts) counts
+        # as w unit parts with its witnesses, the units above an entity's own w met for it from the start, so that
+        # c(e, E) stays a count of unmet units: unit (k, j) is unmet iff part k has no declared witness and the
+        # fallback costs j or more.
+        ents = oracle.entities()[1:]
+        weights = [[p.fallback_cost(e, oracle.config) for e in ents] for p in oracle.parts]
+        self.unit_part = [k for k, w in enumerate(weights) for _ in range(max(w, default=1))]
+        level = [j for w in weights for j in range(1, max(w, default=1) + 1)]
+        free = [sum(1 << e for e in range(n) if weights[k][e] < j) for k, j in zip(self.unit_part, level)]
+        # Units per statement: also the cost of an entity no one witnesses (every part at its fallback).
+        self.kinds = len(self.unit_part)
+        kinds = range(self.kinds)
         if oracle.complete:
             t = oracle.table
-            codes = [t[p.name] for p in oracle.parts]
+            codes = [t[oracle.parts[k].name] for k in self.unit_part]
             # Ego's row also holds the witnesses that need no reference (Part.refless): always available.
-            self._ego = [list(c[0, 1:] != NONE) for c in codes]
+            self._ego = [[bool(ego) or bool(f >> e & 1) for e, ego in enumerate(c[0, 1:] != NONE)]
+                         for c, f in zip(codes, free)]
             self._mask = [[sum(1 << int(r) for r in np.nonzero(c[1:, e + 1] != NONE)[0]) for e in range(n)]
                           for c in codes]
             self._known = [[self.all] * n for _ in kinds]
         else:
             # The smt oracle: ask lazily, nearest reference first (Alg. 4's order), and remember.
-            self._ego = [[None] * n for _ in kinds]
+            self._ego = [[True if f >> e & 1 else None for e in range(n)] for f in free]
             self._mask = [[0] * n for _ in kinds]
             self._known = [[1 << e for e in range(n)] for _ in kinds]
-            ents = oracle.entities()[1:]
             self._nearest = [
                 sorted((r for r in range(n) if r != e),
                        key=lambda r, e=e: (math.hypot(ents[r].x - ents[e].x, ents[r].y - ents[e].y), r))
                 for e in range(n)
             ]
+        # The cost of declaring every entity by its fallbacks (no witness at all): the worst order's cost.
+        self.ceiling = sum(sum(w) for w in weights)
         self._floors: list[int] | None = None
         if oracle.complete:
             self._bitsets()
@@ -110,8 +123,8 @@ class CostModel:
 
     # ------------------------------------------------------------------------------------- witnesses
     def _ask(self, kind: int, r: int, e: int) -> bool:
-        # Oracle indices: 0 is ego, entity i is i + 1.
-        return self.oracle.relation(kind, r + 1, e + 1) != NONE
+        # Oracle indices: 0 is ego, entity i is i + 1; a unit asks its part.
+        return self.oracle.relation(self.unit_part[kind], r + 1, e + 1) != NONE
 
     def ego_witness(self, kind: int, e: int) -> bool:
         known = self._ego[kind][e]

@@ -39,7 +39,7 @@ def monolithic(cost_model: CostModel, budget: Budget) -> SearchResult:
             witnessed = z3.Or(part.any_relation(smt, entities[0], target),
                               *(z3.And(place[r] < place[e], part.any_relation(smt, entities[r + 1], target))
                                 for r in range(n) if r != e))
-            costs.append(z3.If(witnessed, 0, 1))
+            costs.append(z3.If(witnessed, 0, part.fallback_cost(target, oracle.config)))
     total = z3.Sum(*costs) if costs else z3.IntVal(0)
     opt.minimize(total)
     budget.tick()

@@ -99,8 +99,8 @@ def test_comments_and_blank_lines_are_allowed():
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving fast", "expected Range"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving Range(1, 3) km/h", "expected m"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego, moving like b", "neither ego nor declared"),
-    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, stationary, stationary", "unexpected ','"),
-    ("a = new Car ahead of ego by Range(0, 5), facing toward ego,", "expected moving"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, stationary, stationary", "expected a lane clause"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego,", "expected one of: anywhere, in, moving, off, on, stationary"),
     ("a = new Car ahead of ego by Range(0, 1e999), facing toward ego", "out of range"),
 ])
 def test_parse_errors_are_one_line_with_a_position(text, needle):
