@@ -33,8 +33,11 @@ from tqdm import tqdm
 
 from extractors.frames import FramesError, write_frames
 from extractors.frames_dataset import FramesDataset
+from extractors.frames_schema import ROAD_COLUMNS
+from extractors.maps import maps_dir, read_maps
 from pipeline.errors import UserError
 from pipeline.query.events import events_select
+from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, uses_lanes, without_lanes
 from pipeline.query.notes import absent_types_note
 from pipeline.query.sql import (
     EXACT_UDF,
@@ -91,8 +94,10 @@ def _sql_list(files: Sequence[str]) -> str:
     return "[" + ", ".join("'" + f.replace("'", "''") + "'" for f in files) + "]"
 
 
-def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str):
-    """A DuckDB session with the rows view of the files."""
+def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str,
+          lane_sets: pa.Table | None = None):
+    """A DuckDB session with the rows view of the files (with lane_sets, each row's lane facts and relation lists:
+    pipeline.query.lanes)."""
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
                                  "max_temp_directory_size": f"{SPILL_LIMIT_MB}MiB",
                                  **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
@@ -100,6 +105,13 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     con.execute("SET enable_progress_bar = true")
     con.execute("SET enable_progress_bar_print = false")
     source = f"read_parquet({_sql_list(files)}, file_row_number = true, union_by_name = true)"
+    lane_columns, lane_join = "", ""
+    if lane_sets is not None:
+        con.register("r2s_lane_sets_arrow", lane_sets)
+        con.execute(f"CREATE TEMP TABLE {LANE_SETS} AS SELECT * FROM r2s_lane_sets_arrow")
+        con.unregister("r2s_lane_sets_arrow")
+        lane_columns = "".join(f"src.{c}, " for c in FACT_COLUMNS) + "".join(f"ls.{c}, " for c in RELATION_COLUMNS)
+        lane_join = f" LEFT JOIN {LANE_SETS} ls ON ls.map_id = src.map_id AND ls.lane = src.lane"
     # ord, the row ordinal (file number, then row in the file), orders frames and bindings deterministically.
     # speed is optional (frames of sources without velocities lack it): unknown is NULL, as in a file that has it.
     con.execute(
@@ -107,7 +119,9 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
         f"entity_id, track_id, type, "
         f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, is_ego, "
         f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
-        f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild FROM {source}")
+        f"{lane_columns}"
+        f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
+        f"FROM {source} src{lane_join}")
     for macro in MACROS:
         con.execute(macro)
     return con
@@ -276,6 +290,11 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
         raise UserError("--min-duration is a length of events: it needs --events")
     if events and all_bindings:
         raise UserError("--events and --all are two outputs: choose one")
+    sets = None
+    if temporal and any(uses_lanes(step.pattern) for step in pattern.steps):
+        raise UserError("lane clauses are for one-frame patterns: a temporal pattern's steps cannot carry them yet")
+    if not temporal and uses_lanes(pattern):
+        sets = _lane_sets(frames, dataset)
     select = events_select(min_duration_s) if events else matches_select(all_bindings)
     out = Path(out)
     created = []
@@ -287,7 +306,8 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
             for folder in created:
                 stack.enter_context(leftover(folder, "folder"))
             n_events, matched, bindings, calls = _run(dataset, frames, pattern, temporal, config, select, events,
-                                                      out, has_speed, threads, memory_limit_mb, min_duration_s, log)
+                                                      out, has_speed, threads, memory_limit_mb, min_duration_s, log,
+                                                      sets)
     except BaseException:
         for folder in reversed(created):  # only the folders this query made, and only while empty
             try:
@@ -299,14 +319,15 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
 
 
 def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: str, events: bool, out: Path, has_speed: bool,
-         threads, memory_limit_mb, min_duration_s, log) -> tuple[int | None, int, int, int]:
+         threads, memory_limit_mb, min_duration_s, log, sets: pa.Table | None = None) -> tuple[int | None, int, int, int]:
     """The query in its DuckDB session, its spill folder beside `out`; returns (events, frames matched, bindings,
     exact checks)."""
-    check = _ExactCheck(pattern.steps[0].pattern if temporal else pattern, config)
+    # lane clauses are exact SQL (pipeline.query.lanes): the re-check decides the others
+    check = _ExactCheck(pattern.steps[0].pattern if temporal else without_lanes(pattern), config)
     estimate = temporal_estimate_query if temporal else estimate_query
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill, \
             leftover(spill, "tree"):
-        con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill)
+        con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill, sets)
         try:
             if min_duration_s is not None:
                 _require_timestamps(con, frames, "--min-duration")
@@ -350,6 +371,23 @@ def _note_absent_types(con, patterns: list[Pattern], frames, log: Callable[[str]
     note = absent_types_note(patterns, present, frames)
     if note is not None:
         log(note)
+
+
+def _lane_sets(frames, dataset: FramesDataset) -> pa.Table:
+    """The lane relations of every map the frames name (pipeline.query.lanes), read from the maps beside them."""
+    if not all(len(part.road) == len(ROAD_COLUMNS) for part in dataset.parts):
+        raise FramesError(f"{frames} has no lane columns: the pattern's lane clauses need frames extracted with a "
+                          "map (r2s extract of a source whose recordings carry one)")
+    where = maps_dir(frames)
+    with duckdb.connect() as con:  # the distinct map ids, streamed (a dataset names few maps over many rows)
+        wanted = {m for (m,) in con.execute(f"SELECT DISTINCT map_id FROM read_parquet("
+                                             f"{_sql_list([part.path for part in dataset.parts])}, union_by_name = true) "
+                                             "WHERE map_id IS NOT NULL").fetchall()}
+    roads = list(read_maps(where, wanted)) if wanted and where.exists() else []
+    missing = sorted(wanted - {r.map_id for r in roads})
+    if missing:
+        raise FramesError(f"{frames}: the frames name map {missing[0]!r}, which is not in {where}")
+    return lane_sets(roads)
 
 
 def _require_timestamps(con, frames, what: str) -> None:

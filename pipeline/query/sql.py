@@ -46,6 +46,7 @@ from synth.dsl import (
     Statement,
     Stationary,
 )
+from pipeline.query import lanes
 from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern, matched_types
 from synth.scene import EGO_ID
@@ -219,7 +220,11 @@ BUILDERS: dict[type, Builder] = {
 def clause_condition(clause, e: str, r: str | None, config: SynthConfig) -> Condition:
     """A clause's condition, with wild entities always to check (see the module docstring). A clause kind without
     a builder here (a part registered in synth.parts) is never sure and always a candidate: the exact check
-    (Clause.holds) decides it."""
+    (Clause.holds) decides it. A lane clause is exact SQL (pipeline.query.lanes), wild or not: its candidate and
+    sure conditions are one, and the exact check leaves it out."""
+    if (exact := lanes.SQL.get(type(clause))) is not None:
+        sql = exact(clause, e, r, config)
+        return Condition(sql, sql)
     cond = BUILDERS.get(type(clause), _undecided)(clause, e, r, config)
     wild = f"{e}.wild" + (f" OR {r}.wild" if r is not None else "")
     return Condition(f"({cond.candidate}) OR {wild}", f"({cond.sure}) AND NOT ({wild})")
@@ -252,9 +257,18 @@ def matches_select(all_bindings: bool) -> str:
 
 # ego's row per frame, with frame_pos: consecutive frames of a scene have consecutive positions (what events are
 # runs of).
-EGO_CTE = (f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
-           f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild "
-           f"FROM {ROWS} WHERE is_ego)")
+def ego_cte(with_lanes: bool = False) -> str:
+    """The CTE `ego`; with_lanes: with the lane facts and relation lists of its row (pipeline.query.lanes)."""
+    return (f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
+            f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild"
+            f"{_lane_columns('') if with_lanes else ''} FROM {ROWS} WHERE is_ego)")
+
+
+def _lane_columns(prefix: str) -> str:
+    return "".join(f", {prefix}{c}" for c in lanes.FACT_COLUMNS + lanes.RELATION_COLUMNS)
+
+
+EGO_CTE = ego_cte()
 
 
 def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> list[str]:
@@ -262,6 +276,8 @@ def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> 
     nothing as the candidate filter (`sure` says whether they surely hold). They read the CTE `ego` (EGO_CTE)."""
     cols = ("f.fk, f.frame_id, f.scene, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, "
             "f.s, f.wild")
+    if lanes.uses_lanes(pattern):  # the lane facts and relation lists of each row (pipeline.query.lanes)
+        cols += _lane_columns("f.")
     ctes = []
     for st in pattern.statements:
         # Clauses on ego or on nothing filter the name's rows (ego joined per frame); the others filter the join.
@@ -295,7 +311,7 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
     name."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ctes = [EGO_CTE, *_name_ctes(pattern, config, alias)]
+    ctes = [ego_cte(lanes.uses_lanes(pattern)), *_name_ctes(pattern, config, alias)]
     first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
     for k, st in enumerate(pattern.statements):
@@ -370,7 +386,7 @@ ESTIMATE_FRAMES = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS sce
 def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_frame: bool = False) -> str:
     """One aggregate over estimate_ctes: (largest product, its frame id, that frame's non-ego rows, sum of the
     products), or with per_frame one row per frame (frame id, product)."""
-    ctes = [EGO_CTE, ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
+    ctes = [ego_cte(lanes.uses_lanes(pattern)), ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
     return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "0", per_frame)
 
 

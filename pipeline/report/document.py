@@ -178,13 +178,22 @@ def relation_section(usage: RelationUsage, configs: tuple[str, ...], plot: Plot)
                   str(int(usage.counts.loc[kind].sum()))) for kind in usage.kinds)
     motion = (" Motion: stationary and moving like cost 0, relative speed 1, absolute speed 2."
               if usage.motion else "")
+    lanes = (" Lanes: same lane, lane left / right and oncoming lane cost 0; in intersection, on crosswalk, off road "
+             "and off lane 1; a lane by id and anywhere 2." if usage.lanes else "")
     blocks: list[str | Table | Plot] = [
         "Counts of each relation in the programs, read from the DSL text (a program the counts do not account for is parsed with the DSL's own parser). "
         "ahead / behind / left / right and toward / away are the cost-0 relations; relative position and "
-        "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2." + motion,
+        "relative heading are the cost-1 fallbacks; absolute position and absolute heading cost 2." + motion + lanes,
         Table(("Relation", *configs, "Total"), rows, "l" + "r" * (len(configs) + 1)),
         plot,
     ]
+    shares = {c: usage.lane_shares(c) for c in configs}
+    if any(shares.values()):
+        blocks.append("Where the entities are, by their lane clauses: in a lane (a lane relation or a lane by id), in "
+                      "no lane (off lane, off road), or either (in an intersection, on a crosswalk, anywhere).")
+        blocks.append(Table(("Config", "in a lane", "in no lane", "either"),
+                            tuple((c, *(f"{100 * v:.1f}%" for v in s.values())) for c, s in shares.items() if s),
+                            "lrrr"))
     if usage.unparsable:
         blocks.append(f"{usage.unparsable_total} program(s) are not in the DSL and are not counted, e.g. "
                       + "; ".join(f"{c} {f}: {m}" for c, f, m in usage.unparsable[:3]) + ".")

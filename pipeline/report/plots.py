@@ -15,6 +15,7 @@ import numpy as np
 from pipeline.report.stats import (
     ABSOLUTE_COST_PER_ENTITY,
     HEADING_KINDS,
+    LANE_KINDS,
     MOTION_KINDS,
     POSITION_KINDS,
     GroupStats,
@@ -241,6 +242,8 @@ def relation_usage(usage: RelationUsage, configs: tuple[str, ...], path: Path) -
     panels = [(POSITION_KINDS, "Position relations (cost)"), (HEADING_KINDS, "Heading relations (cost)")]
     if usage.motion:
         panels.append((MOTION_KINDS, "Motion relations (cost)"))
+    if usage.lanes:
+        panels.append((LANE_KINDS, "Lane relations (cost)"))
     fig, axes = _figure(width=5.25 * len(panels), height=height, ncols=len(panels))
     for ax, (kinds, title) in zip(axes, panels):
         _grouped_barh(ax, kinds, usage, configs, shown)

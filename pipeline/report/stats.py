@@ -25,7 +25,7 @@ import pyarrow.parquet as pq
 
 from pipeline.programs import STATUSES, ProgramsError, check_programs_schema, programs_files
 from synth.dsl import AbsoluteHeading, AbsoluteXYPos, DslError, parse_program
-from synth.parts import HEADING, MOTION, POSITION
+from synth.parts import HEADING, LANE, MOTION, POSITION
 
 # Entity-count buckets (N excludes ego). Later buckets are wide because dense frames are rare and slow.
 BUCKETS: tuple[tuple[int, int | None], ...] = ((0, 0), (1, 5), (6, 10), (11, 20), (21, 40), (41, 80), (81, None))
@@ -35,6 +35,12 @@ ABSOLUTE_COST_PER_ENTITY = AbsoluteXYPos.cost + AbsoluteHeading.cost
 POSITION_KINDS = POSITION.kinds
 HEADING_KINDS = HEADING.kinds
 MOTION_KINDS = MOTION.kinds
+LANE_KINDS = LANE.kinds
+# Where the lane kinds say an entity is (the share of entities on / off lanes): in a lane (a relation to another
+# entity's lane, or a lane by id), in no lane (off lane, off road), or either (an intersection or a crosswalk may
+# be in a lane or not; anywhere says nothing).
+ON_LANE_KINDS = ("same lane", "lane left", "lane right", "oncoming lane", "lane by id")
+OFF_LANE_KINDS = ("off lane", "off road")
 RELATION_KINDS = POSITION_KINDS + HEADING_KINDS
 ALL = "all"
 # Substrings that mark each relation in a statement `ID = new TYPE POS, HEADING` (docs/dsl.md). The
@@ -47,6 +53,11 @@ _MARKS = {
     "deg": ") deg",
     "stationary": ", stationary", "moving like": ", moving like ", "relative speed": ") m/s relative to ",
     "speed": ") m/s",
+    # LANE (docs/dsl.md, "Lanes"): `in lane left of` holds " left of " too, so position's left / right subtract
+    # the lane forms.
+    "same lane": ", in lane of ", "lane left": " lane left of ", "lane right": " lane right of ",
+    "oncoming lane": ", in oncoming lane of ", "in intersection": ", in intersection", "on crosswalk": ", on crosswalk",
+    "off road": ", off road", "off lane": ", off lane", "lane by id": ', in lane "', "anywhere": ", anywhere",
 }
 # Points drawn per config in a scatter plot: past this, a deterministic sample (by a hash of the frame id).
 PLOT_POINTS = 4000
@@ -235,7 +246,7 @@ def by_bucket(db: ProgramsDB) -> list[GroupStats]:
 
 @dataclass(frozen=True)
 class RelationUsage:
-    counts: pd.DataFrame  # index RELATION_KINDS + MOTION_KINDS, one column per config, integer counts
+    counts: pd.DataFrame  # index RELATION_KINDS + MOTION_KINDS + LANE_KINDS, one column per config, integer counts
     unparsable: tuple[tuple[str, str, str], ...]  # (config, frame_id, parser message) of programs not in the DSL
     unparsable_total: int = 0
 
@@ -245,9 +256,24 @@ class RelationUsage:
         return bool(self.counts.loc[list(MOTION_KINDS)].to_numpy().sum())
 
     @property
+    def lanes(self) -> bool:
+        """Do any programs say where their entities are on the road?"""
+        return bool(self.counts.loc[list(LANE_KINDS)].to_numpy().sum())
+
+    @property
     def kinds(self) -> tuple[str, ...]:
-        """The kinds to show: the paper's always, motion's when some program has them."""
-        return RELATION_KINDS + (MOTION_KINDS if self.motion else ())
+        """The kinds to show: the paper's always, motion's and lanes' when some program has them."""
+        return RELATION_KINDS + (MOTION_KINDS if self.motion else ()) + (LANE_KINDS if self.lanes else ())
+
+    def lane_shares(self, config: str) -> dict[str, float] | None:
+        """Of the entities with a lane clause under a config: the share in a lane, in no lane, and either (in an
+        intersection, on a crosswalk, anywhere); None without lane clauses."""
+        counts = self.counts[config]
+        total = int(counts.loc[list(LANE_KINDS)].sum())
+        if not total:
+            return None
+        on, off = int(counts.loc[list(ON_LANE_KINDS)].sum()), int(counts.loc[list(OFF_LANE_KINDS)].sum())
+        return {"in a lane": on / total, "in no lane": off / total, "either": (total - on - off) / total}
 
 
 def relation_kinds(program_text: str) -> Counter:
@@ -265,12 +291,16 @@ def relation_usage(db: ProgramsDB, examples: int = 3) -> RelationUsage:
     statement with one position and one heading (every program r2s writes); any other program is parsed with
     the DSL's own parser, and counted if it parses, or listed with the parser's message if not."""
     k = {name: f'"k_{name}"' for name in _MARKS}
-    consistent = (f"statements = lines AND {k['ahead']} + {k['behind']} + {k['left']} + {k['right']} + {k['at']} "
+    left, right = f"({k['left']} - {k['lane left']})", f"({k['right']} - {k['lane right']})"
+    lane = " + ".join(k[kind] for kind in LANE_KINDS)
+    consistent = (f"statements = lines AND {k['ahead']} + {k['behind']} + {left} + {right} + {k['at']} "
                   f"= statements AND {k['toward']} + {k['away']} + {k['deg']} = statements AND "
-                  f"{k['stationary']} + {k['moving like']} + {k['speed']} <= statements")  # motion is optional
-    every = RELATION_KINDS + MOTION_KINDS
+                  f"{k['stationary']} + {k['moving like']} + {k['speed']} <= statements "  # motion is optional
+                  f"AND {lane} <= statements")  # and lanes
+    every = RELATION_KINDS + MOTION_KINDS + LANE_KINDS
     # Every kind with a substring of its own; an absolute form is its part's Ranges without `relative to`.
     kinds = {**{name: f"sum({k[name]})" for name in every if name in _MARKS},
+             "left": f"sum({left})", "right": f"sum({right})",
              "absolute position": f"sum({k['at']} - {k['relative position']})",
              "absolute heading": f"sum({k['deg']} - {k['relative heading']})",
              "absolute speed": f"sum({k['speed']} - {k['relative speed']})"}
