@@ -31,6 +31,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from pipeline.query import lanes
 from synth.config import SynthConfig
 from synth.dsl import (
     DIRECTIONS,
@@ -46,7 +47,6 @@ from synth.dsl import (
     Statement,
     Stationary,
 )
-from pipeline.query import lanes
 from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern, matched_types
 from synth.scene import EGO_ID
