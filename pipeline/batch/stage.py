@@ -72,6 +72,10 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
     from pipeline.batch.store import is_single_file
 
     options.check()
+    if options.window is not None:
+        from synth.window import check_window_config
+
+        check_window_config(config)
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
         check_apart(f"{out}.parts", [("input frames", frames)], directory=True)

@@ -113,7 +113,9 @@ def test_resume_keeps_a_window_only_for_the_same_rows_and_options(clips, tmp_pat
 def test_bad_window_runs_are_one_line_and_write_nothing(clips, tmp_path):
     out = tmp_path / "w"
     for args, words in ((("--stride", "1"), "need --window"), (("--window", "0"), "positive"),
-                        (("--window", "nan"), "positive"), (("--window", "1", "--max-gap", "-1"), "positive")):
+                        (("--window", "nan"), "positive"), (("--window", "1", "--max-gap", "-1"), "positive"),
+                        (("--window", "1", "--lanes"), "not yet synthesized over a window"),
+                        (("--window", "1", "--strategy", "monolithic"), "encodes one frame")):
         assert_one_line_error(run_r2s("run", str(clips), "--out", str(out), *args), 2, words)
         assert not out.exists()
     df = read_frames(clips)
