@@ -36,6 +36,9 @@ RELATION_KINDS: dict[str, RelationKind] = {
     "relative_heading": RelationKind("facing Range deg relative to\n(heading, cost 1)", "#0571b0", "--", -0.2),
     "moving_like": RelationKind("moving like\n(motion, cost 0)", "#d01c8b", ":", 0.32),
     "relative_speed": RelationKind("moving Range m/s relative to\n(motion, cost 1)", "#4d9221", ":", 0.32),
+    # Lanes: dash-dot, curved the other way from motion, so a lane arrow stays apart from the other three.
+    "lane_relation": RelationKind("in lane / lane left, right of / oncoming lane of\n(lane, cost 0)", "#8c510a",
+                                  "-.", -0.45),
 }
 
 
@@ -52,6 +55,8 @@ MARK_KINDS: dict[str, MarkKind] = {
     "absolute_heading": MarkKind("absolute heading (cost 2)", "x"),
     "stationary": MarkKind("stationary (motion, cost 0)", "s", hollow=True),
     "absolute_speed": MarkKind("absolute speed (cost 2)", "^"),
+    "lane_fact": MarkKind("in intersection / on crosswalk / off road, lane / in lane ID / anywhere (lane)", "D",
+                          hollow=True),
 }
 
 @dataclass(frozen=True)

@@ -58,6 +58,4 @@ def test_the_report_costs_and_the_pictures_kinds_are_the_classification():
     assert KIND_COST == {k.label: k.clause.cost for k in CLAUSE_KINDS}
     # A clause without a reference is marked on its entity, one with a reference is an arrow from it.
     for kind in CLAUSE_KINDS:
-        if kind.drawn_as in ("lane_relation", "lane_fact"):
-            continue  # the pictures of lane clauses: issue 24 item 6 (pipeline/variants/render.py)
         assert kind.drawn_as in (RELATION_KINDS if "ref" in kind.clause.__dataclass_fields__ else MARK_KINDS)
