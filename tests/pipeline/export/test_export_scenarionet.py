@@ -229,3 +229,19 @@ def test_random_scenes_come_back_through_the_extractor(tmp_path_factory, scene):
         assert r["speed"] == pytest.approx(e.speed or 0.0, abs=1e-9)
         if not e.is_ego:
             assert (r["length"], r["width"]) == pytest.approx(e.dimensions())
+
+
+def test_metadrive_s_check_is_not_blind(recorded, metadrive_format_check, tmp_path):
+    """The format check the tests rely on refuses what breaks the format: a state array of the wrong length, a
+    track type MetaDrive does not have, metadata without its time steps."""
+    scene_file, _ = recorded["scene-0061/0"]
+    _export(scene_file, None, tmp_path / "db")
+    breaks = [lambda sd: sd["tracks"]["ego"]["state"].update(heading=np.zeros(2)),
+              lambda sd: sd["tracks"]["ego"].update(type="CAR"),
+              lambda sd: sd["metadata"].pop("ts")]
+    for spoil in breaks:
+        [sd] = _database(tmp_path / "db")
+        metadrive_format_check(sd, check_self_type=True, valid_check=True)
+        spoil(sd)
+        with pytest.raises((AssertionError, KeyError)):
+            metadrive_format_check(sd, check_self_type=True, valid_check=True)
