@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass
 
 from synth.dsl import DslError
+from synth.geometry import normalize
 from synth.pattern import Pattern, parse_pattern
 
 # Behaviours of a track over time, read from its own frames (speeds in m/s, timestamps in microseconds).
@@ -22,9 +23,15 @@ SPEED_CHANGE = 1.0  # accelerating / braking: a speed change of at least this, m
 SPEED_CHANGE_WINDOW_US = 1_000_000  # ... from a frame at most this long before
 MOVING_SPEED = 1.0  # stopping: moving (at least this, m/s) at a frame at most STOP_WINDOW_US before, stationary now
 STOP_WINDOW_US = 3_000_000
-BEHAVIOURS = ("accelerating", "braking", "stopping")
-NOT_YET = {"turning": "turning needs each frame's ego heading in the world, which frames do not carry yet",
-           "changing": "changing lanes needs lane columns in the frames, which they do not carry yet"}
+# turning left / right: the heading in the world (map_heading) turned by at least TURN_ANGLE degrees, counter-
+# clockwise / clockwise, since a frame of the track at most TURN_WINDOW_US before (turn_of: the signed turn).
+TURN_ANGLE = 30.0
+TURN_WINDOW_US = 3_000_000
+SPEED_BEHAVIOURS = ("accelerating", "braking", "stopping")
+TURNING = ("turning left", "turning right")
+BEHAVIOURS = SPEED_BEHAVIOURS + TURNING
+NOT_YET = {"changing": "changing lanes needs lane columns in the frames, which they do not carry yet"}
+_FIRST_WORDS = {b.split()[0] for b in BEHAVIOURS} | set(NOT_YET)
 
 _THEN = re.compile(r"then(?:\s+within\s+(?P<t>\S+)\s+s)?\Z")
 _FOR = re.compile(r"for\s+at\s+least\s+(?P<t>\S+)\s+s\Z")
@@ -58,7 +65,13 @@ class TemporalPattern:
 
     @property
     def uses_motion(self) -> bool:
-        return any(s.pattern.uses_motion or s.behaviours for s in self.steps)
+        """Does it need the entities' speeds (motion clauses, speed behaviours)?"""
+        return any(s.pattern.uses_motion or any(b in SPEED_BEHAVIOURS for _, b in s.behaviours) for s in self.steps)
+
+    @property
+    def uses_world_heading(self) -> bool:
+        """Does it need the tracks' headings in the world (turning)?"""
+        return any(b in TURNING for s in self.steps for _, b in s.behaviours)
 
     @property
     def needs_timestamps(self) -> bool:
@@ -80,6 +93,12 @@ class TemporalPattern:
 
 def _seconds(us: int) -> str:
     return f"{us / 1e6:g}"
+
+
+def turn_of(before: float, now: float) -> float:
+    """The signed turn from heading `before` to heading `now` (degrees CCW), in [-180, 180): positive is to the
+    left. Written with synth.geometry.normalize, which the engine computes operation for operation (r2s_norm)."""
+    return normalize(now - before + 180.0) - 180.0
 
 
 def duration_us(text: str, where: str) -> int:
@@ -115,7 +134,7 @@ def is_temporal(text: str) -> bool:
         line = raw.split("#", 1)[0].strip()
         if _THEN.match(line) or _FOR.match(line) or line.startswith(("then ", "for ")) or line == "then":
             return True
-        if (m := _BEHAVIOUR.search(line)) and m.group("b").split()[0] in set(BEHAVIOURS) | set(NOT_YET):
+        if (m := _BEHAVIOUR.search(line)) and m.group("b").split()[0] in _FIRST_WORDS:
             return True
     return False
 

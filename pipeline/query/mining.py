@@ -95,9 +95,9 @@ def _sql_list(files: Sequence[str]) -> str:
 
 
 def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_limit_mb: int | None, spill_dir: str,
-          lane_sets: pa.Table | None = None):
+          lane_sets: pa.Table | None = None, has_world: bool = False):
     """A DuckDB session with the rows view of the files (with lane_sets, each row's lane facts and relation lists:
-    pipeline.query.lanes)."""
+    pipeline.query.lanes; map_heading, the heading in the world, where has_world)."""
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
                                  "max_temp_directory_size": f"{SPILL_LIMIT_MB}MiB",
                                  **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
@@ -117,7 +117,8 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     con.execute(
         f"CREATE TEMP VIEW {ROWS} AS SELECT hash(frame_id) AS fk, frame_id, scene, frame_index, timestamp_us, "
         f"entity_id, track_id, type, "
-        f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, is_ego, "
+        f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, "
+        f"{'map_heading' if has_world else 'NULL::DOUBLE AS map_heading'}, is_ego, "
         f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
         f"{lane_columns}"
         f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
@@ -327,8 +328,12 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
     estimate = temporal_estimate_query if temporal else estimate_query
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill, \
             leftover(spill, "tree"):
-        con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill, sets)
+        world = temporal and pattern.uses_world_heading
+        con = _open([part.path for part in dataset.parts], has_speed, threads, memory_limit_mb, spill, sets,
+                    has_world=world and any("map_heading" in part.road for part in dataset.parts))
         try:
+            if world:
+                _require_world_heading(con, frames)
             if min_duration_s is not None:
                 _require_timestamps(con, frames, "--min-duration")
             if temporal and pattern.needs_timestamps:
@@ -388,6 +393,15 @@ def _lane_sets(frames, dataset: FramesDataset) -> pa.Table:
     if missing:
         raise FramesError(f"{frames}: the frames name map {missing[0]!r}, which is not in {where}")
     return lane_sets(roads)
+
+
+def _require_world_heading(con, frames) -> None:
+    """Turning reads each track's heading in the world (map_heading), which frames carry where their source gives
+    a map or a world pose; without any, the behaviour is one line."""
+    (n,) = con.execute(f"SELECT count(*) FROM {ROWS} WHERE NOT is_ego AND isfinite(map_heading)").fetchall()[0]
+    if not n:
+        raise FramesError(f"{frames}: turning needs each track's heading in the world (map_heading), which these "
+                          "frames do not carry: their source gave no map or world pose")
 
 
 def _require_timestamps(con, frames, what: str) -> None:

@@ -33,14 +33,22 @@ from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern
 from synth.temporal import (
     MOVING_SPEED,
+    SPEED_BEHAVIOURS,
     SPEED_CHANGE,
     SPEED_CHANGE_WINDOW_US,
     STOP_WINDOW_US,
+    TURN_ANGLE,
+    TURN_WINDOW_US,
+    TURNING,
     TemporalPattern,
 )
 
 POSITIONS = "r2s_fpos"
 BEHAVIOUR_TABLE = "r2s_behaviour"
+TURNING_TABLE = "r2s_turning"
+# Where each behaviour is read: (table, column).
+BEHAVIOUR_COLUMNS = ({b: (BEHAVIOUR_TABLE, b) for b in SPEED_BEHAVIOURS}
+                     | {b: (TURNING_TABLE, b.replace(" ", "_")) for b in TURNING})
 IDS = "r2s_ids"
 CANDIDATES = "r2s_candidates"
 
@@ -74,6 +82,25 @@ def behaviour_sql(config: SynthConfig) -> str:
     )
 
 
+def turning_sql() -> str:
+    """One row per (scene, frame, track) of a non-ego entity that has an earlier row within TURN_WINDOW_US: has it
+    turned left, right since one of them? Every earlier row of the track in the window is compared (a self-join
+    on the track: headings wrap, so no window extreme decides), by synth.temporal.turn_of's operations on
+    map_heading (r2s_norm is synth.geometry.normalize); rows without a finite map_heading or a timestamp take part
+    in none."""
+    rows = (f"SELECT scene, frame_id, track_id, timestamp_us, map_heading AS h FROM {ROWS} WHERE NOT is_ego "
+            "AND isfinite(map_heading) AND timestamp_us IS NOT NULL")
+    turn = "r2s_norm(p.h - q.h + 180.0) - 180.0"
+    return (
+        f"CREATE TEMP TABLE {TURNING_TABLE} AS WITH h AS ({rows}) "
+        f"SELECT p.scene, p.frame_id, p.track_id, bool_or({turn} >= {_lit(TURN_ANGLE)}) AS turning_left, "
+        f"bool_or({turn} <= {_lit(-TURN_ANGLE)}) AS turning_right "
+        f"FROM h p JOIN h q ON p.scene = q.scene AND p.track_id = q.track_id "
+        f"AND q.timestamp_us >= p.timestamp_us - {TURN_WINDOW_US} AND q.timestamp_us < p.timestamp_us "
+        "GROUP BY p.scene, p.frame_id, p.track_id"
+    )
+
+
 def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], variables: tuple[str, ...],
              config: SynthConfig) -> str:
     """The frames (scene, position, timestamp) and track tuples at which step k holds (its tracks struct is keyed
@@ -81,8 +108,8 @@ def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], 
     names = pattern.names
     cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(names))
     joins = "".join(
-        f" JOIN {BEHAVIOUR_TABLE} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = "
-        f"m.tracks.\"{names.index(n)}\" AND b{j}.{b}" for j, (n, b) in enumerate(behaviours))
+        f" JOIN {BEHAVIOUR_COLUMNS[b][0]} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = "
+        f"m.tracks.\"{names.index(n)}\" AND b{j}.{BEHAVIOUR_COLUMNS[b][1]}" for j, (n, b) in enumerate(behaviours))
     return (f"CREATE TEMP TABLE r2s_step{k} AS {bindings_query(pattern, config)}\n"
             f"SELECT DISTINCT m.scene, m.frame_pos, m.timestamp_us, {cols} FROM m{joins}")
 
@@ -146,8 +173,11 @@ def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Cal
                 f"(PARTITION BY scene ORDER BY frame_index, ord) AS frame_pos, timestamp_us FROM {ROWS} WHERE is_ego")
     con.execute(f"CREATE TEMP TABLE {IDS} AS SELECT scene, track_id, min(entity_id) AS entity_id FROM {ROWS} "
                 "WHERE NOT is_ego GROUP BY scene, track_id")
-    if any(s.behaviours for s in pattern.steps):
+    used = {b for s in pattern.steps for _, b in s.behaviours}
+    if used & set(SPEED_BEHAVIOURS):
         con.execute(behaviour_sql(config))
+    if used & set(TURNING):
+        con.execute(turning_sql())
     for k, step in enumerate(pattern.steps):
         exact_check(step.pattern)
         con.execute(step_sql(k, step.pattern, step.behaviours, pattern.names, config))

@@ -11,6 +11,7 @@ The pattern matches at frame b when b ends such an interval of the last step."""
 from __future__ import annotations
 
 import itertools
+import math
 
 import pandas as pd
 
@@ -18,11 +19,38 @@ from extractors.frames import frame_to_scene
 from synth.config import SynthConfig
 from synth.parts.motion import SPEED_EPS
 from synth.scene import Scene
-from synth.temporal import MOVING_SPEED, SPEED_CHANGE, SPEED_CHANGE_WINDOW_US, STOP_WINDOW_US, TemporalPattern
+from synth.temporal import (
+    MOVING_SPEED,
+    SPEED_CHANGE,
+    SPEED_CHANGE_WINDOW_US,
+    STOP_WINDOW_US,
+    TURN_ANGLE,
+    TURN_WINDOW_US,
+    TemporalPattern,
+    turn_of,
+)
 from tests.support.query_bruteforce import brute_matches
 
 
+def _turning(name: str, track: str, p: int, frames: list[dict]) -> bool:
+    """Some row of the track with t(p) - 3 s <= t < t(p), both headings in the world finite, turned by >= 30 deg
+    to the left (counter-clockwise) or right: the signed turn of each pair, from the definition."""
+    now, t = frames[p]["world"].get(track), frames[p]["t"]
+    if now is None or not math.isfinite(now) or t is None:
+        return False
+    for f in frames:
+        before = f["world"].get(track)
+        if track in f["tracks"] and f["t"] is not None and t - TURN_WINDOW_US <= f["t"] < t \
+                and before is not None and math.isfinite(before):
+            turn = turn_of(before, now)
+            if (turn >= TURN_ANGLE) if name == "turning left" else (turn <= -TURN_ANGLE):
+                return True
+    return False
+
+
 def _behaviour(name: str, track: str, p: int, frames: list[dict], config: SynthConfig) -> bool:
+    if name in ("turning left", "turning right"):
+        return _turning(name, track, p, frames)
     now, t = frames[p]["tracks"][track].speed, frames[p]["t"]
     if now is None:
         return False
@@ -45,7 +73,11 @@ def _frame(rows: pd.DataFrame) -> dict:
             assert track not in by_track, "the reference takes one box per track and frame"
             by_track[track] = e
     t = rows.timestamp_us.iloc[0]
-    return {"t": None if pd.isna(t) else int(t), "ego": scene.ego, "tracks": by_track}
+    world = {}  # each track's heading in the world (map_heading), where the frames carry one
+    if "map_heading" in rows:
+        world = {track: float(h) for track, h, is_ego in zip(rows.track_id, rows.map_heading, rows.is_ego)
+                 if not is_ego and h is not None and not pd.isna(h)}
+    return {"t": None if pd.isna(t) else int(t), "ego": scene.ego, "tracks": by_track, "world": world}
 
 
 def brute_temporal(frames: pd.DataFrame, pattern: TemporalPattern, config: SynthConfig | None = None) -> dict:

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import read_frames, write_frames
+from extractors.frames import FramesError, read_frames, write_frames
 from pipeline.query.mining import query_frames
 from synth.dsl import DslError
 from synth.temporal import is_temporal, parse_query_pattern, parse_temporal
@@ -213,7 +213,8 @@ def test_plain_patterns_stay_one_frame_patterns():
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego\nfor at least -1 s\n", "line 2: a duration is"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego\nthen within nan s\n"
      "a = new Car ahead of ego by Range(0, 5), facing toward ego\n", "line 2: a duration is"),
-    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, turning left\n", "line 1 column 61: turning needs"),
+    ("a = new Car ahead of ego by Range(0, 5), facing toward ego, changing lanes\n",
+     "line 1 column 61: changing lanes needs"),
     ("then\na = new Car ahead of ego by Range(0, 5), facing toward ego\n", "line 1: `then` follows no step"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego\nthen\n", "ends with `then`"),
     ("a = new Car ahead of ego by Range(0, 5), facing toward ego\nfor at least 1 s\n"
@@ -244,4 +245,117 @@ def test_the_verb_refuses_with_one_line(tmp_path):
     pattern.write_text(SHIPPED["vehicle-braking-ahead.dsl"])
     assert_one_line_error(run_r2s("query", str(untimed), str(pattern), "--out", str(out)), 2, "timestamps")
     assert_one_line_error(run_r2s("query", str(keyframes), str(pattern), "--out", str(out)), 2, "speed")
+    assert not out.exists()
+
+
+# ----------------------------------------------------------------------------------------- turning
+
+TURNS = [f"a = new Object on Range(-60, 60) @ Range(-60, 60) relative to ego, facing Range(0, 360) deg, {b}\n"
+         for b in ("turning left", "turning right")] + [
+    "a = new Object on Range(-8, 8) @ Range(-8, 8), facing Range(0, 360) deg, turning left\nthen within 1 s\n"
+    "a = new Object on Range(-8, 8) @ Range(-8, 8), facing Range(0, 360) deg, turning right, braking\n"]
+
+
+@pytest.fixture(scope="module")
+def mapped_frames(tmp_path_factory):
+    """Frames as `r2s extract` writes them, with each entity's place in its map (map_heading): the shipped
+    ScenarioNet excerpt, and /work/shared/data's nuScenes mini scenes when present."""
+    out = {}
+    for name, path in (("excerpt", EXCERPT / "scenarionet"), ("shared-nuscenes", SHARED / "nuscenes-mini" / "scenarionet")):
+        if path.exists():
+            target = tmp_path_factory.mktemp(name) / "frames.parquet"
+            result = run_r2s("extract", "scenarionet", str(path), "--out", str(target))
+            assert result.returncode == 0, result.stderr
+            out[name] = target
+    return out
+
+
+def _rows(path: Path) -> pd.DataFrame:
+    return pq.read_table(path).to_pandas()  # every column (read_frames keeps the frames schema's only)
+
+
+@pytest.mark.parametrize("data", ["excerpt", "shared-nuscenes"])
+@pytest.mark.parametrize("k", range(2))
+def test_turning_on_real_scenes_is_the_brute_force(mapped_frames, data, k, tmp_path):
+    if data not in mapped_frames:
+        pytest.skip(f"{data}: /work/shared/data is not on this machine")
+    frames = mapped_frames[data]
+    got = engine_temporal(frames, TURNS[k], tmp_path)
+    assert got == brute_temporal(_rows(frames), parse_temporal(TURNS[k]))
+    if data == "shared-nuscenes":
+        assert len(got) > 20  # vehicles do turn in the six scenes (69 frames left, 57 right)
+
+
+# Headings in the world that put turns exactly on +-30 degrees and across the wrap (350 -> 20 is +30).
+_world = st.sampled_from([None, 0.0, 29.5, 30.0, 60.0, 180.0, 210.0, 330.0, 350.0, 20.0, -30.0, 390.0, 1e-9])
+_turn_box = st.tuples(st.sampled_from("ab"), st.integers(-8, 8), st.integers(-8, 8), st.sampled_from([None, 0.0, 1.0, 2.0]),
+                      _world)
+_turn_frame = st.tuples(st.lists(_turn_box, max_size=3, unique_by=lambda b: b[0]), st.integers(1, 2),
+                        st.sampled_from([0, 0, 1, 2, 10, 20]))
+
+
+def turning_frames(scenes) -> pd.DataFrame:
+    """Random tracks with headings in the world; timestamps step by 100 ms, sometimes 1 s or 2 s more (the 3 s
+    window met exactly and passed)."""
+    rows = []
+    for s, frames in enumerate(scenes):
+        index, t = 0, 0
+        for boxes, step, extra in frames:
+            index, t = index + step, t + 100_000 * (1 + extra)
+            ego = dict(frame_id=f"s{s}/{index}", source="test", scene=f"s{s}", frame_index=index, timestamp_us=t,
+                       entity_id="ego", track_id="ego", type="Car", category="Car", x=0.0, y=0.0, heading=0.0,
+                       length=None, width=None, is_ego=True, speed=3.0, map_heading=0.0)
+            rows.append(ego)
+            for k, (track, x, y, v, h) in enumerate(boxes, start=1):
+                rows.append(dict(ego, entity_id=f"car_{track}", track_id=track, x=float(x), y=float(y),
+                                 heading=float(30 * k), is_ego=False, speed=v, map_heading=h))
+    return pd.DataFrame(rows)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.lists(_turn_frame, min_size=1, max_size=9), min_size=1, max_size=2), st.sampled_from(TURNS))
+def test_turning_on_random_tracks_is_the_brute_force(tmp_path, scenes, text):
+    here = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = here / "frames.parquet"
+    frames = turning_frames(scenes)
+    write_frames(frames, path)
+    if not frames[~frames.is_ego].map_heading.notna().any():  # no heading in the world at all: refused
+        with pytest.raises(FramesError, match="turning needs"):
+            engine_temporal(path, text, here)
+        return
+    assert engine_temporal(path, text, here) == brute_temporal(_rows(path), parse_temporal(text))
+
+
+@pytest.mark.parametrize("behaviour,headings,extra,expect", [
+    ("turning left", [0.0, 10.0, 30.0], 0, True),  # exactly 30 degrees
+    ("turning left", [0.0, 10.0, 29.999], 0, False),
+    ("turning left", [350.0, 20.0], 0, True),  # across the wrap: +30
+    ("turning right", [20.0, 350.0], 0, True),
+    ("turning left", [20.0, 350.0], 0, False),
+    ("turning right", [0.0] + [None] * 29 + [330.0], 0, True),  # 3 s before exactly; the track's own rows count
+    ("turning right", [0.0] + [None] * 29 + [330.0], 1, False),  # 3.1 s before
+    ("turning right", [0.0, 180.0], 0, True),  # half a turn is -180 (to the right), by the definition
+])
+def test_turning_boundaries_by_hand(tmp_path, behaviour, headings, extra, expect):
+    frames = [([("a", 0, 5, 1.0, h)] if h is not None else [], 1, 0) for h in headings]
+    frames[-1] = (frames[-1][0], 1, extra)
+    path = tmp_path / "f.parquet"
+    write_frames(turning_frames([frames]), path)
+    text = f"a = new Object ahead of ego by Range(0, 8), facing Range(0, 360) deg, {behaviour}\n"
+    got = engine_temporal(path, text, tmp_path)
+    assert (f"s0/{len(headings)}" in got) is expect
+    assert got == brute_temporal(_rows(path), parse_temporal(text))
+
+
+def test_turning_without_headings_in_the_world_is_one_line(tmp_path):
+    pattern = tmp_path / "p.dsl"
+    pattern.write_text(TURNS[0])
+    out = tmp_path / "m.parquet"
+    keyframes = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"  # no map_heading column
+    assert_one_line_error(run_r2s("query", str(keyframes), str(pattern), "--out", str(out)), 2,
+                          "turning needs each track's heading in the world")
+    frames = turning_frames([[([("a", 0, 5, 1.0, None)], 1, 0)] * 3])  # the column, never a value
+    path = tmp_path / "f.parquet"
+    write_frames(frames, path)
+    assert_one_line_error(run_r2s("query", str(path), str(pattern), "--out", str(out)), 2, "map_heading")
     assert not out.exists()
