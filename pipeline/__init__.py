@@ -1,10 +1,15 @@
-"""The pipeline: the `r2s` verbs and the batch stage. `pipeline.run_frames` is the batch stage's Python API
-(pipeline.batch.stage); it is imported on first use, so that `r2s synth` never pays for pandas or pyarrow."""
+"""The pipeline: the `r2s` verbs and the batch stage. Every verb has a Python API (docs/api.md), imported on first
+use so that `r2s synth` never pays for pandas or pyarrow: `pipeline.extract` (r2s extract), `pipeline.scene`
+(r2s scene), `pipeline.run_frames` (r2s run, the batch stage), `pipeline.sample` (r2s sample), `pipeline.render`
+(r2s render), and in the rooms of the same name (so not here) `pipeline.query.query` and `pipeline.report.report`."""
+
+_API = {"extract": "pipeline.batch.extract", "scene": "pipeline.scenes", "run_frames": "pipeline.batch.stage",
+        "sample": "pipeline.variants.sample", "render": "pipeline.variants.picture"}
 
 
 def __getattr__(name: str):
-    if name == "run_frames":
-        from pipeline.batch.stage import run_frames
+    if name in _API:
+        import importlib
 
-        return run_frames
+        return getattr(importlib.import_module(_API[name]), name)
     raise AttributeError(f"module 'pipeline' has no attribute {name!r}")

@@ -123,14 +123,24 @@ def read_programs_table(path: str | os.PathLike) -> pa.Table:
 def program_of_frame(path: str | os.PathLike, frame_id: str) -> str | None:
     """The DSL program of one frame in a programs file or dataset (its cheapest, when several configs ran it),
     read with a filter on frame_id (row-group statistics skip the rest); None if it has none."""
+    return _of_frame(path, frame_id, "program")
+
+
+def scenic_of_frame(path: str | os.PathLike, frame_id: str) -> str | None:
+    """The Scenic text of one frame's program (the row program_of_frame picks), or None if it has none."""
+    return _of_frame(path, frame_id, "scenic")
+
+
+def _of_frame(path: str | os.PathLike, frame_id: str, column: str) -> str | None:
     files = programs_files(path)
     try:
         table = ds.dataset(files, format="parquet").to_table(
-            columns=["frame_id", "program", "cost"], filter=ds.field("frame_id") == frame_id)
+            columns=["frame_id", "program", "cost", column] if column != "program" else ["frame_id", "program", "cost"],
+            filter=ds.field("frame_id") == frame_id)
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise ProgramsError(f"{path} is not a readable programs dataset ({str(exc)[:120]})") from None
     rows = sorted((r for r in table.to_pylist() if r["program"] is not None), key=lambda r: r["cost"] is None or r["cost"])
-    return rows[0]["program"] if rows else None
+    return rows[0][column] if rows else None
 
 
 def read_programs(path: str | os.PathLike):

@@ -168,6 +168,13 @@ def test_readme_shell_block_runs_as_written(k, tmp_path):
     block = README_SH[k][0]
     proc = as_a_user(tmp_path, block)
     assert proc.returncode == 0, f"README sh block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
+    assert_writes_only_under_out(tmp_path)
+
+
+def assert_writes_only_under_out(tmp_path: Path) -> None:
+    """The examples write under out/ (git ignores it), never beside the data in a user's clone."""
+    written = sorted(p.name for p in tmp_path.iterdir() if p.name not in ("data", "configs", ".venv", "out"))
+    assert not written, f"written outside out/: {written}"
 
 
 def test_the_readme_has_a_python_quick_start():
@@ -184,6 +191,7 @@ def test_python_block_runs_as_written(page, k, tmp_path):
     block = python_blocks(ROOT / page)[k]
     proc = as_a_user(tmp_path, "python -", stdin=block)
     assert proc.returncode == 0, f"{page} python block {k + 1}:\n{block}\n{proc.stderr[-2000:]}"
+    assert_writes_only_under_out(tmp_path)
 
 
 def test_the_layout_map_names_every_room_and_module():

@@ -1,4 +1,5 @@
-"""`r2s extract --jobs N` and dataset outputs: the input's pieces (Source.units) extracted in parallel worker
+"""`r2s extract` (extract, its Python API: `from pipeline import extract`), and with --jobs N or a dataset output
+the input's pieces (Source.units) extracted in parallel worker
 processes, each into its own part file, written atomically.
 
 The parts (and the maps of their scenarios, in _maps/: extractors.maps) are staged in a hidden directory beside
@@ -11,6 +12,7 @@ worker streams its frames into its part in row groups (extractors.writer); the c
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import sys
@@ -25,13 +27,17 @@ from joblib.externals.loky import get_reusable_executor
 from tqdm import tqdm
 
 from extractors.base import ExtractOptions, ExtractTally, Source
+from extractors.categories import CategorySelection
+from extractors.frames import FramesError
 from extractors.frames_dataset import FramesDataset
 from extractors.frames_schema import MAPS_DIR
 from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
+from extractors.registry import source as source_named
+from extractors.sniff import wrong_source_hint
 from extractors.writer import frames_writer
 from pipeline.batch.parent import watch_parent
 from pipeline.errors import UserError
-from pipeline.outputs import stage_beside
+from pipeline.outputs import check_apart, stage_beside
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 
@@ -46,6 +52,82 @@ class UnitResult:
     scenes: tuple[str, ...]  # scene names, in order: a name met in an earlier piece is that piece's
     tally: ExtractTally
     frame_hashes: tuple[Any, Any]  # (hi, lo) of its frame ids (storage.frame_index): 16 bytes a frame
+
+
+@dataclass(frozen=True)
+class ExtractSummary:
+    """What an extraction wrote (`r2s extract`'s last line is `line()`): scenarios read, frames and rows written,
+    and what it left out and why (ExtractTally.notes)."""
+
+    scenarios: int
+    frames: int
+    rows: int
+    out: str
+    notes: str
+
+    def line(self) -> str:
+        return (f"{self.scenarios} scenarios, {self.frames} frames, {self.rows} rows -> {self.out}"
+                f"{'; ' + self.notes if self.notes else ''}")
+
+
+def extract(source: str, input_path: str | os.PathLike, out: str | os.PathLike, *, categories: str = "all",
+            radius: float = 50.0, every: int = 1, max_entities: int = 1000, jobs: int = 1,
+            warn=None, **source_options: Any) -> ExtractSummary:
+    """`r2s extract SOURCE INPUT --out OUT` in-process (docs/api.md): the source's recorded data at `input_path`
+    to a frames file (`out` ends in .parquet) or dataset directory, with the maps beside it. `source_options` are
+    the fields of the source's options class (nuscenes: version, scenes, min_visibility, min_lidar_pts; mcap and
+    rosbag: topics, pose_topic, fixed_frame, ego_frame, max_chunk_bytes). Bad input raises an InputError before
+    anything is written; `warn` receives the warnings `r2s extract` prints (default: stderr)."""
+    input_path, out = str(input_path), str(out)
+    check_apart(out, [("input", input_path)], directory=not out.endswith(".parquet"))
+    try:
+        src = source_named(source)
+    except KeyError as exc:
+        raise UserError(exc.args[0]) from None
+    own = {f.name for f in dataclasses.fields(src.options)} - {f.name for f in dataclasses.fields(ExtractOptions)}
+    unknown = sorted(set(source_options) - own)
+    if unknown:
+        raise UserError(f"source {source} has no option {unknown[0]!r} (its options: {', '.join(sorted(own)) or 'none'})")
+    try:
+        options = src.options(radius=radius, categories=CategorySelection.parse(categories, src.taxonomy),
+                              every=every, max_entities=max_entities, **source_options)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if jobs < 1:
+        raise UserError(f"--jobs must be at least 1, got {jobs}")
+    tally = ExtractTally(**({"warn": warn} if warn is not None else {}))
+    try:
+        if jobs > 1 or is_dataset(out):
+            frames, rows = extract_parallel(src, input_path, out, options, jobs, tally)
+        else:
+            frames, rows = _extract_file(src, input_path, out, options, tally)
+    except (FramesError, UserError):
+        # a source that found nothing to read may have been given another source's input: say which
+        if hint := wrong_source_hint(source, input_path):
+            raise UserError(hint) from None
+        raise
+    return ExtractSummary(tally.scenarios_read, frames, rows, out, tally.notes())
+
+
+def _extract_file(src: Source, input_path: str, out: str, options: ExtractOptions,
+                  tally: ExtractTally) -> tuple[int, int]:
+    """One frames file, written as the frames stream, and its maps beside it (F.maps/), staged until the frames
+    are written."""
+    target = maps_dir(out)
+    check_maps_target(target)
+    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        with frames_writer(out) as written, maps_writer(staged / "part-000000.parquet") as maps:
+            bar = tqdm(src.extract(input_path, options, tally, maps=maps.add), desc=f"extract {src.name}",
+                       unit=" frames", file=sys.stderr, disable=None, leave=False)
+            for rows in bar:
+                written.write_frame(rows)
+            if written.frames == 0:
+                raise UserError(f"no frames found in {input_path} (check the source, --categories and --topics)")
+        replace_maps(staged, target)
+    finally:
+        shutil.rmtree(staged, ignore_errors=True)
+    return written.frames, written.rows
 
 
 def extract_unit(source: Source, unit: str, index: int, options: ExtractOptions, stage: str) -> UnitResult:

@@ -3,21 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
+import dataclasses
 import sys
 
 from tqdm import tqdm
 
-from extractors.base import ExtractOptions, ExtractTally
+from extractors.base import ExtractOptions
 from extractors.categories import CategorySelection
-from extractors.frames import FramesError
 from extractors.registry import SOURCES, source, sources
-from extractors.sniff import wrong_source_hint
-from extractors.writer import frames_writer
-from pipeline.batch.extract import extract_parallel, is_dataset
 from pipeline.errors import UserError
-from pipeline.outputs import check_apart
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,55 +41,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_apart(args.out, [("input", args.input)], directory=not str(args.out).endswith(".parquet"))
+    from pipeline.batch.extract import extract
+
     src = source(args.source)
+    # the source's own options as its options class reads them from the command line
+    common = {"radius": 50.0, "categories": CategorySelection.parse("all", src.taxonomy), "every": 1,
+              "max_entities": 1000}
     try:
-        options = src.options.options_from(
-            args, radius=args.radius, categories=CategorySelection.parse(args.categories, src.taxonomy),
-            every=args.every, max_entities=args.max_entities)
+        own = src.options.options_from(args, **common)
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    if args.jobs < 1:
-        raise UserError(f"--jobs must be at least 1, got {args.jobs}")
-    tally = ExtractTally(warn=lambda line: tqdm.write(line, file=sys.stderr))
-
-    if args.jobs > 1 or is_dataset(args.out):
-        try:
-            frames, rows = extract_parallel(src, args.input, args.out, options, args.jobs, tally)
-        except (FramesError, UserError):
-            if hint := wrong_source_hint(args.source, args.input):
-                raise UserError(hint) from None
-            raise
-        _summary(tally, frames, rows, args.out)
-        return 0
-    from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
-
-    # The maps go beside the file (F.maps/), staged until the frames are written.
-    target = maps_dir(args.out)
-    check_maps_target(target)
-    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        with frames_writer(args.out) as out, maps_writer(staged / "part-000000.parquet") as maps:
-            bar = tqdm(src.extract(args.input, options, tally, maps=maps.add), desc=f"extract {args.source}",
-                       unit=" frames", file=sys.stderr, disable=None, leave=False)
-            try:
-                for rows in bar:
-                    out.write_frame(rows)
-                if out.frames == 0:
-                    raise UserError(f"no frames found in {args.input} (check the source, --categories and --topics)")
-            except (FramesError, UserError):
-                # a source that found nothing to read may have been given another source's input: say which
-                if out.frames == 0 and (hint := wrong_source_hint(args.source, args.input)):
-                    raise UserError(hint) from None
-                raise
-        replace_maps(staged, target)
-    finally:
-        shutil.rmtree(staged, ignore_errors=True)
-    _summary(tally, out.frames, out.rows, args.out)
+    base = {f.name for f in dataclasses.fields(ExtractOptions)}
+    source_options = {f.name: getattr(own, f.name) for f in dataclasses.fields(own) if f.name not in base}
+    summary = extract(args.source, args.input, args.out, categories=args.categories, radius=args.radius,
+                      every=args.every, max_entities=args.max_entities, jobs=args.jobs,
+                      warn=lambda line: tqdm.write(line, file=sys.stderr), **source_options)
+    sys.stderr.write(f"r2s extract: {summary.line()}\n")
     return 0
-
-
-def _summary(tally, frames: int, rows: int, out: str) -> None:
-    notes = tally.notes()
-    sys.stderr.write(f"r2s extract: {tally.scenarios_read} scenarios, {frames} frames, {rows} rows -> "
-                     f"{out}{'; ' + notes if notes else ''}\n")

@@ -1,7 +1,7 @@
 """`r2s report programs.parquet --out DIR`: statistics tables and plots as DIR/report.md and DIR/report.html.
 
 The report is built in a temporary directory beside DIR and renamed into place (pipeline.report.output), so a
-failure or a kill leaves either the previous report or none, never half of one.
+failure or a kill leaves either the previous report or none, never half of one. What it does is pipeline.report.output.report (`from pipeline.report import report`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from pipeline.errors import UserError
-from pipeline.outputs import check_apart, staged_directory
+from pipeline.outputs import check_apart
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,59 +30,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.report.output import check_replaceable
-    from pipeline.report.stats import ProgramsDB
+    from pipeline.cli.inputs import read_pattern
+    from pipeline.report.output import report
 
     check_apart(args.out, [("programs", args.programs), ("frames", args.frames), ("pattern", args.query),
                            ("frame programs", args.frame_programs)], directory=True)
     if args.frame_programs is not None and args.frames is None:
         raise UserError("--frame-programs needs --frames: the frames both programs came from (where each frame is)")
-    if args.max_table_rows < 2:
-        raise UserError(f"--max-table-rows must be at least 2, got {args.max_table_rows}")
-    from pipeline.report.window_section import window_section
-
-    # A bad pattern or option: exit 2 before anything is read or written. The windows' section is there for
-    # window programs only (r2s run --window).
-    extra = (*_query_sections(args), window_section(args.frames, args.frame_programs))
-    target = Path(args.out)
-    with ProgramsDB(args.programs) as db:  # ProgramsError (exit 2) before anything is written
-        if db.rows == 0:
-            raise UserError(f"{args.programs} has no rows: nothing to report (did `r2s run` process any frame?)")
-        check_replaceable(target)
-        from pipeline.report.document import HTML_NAME, write_report
-
-        with staged_directory(target) as stage:
-            write_report(args.programs, stage, frames=args.frames, max_table_rows=args.max_table_rows, db=db,
-                         extra=extra)
-        line = summary_line(db)
-    print(f"r2s report: {line} -> {target / HTML_NAME}")
-    return 0
-
-
-def summary_line(db) -> str:
-    """What the report is about, in one line, as every verb ends: frames, configs and how each fared."""
-    from pipeline.report.stats import by_config
-
-    overview = db.overview
-    parts = [f"{overview.frames} frames", f"{len(overview.configs)} config{'s' * (len(overview.configs) != 1)}"]
-    for g in by_config(db):
-        median = "" if g.runtime_median is None else f", median {1000 * g.runtime_median:.1f} ms"
-        parts.append(f"{g.config}: {g.optimal_pct:.1f}% optimal{median}")
-    return "; ".join(parts)
-
-
-def _query_sections(args: argparse.Namespace) -> tuple:
-    if args.query is None:
-        return ()
-    from pipeline.cli.inputs import read_pattern
-    from pipeline.report.query_section import query_section
-
-    if args.frames is None:
+    if args.query is not None and args.frames is None:
         raise UserError("--query needs --frames: the frames the programs came from, where the pattern is matched")
-    if args.query_top < 1:
-        raise UserError(f"--query-top must be at least 1, got {args.query_top}")
-    pattern = read_pattern(args.query)
-    from extractors.frames_dataset import FramesDataset
-
-    FramesDataset.open(args.frames)  # a missing or foreign frames path is refused before the report is built
-    return (query_section(pattern, Path(args.query).name, args.frames, args.query_top),)
+    pattern = None if args.query is None else read_pattern(args.query)
+    summary = report(args.programs, args.out, frames=args.frames, query=pattern,
+                     query_name=Path(args.query).name if args.query else "pattern", query_top=args.query_top,
+                     max_table_rows=args.max_table_rows, frame_programs=args.frame_programs)
+    print(f"r2s report: {summary.line} -> {summary.html}")
+    return 0

@@ -3,7 +3,8 @@
 Writes DIR/sample_000.json ... (same entity ids as the program, ego included, types from the classes, headings
 in degrees [0, 360), each entity's length and width). The same program, seed and sampler give byte-identical
 files; sample k does not depend on K. Or `--program P.dsl --scene S.json`: the DSL program and the scene it
-describes. Every variant is checked against the DSL semantics, and in every variant two boxes overlap only if
+describes; or `--programs PROGRAMS FRAME`: the program `r2s run` wrote for that frame (its scenic column).
+What it does is pipeline.variants.sample.sample (`from pipeline import sample`). Every variant is checked against the DSL semantics, and in every variant two boxes overlap only if
 they overlap in the recorded scene (the collision rule the emitted text states).
 
 Samplers (`--sampler`, see pipeline.variants.sample): `gibbs` (default) is r2sgen's Metropolis-within-Gibbs chain over the
@@ -30,7 +31,11 @@ from pipeline.outputs import check_apart, staged_files
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenic_file", nargs="?", metavar="PROGRAM.scenic",
-                   help="Scenic program written by r2sgen, unedited (anything else is refused: compiling runs it)")
+                   help="Scenic program written by r2sgen, unedited (anything else is refused: compiling runs it); "
+                        "with --programs, the frame id instead")
+    p.add_argument("--programs", metavar="PROGRAMS",
+                   help="sample the program r2s run wrote for frame FRAME (the positional argument) in this programs "
+                        "file or dataset: r2s sample --programs programs scene-0061/0 --out variants")
     p.add_argument("--trusted", action="store_true",
                    help="sample a hand-written or edited Scenic file too, with Scenic (it runs as Python: only "
                         "files you checked)")
@@ -44,35 +49,39 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
-    from pipeline.variants.sample import ProgressReport, sample_program, sample_scenic
+    from pipeline.variants.sample import ProgressReport, sample, sample_scenic
 
     out = Path(args.out)
-    check_apart(out, [("program", args.scenic_file), ("program", args.dsl_file), ("scene", args.scene),
-                      ("config", args.config)], directory=True)
+    check_apart(out, [("program", None if args.programs else args.scenic_file), ("program", args.dsl_file),
+                      ("scene", args.scene), ("config", args.config), ("programs", args.programs)], directory=True)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {args.out} exists and is not a directory")
     options = sample_options(args, args.n)
-    if (args.scenic_file is None) == (args.dsl_file is None):
-        raise UserError("give either PROGRAM.scenic or --program P.dsl --scene S.json")
-    if args.dsl_file is not None:
-        if args.scene is None:
-            raise UserError("--program needs --scene (the scene it was synthesized for)")
-        config = load_config(args.config)
-        program, scene = read_program(args.dsl_file), read_scene(args.scene)
-        progress = ProgressReport("r2s sample")
-        try:
-            samples = sample_program(program, scene, config, options, progress)
-        finally:
-            progress.close()
-    else:
-        if args.scene is not None or args.config is not None:
-            raise UserError("--scene and --config belong to the --program route, not to a Scenic file")
-        text = read_text_file(args.scenic_file, "program")
-        progress = ProgressReport("r2s sample")
-        try:
+    routes = sum((args.programs is not None, args.dsl_file is not None,
+                  args.scenic_file is not None and args.programs is None))
+    if routes != 1:
+        raise UserError("give either PROGRAM.scenic, --program P.dsl --scene S.json, or --programs PROGRAMS FRAME")
+    if args.programs is not None and (args.scenic_file is None or args.scene or args.config or args.trusted):
+        raise UserError("--programs PROGRAMS takes the frame id (r2s sample --programs programs scene-0061/0 ...), "
+                        "and no --scene, --config or --trusted")
+    keywords = {f: getattr(options, f) for f in ("n", "seed", "max_iterations", "allow_collisions", "sampler",
+                                                 "burn_in", "thin")}
+    progress = ProgressReport("r2s sample")
+    try:
+        if args.programs is not None:
+            samples = sample(programs=args.programs, frame_id=args.scenic_file, progress=progress, **keywords)
+        elif args.dsl_file is not None:
+            if args.scene is None:
+                raise UserError("--program needs --scene (the scene it was synthesized for)")
+            samples = sample(read_program(args.dsl_file), read_scene(args.scene), config=load_config(args.config),
+                             progress=progress, **keywords)
+        else:
+            if args.scene is not None or args.config is not None:
+                raise UserError("--scene and --config belong to the --program route, not to a Scenic file")
+            text = read_text_file(args.scenic_file, "program")
             samples = sample_scenic(text, options, filename=args.scenic_file, trusted=args.trusted, progress=progress)
-        finally:
-            progress.close()
+    finally:
+        progress.close()
     width = max(3, len(str(args.n - 1)))
     # Every sample is written beside the directory first and moved in only when all are: a full disk never
     # leaves some of them.

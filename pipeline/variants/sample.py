@@ -315,3 +315,47 @@ def blockers(program: Program, scene: Scene, config: SynthConfig, seed: int, dra
     top = ", ".join(f"{a} and {b} ({share:.0%})" for (a, b), share in odds.pairs[:3])
     return (f"{odds.clear}/{draws} independent draws from the program satisfy the collision rule"
             + (f"; most often colliding: {top}" if top else ""))
+
+
+def sample(program=None, scene=None, *, programs=None, frame_id: str | None = None,
+           config: SynthConfig | dict | None = None, n: int = 1, seed: int = 0, sampler: str | None = None,
+           burn_in: int | None = None, thin: int | None = None, max_iterations: int = DEFAULT_MAX_ITERATIONS,
+           allow_collisions: bool = False, trusted: bool = False, progress: Progress | None = None) -> Samples:
+    """`r2s sample` in-process (docs/api.md): n variants of a recorded scene, from one of
+    - `program`, Scenic text r2sgen wrote (`r2s synth --format scenic`, a run's scenic column; `trusted` samples an
+      edited text with Scenic, as `--trusted` does),
+    - `program` a DSL `Program` or text and `scene` the scene it describes (a `Scene` or a scene JSON dict), with
+      `config` for the tolerances (a SynthConfig or a dict of its fields),
+    - `programs` (a programs file or dataset, r2s run's output) and `frame_id`: that frame's Scenic text.
+    The keywords after `config` are SampleOptions' fields (`r2s sample`'s options). Returns `Samples`: `.scenes`
+    (Scenes), `.sampler`, `.describe()`. Bad input raises an InputError (UserError, one line); no variant within
+    the budget raises SamplingFailed (exit 4 in `r2s sample`)."""
+    from pipeline.programs import scenic_of_frame
+
+    options = SampleOptions(n=n, seed=seed, max_iterations=max_iterations, allow_collisions=allow_collisions,
+                            sampler=sampler, burn_in=burn_in, thin=thin)
+    if programs is not None:
+        if program is not None or scene is not None or frame_id is None:
+            raise UserError("give programs and frame_id, or a program (and the scene, for a DSL program)")
+        text = scenic_of_frame(programs, frame_id)
+        if text is None:
+            raise UserError(f"{programs} has no program for frame {frame_id!r}")
+        return sample_scenic(text, options, filename=f"the program of {frame_id} in {programs}", progress=progress)
+    if program is None:
+        raise UserError("give a program: Scenic text, a DSL program with its scene, or programs and frame_id")
+    if scene is None:
+        if config is not None:
+            raise UserError("config belongs to the DSL route (a program with its scene), not to a Scenic text")
+        if not isinstance(program, str):
+            raise UserError("a DSL program needs the scene it was synthesized for")
+        return sample_scenic(program, options, trusted=trusted, progress=progress)
+    from synth.config import config_from_mapping
+    from synth.dsl import DslError, parse_program
+
+    try:
+        program = parse_program(program) if isinstance(program, str) else program
+        scene = scene_from_dict(scene) if isinstance(scene, dict) else scene
+        config = config_from_mapping(config) if isinstance(config, dict) else config or SynthConfig()
+    except (DslError, SceneError) as exc:
+        raise UserError(str(exc)) from None
+    return sample_program(program, scene, config, options, progress)
