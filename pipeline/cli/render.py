@@ -3,7 +3,8 @@
 Oriented boxes with heading arrows and ids in ego's frame, ego in red; with --program, an arrow from each
 reference to the entity it places or orients, coloured by relation kind; with --samples K, K variants sampled
 from the program as `r2s sample` draws them (same sampler and options), overlaid translucently under the
-recorded one.
+recorded one; with --matches M.parquet (r2s query's output), the entities a match binds in this frame outlined
+and named by the pattern's names.
 What it does is pipeline.variants.picture.render (`from pipeline import render`).
 Exit codes: 0 written; 2 bad input (one line, nothing written); 4 no variant found (as `r2s sample`); 1 bug.
 """
@@ -23,6 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(r2s run's output) by its frame id, instead of --program")
     p.add_argument("--samples", type=bounded_int(0, 1000), default=0, metavar="K",
                    help="overlay K variants sampled from the program (needs --program)")
+    p.add_argument("--matches", metavar="M.parquet",
+                   help="a matches file of r2s query: outline the entities its bindings of this frame bind, named by "
+                        "the pattern's names")
     add_config_option(p, ": the tolerances delta1, delta2")
     p.add_argument("--out", required=True, metavar="F", help="image file: .png, .svg or .pdf")
     add_sampling_options(p)
@@ -33,9 +37,9 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.variants.picture import render
 
     check_apart(args.out, [("scene", args.scene), ("program", args.program), ("programs", args.programs),
-                           ("config", args.config)])
+                           ("config", args.config), ("matches", args.matches)])
     render(read_scene(args.scene), args.out, program=read_program(args.program) if args.program else None,
            programs=args.programs, samples=args.samples, config=load_config(args.config),
-           sampling=sample_options(args, max(1, args.samples)), where_scene=args.scene)
+           sampling=sample_options(args, max(1, args.samples)), matches=args.matches, where_scene=args.scene)
     print(f"wrote {args.out}")
     return 0

@@ -20,15 +20,17 @@ from synth.semantics import check
 
 def render(scene, out: str | os.PathLike, *, program=None, programs=None, samples: int = 0,
            config: SynthConfig | dict | None = None, sampling: SampleOptions | None = None,
-           progress=None, where_scene: str | None = None) -> Path:
+           matches: str | os.PathLike | None = None, progress=None, where_scene: str | None = None) -> Path:
     """`r2s render` in-process (docs/api.md): draws `scene` (a Scene, a scene JSON dict, or a scene JSON file) into
     `out` (.png, .svg or .pdf, written atomically): with `program` (a Program or DSL text) or `programs` (a
     programs file or dataset: the frame's program from a run) its references, and `samples` variants sampled from
-    it (`sampling`: a SampleOptions, seed 0 by default; `where_scene` names the scene in messages). Returns the path written. Bad input raises an InputError
+    it (`sampling`: a SampleOptions, seed 0 by default); with `matches` (a matches file of `r2s query`) the
+entities its bindings of this frame bind, outlined and named by their pattern names (`where_scene` names the
+scene in messages). Returns the path written. Bad input raises an InputError
     (UserError, one line); no variant within the budget raises SamplingFailed."""
     where_scene = where_scene or (str(scene) if isinstance(scene, (str, os.PathLike)) else "the scene")
     check_apart(out, [("scene", scene if isinstance(scene, (str, os.PathLike)) else None),
-                      ("programs", programs)])
+                      ("programs", programs), ("matches", matches)])
     out = Path(out)
     if out.suffix.lstrip(".").lower() not in FORMATS:
         raise UserError(f"--out {out}: the file name must end in {', '.join('.' + f for f in FORMATS)}")
@@ -41,6 +43,7 @@ def render(scene, out: str | os.PathLike, *, program=None, programs=None, sample
     scene = _scene(scene)
     config = config_from_mapping(config) if isinstance(config, dict) else config or SynthConfig()
     program, where = _program(program, programs, scene)
+    bound = () if matches is None else _bound(matches, scene)
     subtitle, drawn = "", ()
     if program is not None:
         ids = {e.id for e in scene.entities}
@@ -60,8 +63,27 @@ def render(scene, out: str | os.PathLike, *, program=None, programs=None, sample
                     progress.close()
             drawn = variants.scenes
             subtitle += f"; {len(drawn)} variants ({variants.sampler}, seed {options.seed})"
-    save(draw(View(scene, program, drawn, subtitle)), out)
+    if matches is not None:
+        names = sorted({name for name, _ in bound})
+        subtitle = "; ".join(filter(None, (subtitle, f"bound by the match in {Path(matches).name}: {', '.join(names)}")))
+    save(draw(View(scene, program, drawn, subtitle, bound)), out)
     return out
+
+
+def _bound(matches, scene: Scene) -> tuple[tuple[str, str], ...]:
+    """(pattern name, entity id) for every binding of the scene's frame in the matches file."""
+    from pipeline.query.matches import bindings_of_frame
+
+    bindings = bindings_of_frame(matches, scene.frame_id)
+    if not bindings:
+        raise UserError(f"{matches} has no match in frame {scene.frame_id!r}")
+    ids = {e.id for e in scene.entities}
+    pairs = tuple(dict.fromkeys(p for b in bindings for p in b))
+    stray = next((eid for _, eid in pairs if eid not in ids), None)
+    if stray is not None:
+        raise UserError(f"{matches} binds {stray!r} in frame {scene.frame_id!r}, which the scene does not have "
+                        "(matches of other frames?)")
+    return pairs
 
 
 def _scene(scene) -> Scene:

@@ -76,6 +76,7 @@ FAMILIES: dict[str, Family] = {
                             ("Barrier", "TrafficCone", "PushableObject", "Debris", "BicycleRack", "Object")),
 }
 EGO_FILL, EGO_EDGE = "#e31a1c", "#67000d"
+BOUND_EDGE = "#00a087"  # a match's bound entities: a thick outline no family or relation uses
 
 
 @dataclass(frozen=True)
@@ -199,6 +200,7 @@ class View:
     program: Program | None = None
     samples: tuple[Scene, ...] = ()
     subtitle: str = ""
+    bound: tuple[tuple[str, str], ...] = ()  # (pattern name, entity id): a query's match, outlined and named
 
 
 def draw(view: View):
@@ -243,14 +245,23 @@ def draw(view: View):
         ax.annotate("", xy=b.front(), xytext=(b.x, b.y), zorder=4,
                     arrowprops={"arrowstyle": "-|>", "color": "white" if ego else "#303030", "lw": 0.8,
                                 "mutation_scale": 6, "shrinkA": 0, "shrinkB": 0})
-        # The id just below the box (in metres, so it follows the box at any zoom).
-        ax.text(b.x, min(c[1] for c in b.corners()) - 0.4, b.id, fontsize=font, ha="center", va="top", zorder=6,
-                color=EGO_EDGE if ego else "#202020", fontweight="bold" if ego else "normal")
+        names = [name for name, eid in view.bound if eid == b.id]
+        if names:
+            ax.add_patch(Polygon(b.corners(), closed=True, facecolor="none", edgecolor=BOUND_EDGE, linewidth=2.4,
+                                 zorder=3.5))
+        # The id just below the box (in metres, so it follows the box at any zoom); a bound one with its names.
+        label = f"{b.id} = {', '.join(names)}" if names else b.id
+        ax.text(b.x, min(c[1] for c in b.corners()) - 0.4, label, fontsize=font, ha="center", va="top", zorder=6,
+                color=BOUND_EDGE if names else EGO_EDGE if ego else "#202020",
+                fontweight="bold" if ego or names else "normal")
 
     handles = [Patch(facecolor=EGO_FILL, edgecolor=EGO_EDGE, label="ego")]
     present = {family_of(b.type) for b in boxes.values() if b.id != "ego"}
     handles += [Patch(facecolor=f.fill, edgecolor="#303030", label=name) for name, f in FAMILIES.items()
                 if name in present]
+    if view.bound:
+        handles.append(Patch(facecolor="none", edgecolor=BOUND_EDGE, linewidth=2.4,
+                             label="bound by the match\n(id = pattern name)"))
     drawn = {r.style for r in road}
     handles += [Patch(facecolor=st.face, edgecolor=st.edge, label=st.label) if st.face != "none" else
                 Line2D([], [], color=st.edge, label=st.label) for name, st in ROAD_STYLES.items() if name in drawn]

@@ -191,3 +191,51 @@ def test_the_road_is_drawn_in_ego_s_frame_under_the_boxes(tmp_path):
     path.write_text(scene_from_dict(plain).to_json())
     assert run_r2s("render", str(path), "--out", str(without)).returncode == 0
     assert with_road.read_bytes() != without.read_bytes()
+
+
+def test_render_matches_outlines_and_names_exactly_the_bound_entities(tmp_path, monkeypatch):
+    """`r2s render --matches M`: every entity a binding of the frame binds (read back from the matches file as pandas
+    reads it) is outlined and labelled with its pattern name; no other is."""
+    import pandas as pd
+
+    import pipeline.variants.picture as picture
+    from pipeline import render, scene
+    from pipeline.variants.render import BOUND_EDGE, draw
+
+    keyframes = "data/nuscenes-mini-keyframes/frames.parquet"
+    proc = run_r2s("query", keyframes, "data/patterns/queue-of-three.dsl", "--all", "--out", str(tmp_path / "m.parquet"))
+    assert proc.returncode == 0, proc.stderr
+    matches = pd.read_parquet(tmp_path / "m.parquet")
+    fid = matches.frame_id.value_counts().index[0]  # the frame with the most bindings
+    want = {(name, eid) for b in matches[matches.frame_id == fid].binding for name, eid in b.items()}
+    seen = []
+    monkeypatch.setattr(picture, "draw", lambda view: seen.append(view) or draw(view))
+    s = scene(keyframes, fid)
+    render(s, tmp_path / "m.png", matches=tmp_path / "m.parquet")
+    assert set(seen[0].bound) == want and len(want) > 3
+    fig = draw(seen[0])
+    ax = fig.axes[0]
+    outlined = [p for p in ax.patches if p.get_edgecolor()[:3] == pytest.approx((0.0, 160 / 255, 135 / 255))
+                and p.get_linewidth() > 2]
+    assert len(outlined) == len({eid for _, eid in want})
+    labels = {t.get_text() for t in ax.texts}
+    for eid in {eid for _, eid in want}:
+        names = [n for n, e in seen[0].bound if e == eid]
+        assert f"{eid} = {', '.join(names)}" in labels
+    assert BOUND_EDGE == "#00a087"
+    # The CLI: the same picture from the same inputs, a frame without a match and a file that is not a matches file.
+    (tmp_path / "s.json").write_text(s.to_json())
+    proc = run_r2s("render", str(tmp_path / "s.json"), "--matches", str(tmp_path / "m.parquet"),
+                   "--out", str(tmp_path / "cli.png"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "cli.png").read_bytes() == (tmp_path / "m.png").read_bytes()
+    other = next(f for f in sorted(set(pd.read_parquet(keyframes).frame_id)) if f not in set(matches.frame_id))
+    (tmp_path / "o.json").write_text(scene(keyframes, other).to_json())
+    pd.DataFrame({"frame_id": ["x"], "n": [1]}).to_parquet(tmp_path / "not-matches.parquet")
+    for scene_file, file, words in (("o.json", "m.parquet", "has no match in frame"),
+                                    ("s.json", "not-matches.parquet", "is not a matches file"),
+                                    ("s.json", "s.json", "not a readable Parquet file")):
+        proc = run_r2s("render", str(tmp_path / scene_file), "--matches", str(tmp_path / file),
+                       "--out", str(tmp_path / "bad.png"))
+        assert_one_line_error(proc, contains=words)
+        assert words in proc.stderr and not (tmp_path / "bad.png").exists()
