@@ -160,6 +160,7 @@ class ExtractTally:
     by_fallback: Counter = field(default_factory=Counter)  # "raw as FALLBACK" -> objects
     unknown_kept: Counter = field(default_factory=Counter)  # raw -> objects typed UNKNOWN_CLASS
     unknown_left_out: Counter = field(default_factory=Counter)  # raw -> objects left out
+    categories_left_out: Counter = field(default_factory=Counter)  # Scenic class -> boxes --categories left out
     _scene: str | None = field(default=None, repr=False, compare=False)
 
     def frame_of(self, scene: str) -> None:
@@ -182,10 +183,15 @@ class ExtractTally:
         return self.scenarios + sum(self.skipped.values())
 
     def notes(self) -> str:
-        """What was skipped and why, and how objects of unknown type were typed ("" when nothing was)."""
+        """What was skipped and why, what --categories left out (boxes by Scenic class), and how objects of unknown
+        type were typed ("" when nothing was)."""
         parts = []
         if self.skipped:
             parts.append(f"skipped {sum(self.skipped.values())} scenarios ({_listing(self.skipped)})")
+        if self.categories_left_out:
+            # Said first among the objects: a query for a type this dropped finds nothing, so the user must see it.
+            parts.append(f"--categories left out {sum(self.categories_left_out.values())} boxes within --radius "
+                         f"({_listing(self.categories_left_out)})")
         unknown = [(self.by_fallback, "typed by their MetaDrive type"), (self.unknown_kept, f"typed {UNKNOWN_CLASS}"),
                    (self.unknown_left_out, "left out")]
         if any(c for c, _ in unknown):
@@ -247,11 +253,16 @@ class FrameBuilder:
         """The Scenic class of a box under --categories, or None to leave it out; a category no map knows is
         classified by the box's fallback if that is known, else as UNKNOWN_CLASS, and counted either way."""
         select = self.options.categories.select
-        if self.taxonomy.scenic_class(b.category) is not None:
-            return select(self.taxonomy, b.category)
-        if b.fallback is not None and self.taxonomy.scenic_class(b.fallback) is not None:
-            ExtractTally.count(self.tally.by_fallback, f"{b.category} as {b.fallback}")
-            return select(self.taxonomy, b.fallback)
+        for by_fallback, raw in enumerate((b.category, b.fallback)):
+            known = None if raw is None else self.taxonomy.scenic_class(raw)
+            if known is None:
+                continue
+            if by_fallback:
+                ExtractTally.count(self.tally.by_fallback, f"{b.category} as {b.fallback}")
+            cls = select(self.taxonomy, raw)
+            if cls is None:
+                ExtractTally.count(self.tally.categories_left_out, known)
+            return cls
         cls = select(self.taxonomy, b.category)
         ExtractTally.count(self.tally.unknown_kept if cls is not None else self.tally.unknown_left_out, b.category)
         return cls

@@ -142,3 +142,29 @@ def test_summary_line_counts_scenarios_frames_and_rows(tmp_path, capsys):
     assert res.stderr == (f"r2s extract: {df.scene.nunique()} scenarios, {df.frame_id.nunique()} frames, "
                           f"{len(df)} rows -> {out}\n")
     assert df.scene.nunique() == 3
+
+
+@pytest.mark.parametrize("source,path", [("scenarionet", EXCERPT / "scenarionet"), ("nuscenes", EXCERPT)])
+@pytest.mark.parametrize("categories", ["vehicles", "Pedestrian", "Car,Barrier", "human.pedestrian"])
+def test_the_summary_says_what_categories_left_out_by_type(tmp_path, capsys, source, path, categories):
+    """Nothing filtered silently: the boxes --categories left out, counted by type, are exactly those that an
+    extraction of every type has and this one lacks (the same frames, radius and ids)."""
+    every = tmp_path / "all.parquet"
+    assert r2s(capsys, "extract", source, str(path), "--out", str(every)).returncode == 0
+    chosen = tmp_path / "chosen.parquet"
+    res = r2s(capsys, "extract", source, str(path), "--categories", categories, "--out", str(chosen))
+    assert res.returncode == 0, res.stderr
+    a, c = read_frames(every), read_frames(chosen)
+    a, c = a[~a.is_ego], c[~c.is_ego]
+    dropped = a[~a.set_index(["frame_id", "entity_id"]).index.isin(c.set_index(["frame_id", "entity_id"]).index)]
+    want = dropped.type.value_counts()
+    assert len(want), "the selection should leave something out"
+    listing = ", ".join(f"{t} x{n}" for t, n in sorted(want.items(), key=lambda kv: (-kv[1], kv[0])))
+    assert f"--categories left out {len(dropped)} boxes within --radius ({listing})" in res.stderr, res.stderr
+    # every type kept is named nowhere in the listing
+    assert not set(c.type) & set(want.index)
+
+
+def test_all_categories_leave_nothing_out_and_say_nothing(tmp_path, capsys):
+    res = r2s(capsys, "extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(tmp_path / "f.parquet"))
+    assert res.returncode == 0 and "left out" not in res.stderr
