@@ -55,9 +55,8 @@ class Statement:
         unknown = sorted(set(given) - set(order))
         if unknown:
             raise TypeError(f"Statement: no part named {unknown[0]!r}")
-        missing = [p.name for p in all_parts() if not p.optional and given.get(p.name) is None]
-        if missing:
-            raise TypeError(f"Statement: no {missing[0]} clause")
+        # A program's statement carries every required part (the parser and Alg. 4 see to it); a pattern's may
+        # leave one out, which means "any" (synth.pattern).
         object.__setattr__(self, "id", id)
         object.__setattr__(self, "type", type)
         object.__setattr__(self, "parts", tuple(sorted(((n, c) for n, c in given.items() if c is not None),
@@ -81,8 +80,13 @@ class Statement:
     def cost(self) -> int:
         return sum(c.cost for _, c in self.clauses())
 
+    @property
+    def complete(self) -> bool:
+        """Does it carry a clause of every required part (as a program's statement must)?"""
+        return all(p.optional or getattr(self, p.name) is not None for p in all_parts())
+
     def __str__(self) -> str:
-        return f"{self.id} = new {self.type} " + ", ".join(str(c) for _, c in self.clauses())
+        return " ".join(filter(None, (f"{self.id} = new {self.type}", ", ".join(str(c) for _, c in self.clauses()))))
 
 
 @dataclass(frozen=True)
@@ -109,22 +113,25 @@ def parse_program(text: str) -> Program:
     return Program(parse_statements(text, ENTITY_TYPES))
 
 
-def parse_statements(text: str, types: Collection[str]) -> tuple[Statement, ...]:
+def parse_statements(text: str, types: Collection[str], reader=None) -> tuple[Statement, ...]:
     """The statements of DSL text whose TYPEs are drawn from `types` (programs: the entity types; patterns,
-    synth.pattern, add their type classes). Errors name the line and column."""
+    synth.pattern, add their type classes and read their lines with their own `reader`, called as _statement
+    is). Errors name the line and column."""
     declared: set[str] = set()
     statements = []
     for lineno, raw in enumerate(lines(text), start=1):
         line = raw.split("#", 1)[0]
         if not line.strip(BLANKS):
             continue
-        st = _statement(Line(line, lineno), declared, types)
-        declared.add(st.id)
+        st = (reader or _statement)(Line(line, lineno), declared, types)
+        if st.id != EGO_ID:  # a pattern's line about ego (synth.pattern) declares nothing
+            declared.add(st.id)
         statements.append(st)
     return tuple(statements)
 
 
-def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statement:
+def statement_head(ln: Line, declared: set[str], types: Collection[str]) -> tuple[str, str]:
+    """`ID = new TYPE`: the declared name (an identifier, not ego, not declared before) and its type."""
     name = ln.take("word")
     try:
         check_identifier(name)
@@ -139,6 +146,11 @@ def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statemen
     etype = ln.take("word")
     if etype not in types:
         raise DslError(f"{ln.where(back=1)}: unknown type {etype!r}")
+    return name, etype
+
+
+def _statement(ln: Line, declared: set[str], types: Collection[str]) -> Statement:
+    name, etype = statement_head(ln, declared, types)
     clauses = {}
     parts = all_parts()
     for k, part in enumerate(p for p in parts if not p.optional):
@@ -161,5 +173,5 @@ __all__ = [
     "DIRECTIONS", "FACINGS", "AbsoluteHeading", "AbsoluteSpeed", "AbsoluteXYPos", "DirectionPos", "DslError",
     "FacingRelation", "Heading", "LocalXYPos", "Motion", "MovingLike", "Position", "Program", "Range",
     "RelativeHeading", "RelativeSpeed", "Stationary", "Statement", "fmt_number",
-    "format_program", "parse_program", "parse_statements",
+    "format_program", "parse_program", "parse_statements", "statement_head",
 ]

@@ -1,9 +1,13 @@
 """Patterns: DSL programs whose declared names are variables, matched against scenes (scenario mining).
 
-A pattern is a program in the DSL, parsed by the same parser, with two differences of reading:
+A pattern is a program in the DSL, parsed by the same parser, with these differences of reading:
 - TYPE may also be a type class: `Vehicle` (any of VEHICLE_CLASSES, what `--categories vehicles` keeps) or
   `Object` (any type at all);
-- Ranges are taken as written, of any width (the C_dist / C_head widths are a rule for synthesized programs).
+- Ranges are taken as written, of any width (the C_dist / C_head widths are a rule for synthesized programs);
+- a statement may leave out its position or heading clause (or both): any position, any heading;
+- a position may be a distance alone, `within Range(a, b) of REF` (WithinDistance: any direction);
+- a line `ego CLAUSE, ...` constrains the frame's ego by clauses of the optional parts (its motion: `ego
+  stationary`, `ego moving Range(5, 15) m/s`, `ego moving like car`), its references declared above it.
 A match of a pattern in a scene is an injective binding of its names to the scene's non-ego entities, of
 matching types, under which every statement holds by the DSL semantics, REF resolved through the binding
 (synth.semantics: the same functions `r2s check` uses). This module is the definition; pipeline.query.mining is the
@@ -12,21 +16,74 @@ vectorized engine over a whole frames dataset, which must agree with it exactly.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+import math
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from synth.config import SynthConfig
-from synth.dsl import DslError, Statement, parse_statements
+from synth.dsl import DslError, Statement, parse_statements, statement_head
+from synth.parts import Clause, Part, all_parts
+from synth.parts.position import LENGTH_EPS
 from synth.scene import EGO_ID, ENTITY_TYPES, VEHICLE_CLASSES, Entity, Scene
+from synth.syntax import Line, Range
 
 VEHICLE = "Vehicle"
 ANY = "Object"
 PATTERN_TYPES = frozenset(ENTITY_TYPES) | {VEHICLE}
 
 
+PATTERN_ONLY = "a pattern's clause: patterns are matched, never synthesized, certified or sampled"
+
+
+@dataclass(frozen=True)
+class WithinDistance(Clause):
+    """`within Range(a, b) of REF`, in patterns only: the centre distance to REF is in [a, b] (within 1e-9 m, as
+    every length of the checker), in any direction. A position clause (it takes the position's place)."""
+
+    distance: Range
+    ref: str
+    cost = 0
+    text = "within {c.distance} of {c.ref}"
+    labels = ("within",)
+    drawn_as = "sector"
+    first_word = "within"
+
+    @classmethod
+    def read(cls, ln: Line, declared: set[str]) -> WithinDistance | None:
+        if not ln.accept("within"):
+            return None
+        distance = ln.range_()
+        ln.take(text="of")
+        return cls(distance, ln.reference(declared))
+
+    def holds(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
+        return self.distance.contains(math.hypot(e.x - ref.x, e.y - ref.y), LENGTH_EPS)
+
+    def observed(self, e: Entity) -> str:
+        return f"({e.x:.3f}, {e.y:.3f})"
+
+    def formula(self, backend: Any, e: Entity, ref: Entity | None) -> Any:
+        raise NotImplementedError(PATTERN_ONLY)
+
+    def violations(self, backend: Any, e: Entity, ref: Entity | None) -> list[Any]:
+        raise NotImplementedError(PATTERN_ONLY)
+
+    def scenic(self, at: str) -> str:
+        raise NotImplementedError(PATTERN_ONLY)
+
+    def draws(self, config: SynthConfig) -> Any:
+        raise NotImplementedError(PATTERN_ONLY)
+
+
+# Pattern-only clause kinds, by the part whose place they take.
+PATTERN_CLAUSES: dict[str, tuple[type[Clause], ...]] = {"position": (WithinDistance,)}
+
+
 @dataclass(frozen=True)
 class Pattern:
     statements: tuple[Statement, ...]
+    ego: Statement | None = None  # the `ego ...` line: clauses of optional parts that ego must satisfy
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -34,19 +91,79 @@ class Pattern:
 
     @property
     def uses_motion(self) -> bool:
-        """Does a statement carry a MOTION clause (which needs the entities' speeds)?"""
-        return any(s.motion is not None for s in self.statements)
+        """Does a statement (or the ego line) carry a MOTION clause (which needs the entities' speeds)?"""
+        return any(s.motion is not None for s in (*self.statements, *([self.ego] if self.ego else [])))
 
     def __str__(self) -> str:
-        return "".join(f"{s}\n" for s in self.statements)
+        ego = f"{EGO_ID} {', '.join(str(c) for _, c in self.ego.clauses())}\n" if self.ego is not None else ""
+        return "".join(f"{s}\n" for s in self.statements) + ego
 
 
 def parse_pattern(text: str) -> Pattern:
     """A pattern from DSL text; errors (DslError) carry the line and column, as `r2s check` reports them."""
-    statements = parse_statements(text, PATTERN_TYPES)
+    lines = parse_statements(text, PATTERN_TYPES, reader=_pattern_line)
+    statements = tuple(st for st in lines if st.id != EGO_ID)
     if not statements:
         raise DslError("line 1 column 1: the pattern declares no name (one statement a line: NAME = new TYPE ...)")
-    return Pattern(statements)
+    return Pattern(statements, next((st for st in lines if st.id == EGO_ID), None))
+
+
+def _pattern_line(ln: Line, declared: set[str], types: Collection[str]) -> Statement:
+    """A pattern's line: `NAME = new TYPE [CLAUSE[, CLAUSE ...]]`, its clauses in the parts' order, each part at
+    most once (a required part left out: any); or `ego CLAUSE[, ...]` with clauses of the optional parts."""
+    if ln.peek() == EGO_ID:
+        ln.take()
+        if ln.peek() == "=":
+            raise DslError(f"{ln.where()}: ego is given by the scene and is never declared; constrain it with a line "
+                           "such as `ego moving Range(5, 15) m/s`")
+        if EGO_ID in declared:
+            raise DslError(f"{ln.where(back=1)}: ego is constrained twice (one `ego ...` line, its clauses "
+                           "comma-separated)")
+        clauses = _clauses(ln, declared, [p for p in all_parts() if p.optional], "ego")
+        if not clauses:
+            raise DslError(f"{ln.where()}: expected a clause about ego after `ego`")
+        declared.add(EGO_ID)  # marks the ego line as given (references to ego are always allowed)
+        return Statement(EGO_ID, ANY, **clauses)
+    name, etype = statement_head(ln, declared, types)
+    return Statement(name, etype, **_clauses(ln, declared, list(all_parts()), name))
+
+
+def _clauses(ln: Line, declared: set[str], parts: list[Part], who: str) -> dict[str, Clause]:
+    clauses: dict[str, Clause] = {}
+    ln.accept(",")  # `p = new Pedestrian, facing toward ego` reads as well as without the comma
+    while ln.peek() is not None:
+        if clauses:
+            ln.take(text=",")
+        part, clause = _clause(ln, declared, parts, who)
+        clauses[part.name] = clause
+        parts = parts[parts.index(part) + 1:]
+    ln.end()
+    return clauses
+
+
+def _clause(ln: Line, declared: set[str], parts: list[Part], who: str) -> tuple[Part, Clause]:
+    """The clause at the cursor, of the first of `parts` (the parts not yet said, in order) that reads one."""
+    for part in parts:
+        for kind in PATTERN_CLAUSES.get(part.name, ()):
+            if (clause := kind.read(ln, declared)) is not None:
+                return part, clause
+        start = ln.i
+        try:
+            return part, part.parse(ln, declared)
+        except DslError:
+            if ln.i > start:  # the part recognised its first word: the error is in its clause
+                raise
+            ln.i = start
+    found = ln.peek()
+    words = ", ".join(f"{p.name} ({', '.join(sorted(_first_words(p)))})" for p in parts)
+    raise DslError(f"{ln.where()}: expected a clause of {who} in this order: {words or 'none left'}; found "
+                   f"{'end of line' if found is None else repr(found)}")
+
+
+def _first_words(part: Part) -> set[str]:
+    """The words a part's clauses begin with, for messages (position and heading parse themselves)."""
+    own = {"position": {"ahead of", "behind", "left of", "right of", "on"}, "heading": {"facing"}}.get(part.name, set())
+    return own | set(part.first_words) | {k.first_word for k in PATTERN_CLAUSES.get(part.name, ())}
 
 
 def matched_types(pattern_type: str) -> frozenset[str] | None:
@@ -73,9 +190,11 @@ def statement_holds(st: Statement, bound: Mapping[str, Entity], config: SynthCon
 
 
 def binding_holds(pattern: Pattern, ego: Entity, binding: Mapping[str, Entity], config: SynthConfig) -> bool:
-    """Is `binding` (pattern name -> entity, injective, ego excluded) a match? The definition the engine meets."""
+    """Is `binding` (pattern name -> entity, injective, ego excluded) a match? The definition the engine meets:
+    every statement holds, and the ego line of ego."""
     bound = {EGO_ID: ego, **binding}
-    return all(statement_holds(st, bound, config) for st in pattern.statements)
+    return all(statement_holds(st, bound, config) for st in pattern.statements) and (
+        pattern.ego is None or statement_holds(pattern.ego, bound, config))
 
 
 def matches(pattern: Pattern, scene: Scene, config: SynthConfig | None = None) -> Iterator[dict[str, str]]:
@@ -91,7 +210,8 @@ def matches(pattern: Pattern, scene: Scene, config: SynthConfig | None = None) -
 
     def extend(k: int) -> Iterator[dict[str, str]]:
         if k == len(statements):
-            yield {st.id: bound[st.id].id for st in statements}
+            if pattern.ego is None or statement_holds(pattern.ego, bound, config):
+                yield {st.id: bound[st.id].id for st in statements}
             return
         st = statements[k]
         for i, e in enumerate(others):

@@ -48,7 +48,7 @@ from synth.dsl import (
     Stationary,
 )
 from synth.parts.motion import SPEED_EPS
-from synth.pattern import Pattern, matched_types
+from synth.pattern import Pattern, WithinDistance, matched_types
 from synth.scene import EGO_ID
 from synth.semantics import ANGLE_EPS, LENGTH_EPS
 
@@ -138,6 +138,12 @@ def direction_pos(pos: DirectionPos, e: str, r: str | None, config: SynthConfig)
     return _and_exact(_distinct_points(e, r), Condition.all([dist, angle]))
 
 
+def within_distance(pos: WithinDistance, e: str, r: str | None, config: SynthConfig) -> Condition:
+    # Distance alone: direction_pos's distance test, with no cone and coincident points allowed.
+    dx, dy = f"({e}.x - {r}.x)", f"({e}.y - {r}.y)"
+    return _within(f"sqrt({dx} * {dx} + {dy} * {dy})", pos.distance.lo - LENGTH_EPS, pos.distance.hi + LENGTH_EPS)
+
+
 def local_xy_pos(pos: LocalXYPos, e: str, r: str | None, config: SynthConfig) -> Condition:
     dx, dy = f"({e}.x - {r}.x)", f"({e}.y - {r}.y)"
     # synth.geometry.to_local: lx = dx cos t + dy sin t, ly = dy cos t - dx sin t.
@@ -205,6 +211,7 @@ def _undecided(clause, e: str, r: str | None, config: SynthConfig) -> Condition:
 
 BUILDERS: dict[type, Builder] = {
     DirectionPos: direction_pos,
+    WithinDistance: within_distance,
     LocalXYPos: local_xy_pos,
     AbsoluteXYPos: absolute_xy_pos,
     FacingRelation: facing_relation,
@@ -327,6 +334,13 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
         sure_parts.append(f"({bcond.sure})")
         candidate_parts.append(f"({bcond.candidate})")
         joins.append(f"JOIN {a} ON {' AND '.join(on)}")
+    if pattern.ego is not None:
+        # The ego line: conditions on g, the frame's ego row, in the final filter (the ego CTE keeps every frame:
+        # frame_pos numbers a scene's frames for events).
+        ego = Condition.all([clause_condition(c, "g", None if c.ref is None else alias[c.ref], config)
+                             for c in clauses(pattern.ego)])
+        sure_parts.append(f"({ego.sure})")
+        candidate_parts.append(f"({ego.candidate})")
     numbers = [f"{a}.{c}" for a in ["g"] + [alias[n] for n in names] for c in ("x", "y", "heading", "speed")]
     types = [f"{alias[n]}.type" for n in names]
     key = "[" + ", ".join(f"{alias[n]}.ord" for n in names) + "]"

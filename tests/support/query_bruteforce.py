@@ -4,7 +4,9 @@ It shares nothing with pipeline.query.mining / pipeline.query.sql or with synth.
 non-ego entities of the right types (the type classes written out again here), the pattern is made a program with
 the bound entities' own types, the scene is cut to ego plus those entities renamed to the pattern's names, and
 synth.semantics.check (the checker `r2s check` runs) decides; tuples are extended one name at a time and a prefix
-the checker refuses is not extended. Exponential in the number of names: small patterns.
+the checker refuses is not extended; a whole tuple then needs the pattern's ego line to hold of ego, judged by the
+checker's own statement check with ego's type. A statement that leaves out a clause is checked on the clauses it
+has. Exponential in the number of names: small patterns.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from synth.config import SynthConfig
 from synth.dsl import Program
 from synth.pattern import Pattern
 from synth.scene import Scene
-from synth.semantics import check
+from synth.semantics import check, check_statement
 
 VEHICLE_TYPES = {"Car", "Truck", "Bus", "Motorcycle", "Bicycle", "Trailer", "ConstructionVehicle", "EmergencyVehicle"}
 
@@ -48,6 +50,10 @@ def brute_matches(pattern: Pattern, scene: Scene, config: SynthConfig | None = N
     def extend(bound: list[int]) -> None:
         # A prefix of the program only refers to earlier names, so a failing prefix fails every extension.
         if len(bound) == len(statements):
+            if pattern.ego is not None:
+                by_id = {"ego": scene.ego, **{st.id: renamed[k][i] for k, (st, i) in enumerate(zip(statements, bound))}}
+                if check_statement(replace(pattern.ego, type=scene.ego.type), by_id, config):
+                    return
             found.append(tuple(others[i].id for i in bound))
             return
         st = statements[len(bound)]
