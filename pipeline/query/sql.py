@@ -81,8 +81,8 @@ class Condition:
 
     @staticmethod
     def all(conds: list[Condition]) -> Condition:
-        if not conds:
-            return Condition("TRUE", "FALSE")
+        if not conds:  # nothing to hold (a name whose clauses all left out, or all on other names): surely true
+            return Condition("TRUE", "TRUE")
         return Condition(" AND ".join(f"({c.candidate})" for c in conds), " AND ".join(f"({c.sure})" for c in conds))
 
 

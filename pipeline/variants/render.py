@@ -8,6 +8,7 @@ in ego's frame (metres, +x right of ego, +y ahead of it, equal aspect), whatever
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -203,6 +204,30 @@ class View:
     bound: tuple[tuple[str, str], ...] = ()  # (pattern name, entity id): a query's match, outlined and named
 
 
+# Variants are drawn in their entity's colour (and its recorded box outlined and labelled in it), from this palette
+# of dark, distinct hues; entities near each other get different ones (entity_colours).
+ENTITY_PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
+                  "#ff7f0e", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d",
+                  "#31a354", "#756bb1", "#636363", "#a55194")
+LABEL_GID = "r2s-entity-label"  # every entity's label carries it (the tests find the labels by it)
+LEADER_COLOUR = "#8a8a8a"
+
+
+def entity_colours(boxes: dict[str, Footprint]) -> dict[str, str]:
+    """A palette colour for every non-ego entity, in scene order, each the colour whose nearest earlier holder is
+    farthest away (first in palette order on ties): with 20 colours, two entities that share one are far apart."""
+    taken: dict[str, list[Footprint]] = {c: [] for c in ENTITY_PALETTE}
+    out = {}
+    for b in boxes.values():
+        if b.id == "ego":
+            continue
+        colour = max(ENTITY_PALETTE, key=lambda c: min((math.hypot(b.x - o.x, b.y - o.y) for o in taken[c]),
+                                                        default=math.inf))
+        taken[colour].append(b)
+        out[b.id] = colour
+    return out
+
+
 def draw(view: View):
     """A matplotlib Figure (Agg canvas) of the view."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -213,14 +238,17 @@ def draw(view: View):
     boxes = ego_frame(view.scene)
     sample_boxes = [b for s in view.samples for b in ego_frame(s).values() if b.id != "ego"]
     x0, x1, y0, y1 = _extent([*boxes.values(), *sample_boxes], margin=4.0)
-    # Plot side ~ 9 in on the longer axis; the legend gets its own strip on the right.
+    n = len(boxes)
+    # Plot side ~ 9 in on the longer axis (12 in beyond 40 entities, so a dense frame's labels have room); the
+    # legend gets its own strip on the right.
+    side = 9.0 if n <= 40 else 12.0
     span = max(x1 - x0, y1 - y0)
-    w_in, h_in = max(5.0, 9.0 * (x1 - x0) / span), max(4.0, 9.0 * (y1 - y0) / span)
+    w_in, h_in = max(5.0, side * (x1 - x0) / span), max(4.0, side * (y1 - y0) / span)
     fig = Figure(figsize=(w_in + 3.0, h_in + 0.9), dpi=150, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    n = len(boxes)
-    font = 7.0 if n <= 25 else 5.5 if n <= 70 else 4.5
+    font = 7.0 if n <= 25 else 6.0 if n <= 70 else 5.0
+    colours = entity_colours(boxes) if view.samples else {}
 
     road = road_shapes(view.scene)
     for r in road:
@@ -234,31 +262,28 @@ def draw(view: View):
     # Dense enough that where variants pile up reads as likely, sparse enough that single ones still show.
     alpha = max(0.06, min(0.3, 2.0 / max(1, len(view.samples))))
     for b in sample_boxes:
-        color = FAMILIES[family_of(b.type)].variant
+        color = colours.get(b.id, FAMILIES[family_of(b.type)].variant)
         ax.add_patch(Polygon(b.corners(), closed=True, facecolor=color, edgecolor=color, linewidth=0.3,
                              alpha=alpha, zorder=1))
+    bound = {eid for _, eid in view.bound}
     for b in boxes.values():
         ego = b.id == "ego"
-        face, edge = (EGO_FILL, EGO_EDGE) if ego else (FAMILIES[family_of(b.type)].fill, "#303030")
-        ax.add_patch(Polygon(b.corners(), closed=True, facecolor=face, edgecolor=edge, linewidth=1.2 if ego else 0.7,
-                             zorder=3))
+        face, edge = (EGO_FILL, EGO_EDGE) if ego else (FAMILIES[family_of(b.type)].fill, colours.get(b.id, "#303030"))
+        ax.add_patch(Polygon(b.corners(), closed=True, facecolor=face, edgecolor=edge,
+                             linewidth=1.2 if ego or b.id in colours else 0.7, zorder=3))
         ax.annotate("", xy=b.front(), xytext=(b.x, b.y), zorder=4,
                     arrowprops={"arrowstyle": "-|>", "color": "white" if ego else "#303030", "lw": 0.8,
                                 "mutation_scale": 6, "shrinkA": 0, "shrinkB": 0})
-        names = [name for name, eid in view.bound if eid == b.id]
-        if names:
+        if b.id in bound:
             ax.add_patch(Polygon(b.corners(), closed=True, facecolor="none", edgecolor=BOUND_EDGE, linewidth=2.4,
                                  zorder=3.5))
-        # The id just below the box (in metres, so it follows the box at any zoom); a bound one with its names.
-        label = f"{b.id} = {', '.join(names)}" if names else b.id
-        ax.text(b.x, min(c[1] for c in b.corners()) - 0.4, label, fontsize=font, ha="center", va="top", zorder=6,
-                color=BOUND_EDGE if names else EGO_EDGE if ego else "#202020",
-                fontweight="bold" if ego or names else "normal")
 
     handles = [Patch(facecolor=EGO_FILL, edgecolor=EGO_EDGE, label="ego")]
     present = {family_of(b.type) for b in boxes.values() if b.id != "ego"}
     handles += [Patch(facecolor=f.fill, edgecolor="#303030", label=name) for name, f in FAMILIES.items()
                 if name in present]
+    handles.append(Line2D([], [], color="#303030", marker=">", markersize=4, linewidth=0.8,
+                          label="heading (arrow from the centre)"))
     if view.bound:
         handles.append(Patch(facecolor="none", edgecolor=BOUND_EDGE, linewidth=2.4,
                              label="bound by the match\n(id = pattern name)"))
@@ -266,8 +291,9 @@ def draw(view: View):
     handles += [Patch(facecolor=st.face, edgecolor=st.edge, label=st.label) if st.face != "none" else
                 Line2D([], [], color=st.edge, label=st.label) for name, st in ROAD_STYLES.items() if name in drawn]
     if view.samples:
-        handles.append(Patch(facecolor=FAMILIES["vehicle"].variant, alpha=0.3,
-                             label=f"{len(view.samples)} sampled variants\n(translucent)"))
+        handles.append(Patch(facecolor=ENTITY_PALETTE[0], edgecolor=ENTITY_PALETTE[0], alpha=0.3,
+                             label=f"{len(view.samples)} sampled variants (translucent),\neach in its entity's "
+                                   "colour: the outline\nand label of its recorded box"))
     if view.program is not None:
         arrows, marks = references(view.program)
         for r in arrows:
@@ -287,6 +313,8 @@ def draw(view: View):
                            linewidths=1.0, **colour)
                 handles.append(Line2D([], [], color="black", marker=k.marker, linestyle="none", label=k.label,
                                       **({"markerfacecolor": "none"} if k.hollow else {})))
+    handles.append(Line2D([], [], color=LEADER_COLOUR, linewidth=0.5,
+                          label="label placed away from its box\n(the line leads to it)"))
 
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
@@ -298,7 +326,52 @@ def draw(view: View):
     title = f"{view.scene.frame_id}: ego and {n - 1} entities"
     ax.set_title(f"{title}\n{view.subtitle}" if view.subtitle else title, fontsize=8)
     fig.legend(handles=handles, loc="outside right upper", fontsize=7, frameon=False, labelspacing=0.9)
+    _label(fig, ax, boxes, view, colours, font)
     return fig
+
+
+def _label(fig, ax, boxes: dict[str, Footprint], view: View, colours: dict[str, str], font: float) -> None:
+    """Every entity's id (a match's with its pattern names), placed by pipeline.variants.labels where it overlaps
+    no other label and no box, with a leader line when it sits away from its box. Last, once the layout is fixed:
+    the labels are placed in its pixels, and kept out of it (set_in_layout) so that saving does not move it."""
+    from pipeline.variants.labels import place
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    to_px = ax.transData.transform
+    rects = {}
+    for b in boxes.values():
+        px = to_px(b.corners())
+        rects[b.id] = (float(px[:, 0].min()), float(px[:, 1].min()), float(px[:, 0].max()), float(px[:, 1].max()))
+    names = {eid: [n for n, e in view.bound if e == eid] for eid in boxes}
+    order = sorted(boxes.values(), key=lambda b: (b.id != "ego", not names[b.id], math.hypot(b.x, b.y)))
+    texts, sizes = [], []
+    for b in order:
+        ego, named = b.id == "ego", bool(names[b.id])
+        text = ax.text(0, 0, f"{b.id} = {', '.join(names[b.id])}" if named else b.id, fontsize=font, ha="center",
+                       va="center", zorder=8, gid=LABEL_GID, clip_on=True,
+                       color=BOUND_EDGE if named else EGO_EDGE if ego else colours.get(b.id, "#202020"),
+                       fontweight="bold" if ego or named else "normal",
+                       # a light halo, so a label stays legible over an arrow or a variant
+                       bbox={"boxstyle": "square,pad=0.05", "facecolor": "white", "edgecolor": "none", "alpha": 0.75})
+        text.set_in_layout(False)
+        ext = text.get_window_extent(renderer)
+        texts.append(text)
+        sizes.append((ext.width + 2.0, ext.height + 1.0))
+    frame = ax.get_window_extent(renderer)
+    spots = place(sizes, [rects[b.id] for b in order], list(rects.values()),
+                  (frame.x0, frame.y0, frame.x1, frame.y1))
+    to_data = ax.transData.inverted().transform
+    for text, spot, b in zip(texts, spots, order):
+        x0, y0, x1, y1 = spot.rect
+        text.set_position(tuple(to_data(((x0 + x1) / 2, (y0 + y1) / 2))))
+        if spot.leader:
+            # From the label's edge nearest the box to the box's centre.
+            cx, cy = to_px((b.x, b.y))
+            ex, ey = min(max(cx, x0), x1), min(max(cy, y0), y1)
+            (ax_, ay_), (bx_, by_) = to_data((ex, ey)), (b.x, b.y)
+            (line,) = ax.plot([ax_, bx_], [ay_, by_], color=LEADER_COLOUR, linewidth=0.5, zorder=7.5)
+            line.set_in_layout(False)
 
 
 def save(fig, path: str | Path) -> None:
