@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     routes = sum((args.programs is not None, args.dsl_file is not None,
                   args.scenic_file is not None and args.programs is None))
     if routes != 1:
-        raise UserError("give either PROGRAM.scenic, --program P.dsl --scene S.json, or --programs PROGRAMS FRAME")
+        raise UserError("give either PROGRAM.scenic or --program P.dsl --scene S.json (or --programs PROGRAMS FRAME)")
     if args.programs is not None and (args.scenic_file is None or args.scene or args.config or args.trusted):
         raise UserError("--programs PROGRAMS takes the frame id (r2s sample --programs programs scene-0061/0 ...), "
                         "and no --scene, --config or --trusted")
