@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.programs import STATUSES
+from pipeline.report.data import BANDS, NEAR, STATIONARY_SPEED, DataFrames, DataLook, data_looks, data_overview
 from pipeline.report.plots import PLOT_FILES, Plot, all_plots
 from pipeline.report.stats import (
     ABSOLUTE_COST_PER_ENTITY,
@@ -247,6 +248,43 @@ def look_section(frames: list[LookFrame], frames_path: str | None, programs: str
 
 
 FRAMES_TITLE = "Frames worth a look"
+DATA_TITLE = "The data"
+DATA_LOOK_TITLE = "Frames worth a look for a data user"
+
+
+def data_section(o: DataFrames) -> Section:
+    """What the frames hold: entities by type, their distance from ego and their speed."""
+    band_names = [f"{lo:g}–{hi:g} m" for lo, hi in zip(BANDS, BANDS[1:])] + [f"{BANDS[-1]:g}+ m"]
+    speed = ("Median speed (m/s)", f"Stationary (≤ {STATIONARY_SPEED:g} m/s)") if o.has_speed else ()
+    rows = tuple((t.type, str(t.boxes), str(t.frames), fmt_pct(100 * t.frames / o.frames if o.frames else None),
+                  fmt_float(t.distance_median, 1), fmt_float(t.distance_p90, 1), str(t.near),
+                  *((fmt_float(t.speed_median), fmt_pct(100 * t.stationary / t.boxes)) if o.has_speed else ()))
+                 for t in o.types)
+    bands = tuple((t.type, *(str(n) for n in t.bands)) for t in o.types)
+    return Section(DATA_TITLE, (
+        f"{o.frames} frame(s) of {o.scenes} scene(s), {o.boxes} entity boxes besides ego (one entity in one frame): "
+        f"median {o.per_frame_median:g} per frame, at most {o.per_frame_max}. Distances are between centres, from "
+        "each frame's ego" + ("; speeds as the frames carry them." if o.has_speed else
+                              "; the frames carry no speeds."),
+        Table(("Type", "Boxes", "Frames with one", "Share of frames", "Median distance (m)", "p90 distance (m)",
+               f"Within {NEAR:g} m", *speed), rows, "lrrrrrr" + "rr" * o.has_speed),
+        "Boxes by distance from ego:",
+        Table(("Type", *band_names), bands, "l" + "r" * len(band_names)),
+    ))
+
+
+def data_look_section(looks: list[DataLook], frames_path: str | None, programs: str) -> Section:
+    where = frames_path or "FRAMES"
+    rows = tuple((f.frame_id, f.reason, f.detail, render_command(where, programs, f.frame_id)) for f in looks)
+    text = ("Frames a data user would open first: the most crowded, the nearest to ego, pedestrians close to ego, "
+            "the fastest, the rarest types, and the frames whose programs use the relations used least. Each command "
+            "draws the frame with its program."
+            if frames_path else
+            "Frames whose programs use the relations used least (`r2s report --frames F` adds the most crowded, the "
+            "nearest to ego, the fastest, the rarest types). FRAMES stands for the frames the programs came from.")
+    if not looks:
+        return Section(DATA_LOOK_TITLE, (text, "None: no program uses a relation."))
+    return Section(DATA_LOOK_TITLE, (text, Table(("Frame", "Why", "What", "Render"), rows, "llll")))
 
 
 class ReportContext:
@@ -270,6 +308,11 @@ class ReportContext:
         return relation_usage(self.db)
 
     @cached_property
+    def data(self) -> DataFrames | None:
+        """What the frames hold (None without --frames)."""
+        return None if self.frames is None else data_overview(self.db, self.frames)
+
+    @cached_property
     def plots(self) -> list[Plot]:
         return all_plots(self.db, self.bucket_stats, self.usage, self.out)  # relation usage last: with its table
 
@@ -289,6 +332,8 @@ SECTIONS: tuple[SectionBuilder, ...] = (
     _side_by_side,
     lambda ctx: Section("Plots", tuple(ctx.plots[:-1])),
     lambda ctx: relation_section(ctx.usage, ctx.db.overview.configs, ctx.plots[-1]),
+    lambda ctx: None if ctx.data is None else data_section(ctx.data),
+    lambda ctx: data_look_section(data_looks(ctx.db, ctx.data), ctx.frames, ctx.programs),
     lambda ctx: look_section(frames_to_look_at(ctx.db), ctx.frames, ctx.programs),
     lambda ctx: failure_section(failures(ctx.db)),
 )
