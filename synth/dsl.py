@@ -80,11 +80,6 @@ class Statement:
     def cost(self) -> int:
         return sum(c.cost for _, c in self.clauses())
 
-    @property
-    def complete(self) -> bool:
-        """Does it carry a clause of every required part (as a program's statement must)?"""
-        return all(p.optional or getattr(self, p.name) is not None for p in all_parts())
-
     def __str__(self) -> str:
         return " ".join(filter(None, (f"{self.id} = new {self.type}", ", ".join(str(c) for _, c in self.clauses()))))
 
