@@ -206,7 +206,7 @@ class View:
 
 # Variants are drawn in their entity's colour (and its recorded box outlined and labelled in it), from this palette
 # of dark, distinct hues; entities near each other get different ones (entity_colours).
-ENTITY_PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
+ENTITY_PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#1192a0", "#9a9a00",
                   "#ff7f0e", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d",
                   "#31a354", "#756bb1", "#636363", "#a55194")
 LABEL_GID = "r2s-entity-label"  # every entity's label carries it (the tests find the labels by it)
