@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.programs import STATUSES
+from synth.errors import InputError
 from pipeline.report.data import BANDS, NEAR, STATIONARY_SPEED, DataFrames, DataLook, data_looks, data_overview
 from pipeline.report.plots import PLOT_FILES, Plot, all_plots
 from pipeline.report.stats import (
@@ -308,9 +309,15 @@ class ReportContext:
         return relation_usage(self.db)
 
     @cached_property
-    def data(self) -> DataFrames | None:
-        """What the frames hold (None without --frames)."""
-        return None if self.frames is None else data_overview(self.db, self.frames)
+    def data(self) -> DataFrames | str | None:
+        """What the frames hold; None without --frames; why not (one line) when --frames names no readable frames
+        (it also only fills in the render commands, so the report is still written, and says so)."""
+        if self.frames is None:
+            return None
+        try:
+            return data_overview(self.db, self.frames)
+        except InputError as exc:
+            return f"The frames given with --frames could not be read, so there is no report about the data: {exc}"
 
     @cached_property
     def plots(self) -> list[Plot]:
@@ -332,8 +339,10 @@ SECTIONS: tuple[SectionBuilder, ...] = (
     _side_by_side,
     lambda ctx: Section("Plots", tuple(ctx.plots[:-1])),
     lambda ctx: relation_section(ctx.usage, ctx.db.overview.configs, ctx.plots[-1]),
-    lambda ctx: None if ctx.data is None else data_section(ctx.data),
-    lambda ctx: data_look_section(data_looks(ctx.db, ctx.data), ctx.frames, ctx.programs),
+    lambda ctx: None if ctx.data is None else data_section(ctx.data) if isinstance(ctx.data, DataFrames)
+    else Section(DATA_TITLE, (ctx.data,)),
+    lambda ctx: data_look_section(data_looks(ctx.db, ctx.data if isinstance(ctx.data, DataFrames) else None),
+                                  ctx.frames, ctx.programs),
     lambda ctx: look_section(frames_to_look_at(ctx.db), ctx.frames, ctx.programs),
     lambda ctx: failure_section(failures(ctx.db)),
 )

@@ -105,3 +105,14 @@ def test_the_report_has_the_data_sections_and_without_frames_only_the_rare_relat
     assert "most entities" not in text and "rare relation" in text
     with ProgramsDB(run / "programs") as db:
         assert rarest_relations(db)
+
+
+def test_frames_that_cannot_be_read_are_said_and_the_report_is_still_written(run, tmp_path):
+    """--frames also only fills in the render commands: a path that is not readable frames costs the data sections,
+    which say why, not the report."""
+    from pipeline.report import report
+
+    report(run / "programs", tmp_path / "r", frames=tmp_path / "nowhere.parquet")
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert "could not be read, so there is no report about the data" in text and "nowhere.parquet" in text
+    assert "most entities" not in text and "rare relation" in text
