@@ -23,7 +23,6 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.programs import STATUSES
-from synth.errors import InputError
 from pipeline.report.data import BANDS, NEAR, STATIONARY_SPEED, DataFrames, DataLook, data_looks, data_overview
 from pipeline.report.plots import PLOT_FILES, Plot, all_plots
 from pipeline.report.stats import (
@@ -41,6 +40,7 @@ from pipeline.report.stats import (
     relation_usage,
     side_by_side,
 )
+from synth.errors import InputError
 
 MD_NAME, HTML_NAME = "report.md", "report.html"
 SIDE_BY_SIDE_TITLE = "Strategies side by side (Table 3 layout)"
