@@ -18,9 +18,8 @@ from synth.config import SynthConfig
 from synth.dsl import DslError
 from synth.pattern import matches, parse_pattern
 from synth.scene import Entity, Scene
-from tests.pipeline.query.test_query import engine
+from tests.pipeline.query.test_query import brute, engine
 from tests.support import ROOT, assert_one_line_error, run_r2s
-from tests.support.query_bruteforce import brute_matches
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"  # 10 Hz, with speeds
@@ -39,11 +38,6 @@ MOTION = [
     "car = new Vehicle behind ego by Range(0, 40), moving Range(0.5, 20) m/s\nego moving Range(2, 5) m/s\n",
     "thing = new Object within Range(0, 15) of ego, stationary\nego moving Range(1, 3) m/s relative to thing\n",
 ]
-
-
-def brute(scenes, text: str, config: SynthConfig | None = None):
-    pattern = parse_pattern(text)
-    return {s.frame_id: b for s in scenes if (b := brute_matches(pattern, s, config))}
 
 
 @pytest.fixture(scope="module")
