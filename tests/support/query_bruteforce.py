@@ -63,3 +63,8 @@ def brute_matches(pattern: Pattern, scene: Scene, config: SynthConfig | None = N
 
     extend([])
     return found
+
+
+def brute_by_frame(scenes, pattern: Pattern, config: SynthConfig | None = None) -> dict[str, list[tuple[str, ...]]]:
+    """{frame_id: every match} over the scenes that have one (brute_matches per scene)."""
+    return {s.frame_id: b for s in scenes if (b := brute_matches(pattern, s, config))}

@@ -9,6 +9,7 @@ import math
 import random
 from pathlib import Path
 
+import pyarrow.parquet as pq
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -18,8 +19,8 @@ from synth.config import SynthConfig
 from synth.dsl import DslError
 from synth.pattern import matches, parse_pattern
 from synth.scene import Entity, Scene
-from tests.pipeline.query.test_query import brute, engine
 from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support.query_bruteforce import brute_by_frame
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"  # 10 Hz, with speeds
@@ -38,6 +39,24 @@ MOTION = [
     "car = new Vehicle behind ego by Range(0, 40), moving Range(0.5, 20) m/s\nego moving Range(2, 5) m/s\n",
     "thing = new Object within Range(0, 15) of ego, stationary\nego moving Range(1, 3) m/s relative to thing\n",
 ]
+
+
+def brute(scenes, text: str, config: SynthConfig | None = None):
+    return brute_by_frame(scenes, parse_pattern(text), config)
+
+
+def engine(frames, text: str, tmp_path: Path, config: SynthConfig | None = None):
+    """{frame_id: [binding, ...]} by the engine (`pipeline.query.query`, one row per binding), and how many
+    candidates went to the exact check."""
+    from pipeline.query.mining import query_frames
+
+    pattern = parse_pattern(text)
+    out = tmp_path / "m.parquet"
+    summary = query_frames(frames, pattern, out, all_bindings=True, config=config, log=lambda _: None)
+    got: dict[str, list[tuple[str, ...]]] = {}
+    for row in pq.read_table(out).to_pylist():
+        got.setdefault(row["frame_id"], []).append(tuple(row["binding"][n] for n in pattern.names))
+    return got, summary
 
 
 @pytest.fixture(scope="module")
