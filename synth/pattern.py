@@ -76,6 +76,10 @@ class WithinDistance(Clause):
         raise NotImplementedError(PATTERN_ONLY)
 
 
+# The parts an `ego ...` line may use: motion. (Lane clauses on ego wait until the lane engine of
+# pipeline/query/lanes.py is checked on ego's row.)
+EGO_PARTS = ("motion",)
+
 # Pattern-only clause kinds, by the part whose place they take.
 PATTERN_CLAUSES: dict[str, tuple[type[Clause], ...]] = {"position": (WithinDistance,)}
 
@@ -119,7 +123,7 @@ def _pattern_line(ln: Line, declared: set[str], types: Collection[str]) -> State
         if EGO_ID in declared:
             raise DslError(f"{ln.where(back=1)}: ego is constrained twice (one `ego ...` line, its clauses "
                            "comma-separated)")
-        clauses = _clauses(ln, declared, [p for p in all_parts() if p.optional], "ego")
+        clauses = _clauses(ln, declared, [p for p in all_parts() if p.name in EGO_PARTS], "ego")
         if not clauses:
             raise DslError(f"{ln.where()}: expected a clause about ego after `ego`")
         declared.add(EGO_ID)  # marks the ego line as given (references to ego are always allowed)
