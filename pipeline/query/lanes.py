@@ -38,7 +38,7 @@ def uses_lanes(pattern: Pattern) -> bool:
 def without_lanes(pattern: Pattern) -> Pattern:
     """The pattern with its lane clauses left out: what the Python re-check decides (SQL decides those exactly)."""
     return Pattern(tuple(Statement(st.id, st.type, parts=tuple((n, c) for n, c in st.parts if n != LANE_PART))
-                         for st in pattern.statements))
+                         for st in pattern.statements), pattern.ego)  # the ego line (motion only) is kept
 
 
 def lane_sets(roads: Iterable[RoadMap]) -> pa.Table:
