@@ -19,12 +19,13 @@ intersection (an intersection feature, or a lane flagged as an intersection lane
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
 
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
+from synth.scene import Entity, Scene
 
 EPS = 2.0 ** -53
 # Shewchuk, "Adaptive precision floating-point arithmetic and fast robust geometric predicates" (1997):
@@ -284,6 +285,7 @@ class SceneRoad:
         self.areas = {kind: Cells([(Banded(f.polygon), f) for f in road.of_kind(kind)])
                       for kind in (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)}
         self._facts: dict[tuple[float, float, float], LaneFacts] = {}
+        self._graph = None
 
     def _containing(self, kind: str, x: float, y: float) -> list[MapFeature]:
         return [f for ring, f in self.areas[kind].near(x, y) if ring.contains(x, y)]
@@ -309,13 +311,29 @@ class SceneRoad:
             off_road=not lanes and not self._containing(DRIVABLE_AREA, x, y),
         )
 
-    def placed(self, scene):
-        """The scene on this road, every entity with its lane facts decided again where it now is."""
-        from dataclasses import replace
+    @property
+    def graph(self):
+        """The lane graph of the road (synth.lane_relations), built once: what a lane relation reads."""
+        if self._graph is None:
+            from synth.lane_relations import LaneGraph
 
+            self._graph = LaneGraph(self.road)
+        return self._graph
+
+    def entity(self, pose) -> Entity:
+        """A pose (x, y, heading: a synth.draws.Pose) as an entity on this road: its lane facts and the lane
+        graph, all that a lane clause's semantics reads."""
+        f = self.facts(pose.x, pose.y, pose.heading)
+        return Entity("placed", "Car", pose.x, pose.y, pose.heading, lanes=f.lanes, lane=f.lane,
+                      in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk, off_road=f.off_road,
+                      lane_graph=self.graph)
+
+    def placed(self, scene: Scene) -> Scene:
+        """The scene on this road, every entity with its lane facts decided again where it now is (and the lane
+        graph, built once for all variants)."""
         ents = scene.entities
         facts = self.index.facts(np.array([e.x for e in ents]), np.array([e.y for e in ents]),
                                  np.array([(e.heading + 90.0) % 360.0 for e in ents]))
         return replace(scene, road=self.road, entities=tuple(
             replace(e, lanes=f.lanes, lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
-                    off_road=f.off_road) for e, f in zip(ents, facts)))
+                    off_road=f.off_road, lane_graph=self.graph) for e, f in zip(ents, facts)))

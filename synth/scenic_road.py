@@ -7,8 +7,10 @@ by feature id (`road__lanes['ID']`, ...), every lane's centre line (`road__centr
 say where an object's centre is, as the lane facts say it (synth.lane_facts; docs/formats.md, "Lane facts"):
 `road__in(road__crosswalks, obj)` the ids of the table's regions containing it, `road__lane_of(obj)` its chosen
 lane (the tie rule), `road__in_intersection(obj)`, `road__on_crosswalk(obj)`, `road__off_road(obj)` (with
-`road__intersection_lanes`, the ids of the intersection lanes). Lane clauses become requirements over them. Road
-lines bound no region and are left out.
+`road__intersection_lanes`, the ids of the intersection lanes), `road__off_lane(obj)`, and the lane relations
+(`road__related[side][lane]`: synth.lane_relations on the scene's road) with `road__lane_related(obj, ref,
+side)`. Lane clauses (synth.parts.lane) become requirements over them. Road lines bound no region and are left
+out.
 
 The features are data, written as one JSON document in one raw string literal (a feature a line) that the text
 decodes, and the tables are built from it by comprehensions: Scenic's parser is slow per statement and per
@@ -28,6 +30,7 @@ TABLES = ((LANE, "road__lanes"), (CROSSWALK, "road__crosswalks"), (INTERSECTION,
           (DRIVABLE_AREA, "road__drivable_areas"))
 CENTRE_LINES = "road__centre_lines"
 INTERSECTION_LANES = "road__intersection_lanes"
+RELATED = "road__related"
 DATA = "road__data"
 
 ROAD_PRELUDE = '''\
@@ -71,6 +74,16 @@ def road__off_road(obj):
     """obj's centre is in no lane and no drivable area (the lane fact off_road)."""
     return not road__in(road__lanes, obj) and not road__in(road__drivable_areas, obj)
 
+def road__off_lane(obj):
+    """obj's centre is in no lane but in a drivable area."""
+    return not road__in(road__lanes, obj) and bool(road__in(road__drivable_areas, obj))
+
+def road__lane_related(obj, ref, side):
+    """obj's lane is one of the lanes related to ref's lane by `side` (same, left, right, oncoming: the lane
+    relations of synth.lane_relations, road__related[side][ref's lane])."""
+    mine = road__lane_of(obj)
+    return mine is not None and mine in road__related[side].get(road__lane_of(ref), ())
+
 def road__lane_of(obj):
     """obj's lane: of the lanes containing its centre, the one whose direction at its centre-line segment nearest
     the centre differs least from obj's heading, then the smaller id; None in no lane (synth.lane_facts)."""
@@ -103,15 +116,31 @@ def _feature(f: MapFeature) -> str:
     return f"{_json(f.feature_id)}:{_json(value)}"
 
 
+def _related(road: RoadMap) -> str:
+    """The lane relations (synth.lane_relations.LaneGraph.related) as data: for each side (same, left, right,
+    oncoming), each lane that has related lanes -> the lanes a target's lane must be in for that relation with a
+    reference in it (sorted), a side a line."""
+    from synth.lane_relations import SIDES, LaneGraph  # the map's relations, computed here only
+
+    graph = LaneGraph(road)
+    rows = []
+    for side in SIDES:
+        table = {f.feature_id: sorted(r) for f in road.lanes if (r := graph.related(f.feature_id, side))}
+        rows.append(f"\n{_json(side)}:{_json(table)}")
+    return "{" + ",".join(rows) + "}"
+
+
 def road_scenic(road: RoadMap) -> list[str]:
     """The lines that define a scene's road in Scenic: the helpers, the data (a feature a line, in map order),
     the tables built from it."""
     sections = [f'"{table}":{{' + ",".join(f"\n{_feature(f)}" for f in road.of_kind(kind)) + "}"
                 for kind, table in TABLES]
+    sections.append(f'"{RELATED}":{_related(road)}')
     lines = [ROAD_PRELUDE, f"# map {road.map_id!r}", f"{DATA} = road__json.loads(r'''{{{','.join(sections)}}}''')"]
     lines += [f"{table} = {{i: PolygonalRegion(road__pairs(f['polygon'])) for i, f in {DATA}['{table}'].items()}}"
               for _, table in TABLES]
     lines += [f"{CENTRE_LINES} = {{i: road__pairs(f['line']) for i, f in {DATA}['road__lanes'].items()}}",
               f"{INTERSECTION_LANES} = frozenset(i for i, f in {DATA}['road__lanes'].items() if f['intersection'])",
+              f"{RELATED} = {DATA}['{RELATED}']",
               ""]
     return lines

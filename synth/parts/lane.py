@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from synth.config import SynthConfig
-from synth.draws import Draws, Pose, Reach
+from synth.draws import Draws, Pose, Requirement
 from synth.errors import InputError
 from synth.lane_relations import RELATION_NAMES, SIDES, Places, places
 from synth.parts.base import Clause, Part
@@ -41,6 +41,7 @@ from synth.syntax import DslError, Line
 from synth.tables import NONE, SceneArrays, no_self_witness
 
 if TYPE_CHECKING:
+    from synth.lane_facts import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
 
 # The facts a cost-1 clause names, in the order the fallback tries them (the Entity field or rule of each).
@@ -102,13 +103,20 @@ class LaneClause(Clause):
         """Does the clause hold wherever the entity (and its reference) may be under the bounds?"""
         raise NotImplementedError
 
-    # The regions and the sampler's draws of lane clauses are the Scenic side's (issue 24 item 5): until then a
-    # lane clause is written as a property of its object, which Scenic keeps and does not enforce.
+    # Scenic: the clause's text as a property of its object (a label), and a requirement over the road's regions
+    # (synth.scenic_road) that keeps it there; the sampler asks the same of every pose it tries (LaneDraws).
     def scenic(self, at: str) -> str:
         return json.dumps(str(self))  # a Python string literal (lane ids hold no quote or backslash)
 
+    def scenic_requirements(self, entity: str) -> list[str]:
+        return [f"require {self.scenic_condition(entity)}"]
+
+    def scenic_condition(self, entity: str) -> str:
+        """The clause over the road's regions, in Scenic, for the object named `entity` (docs/scenic.md)."""
+        raise NotImplementedError
+
     def draws(self, config: SynthConfig) -> Draws:
-        return LaneDraws(self.ref, (), ())
+        return LaneDraws(self.ref, (), (), self, config)
 
 
 def _robust_places(e: Entity, config: SynthConfig) -> Places:
@@ -146,6 +154,9 @@ class LaneRelation(LaneClause):
     def robustly(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
         return LANE.robust_code(SIDES.index(self.side), ref, e, config)
 
+    def scenic_condition(self, entity: str) -> str:
+        return f"road__lane_related({entity}, {self.ref}, {self.side!r})"
+
 
 @dataclass(frozen=True)
 class LaneFact(LaneClause):
@@ -173,6 +184,11 @@ class LaneFact(LaneClause):
     def robustly(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
         return self.fact in _robust_places(e, config).sure
 
+    def scenic_condition(self, entity: str) -> str:
+        helper = {"intersection": "road__in_intersection", "crosswalk": "road__on_crosswalk",
+                  "off road": "road__off_road", "off lane": "road__off_lane"}[self.fact]
+        return f"{helper}({entity})"
+
 
 @dataclass(frozen=True)
 class InLane(LaneClause):
@@ -192,6 +208,9 @@ class InLane(LaneClause):
         p = _robust_places(e, config)
         return not p.laneless and p.lanes == {self.lane}
 
+    def scenic_condition(self, entity: str) -> str:
+        return f"road__lane_of({entity}) == {self.lane!r}"
+
 
 @dataclass(frozen=True)
 class Anywhere(LaneClause):
@@ -210,22 +229,22 @@ class Anywhere(LaneClause):
     def robustly(self, e: Entity, ref: Entity | None, config: SynthConfig) -> bool:
         return True
 
+    def scenic_requirements(self, entity: str) -> list[str]:
+        return []  # no claim, nothing to require
+
 
 @dataclass(frozen=True)
-class LaneDraws(Draws):
-    """A lane clause draws nothing of its own yet (issue 24 item 5 gives it its regions)."""
+class LaneDraws(Requirement):
+    """What the sampler asks of a lane clause: nothing drawn; its entity (and its reference) placed where the
+    clause holds, by the clause's own semantics on the lane facts of the poses (synth.lane_facts.SceneRoad)."""
 
-    writes = "lane"
+    clause: LaneClause
+    config: SynthConfig
 
-    def evaluate(self, p: Sequence[float], own: Pose, ref: Pose | None) -> None:
-        raise InputError("variants of programs with lane clauses cannot be drawn yet (their Scenic regions are "
-                         "still to come)")
-
-    def invert(self, own: Pose, ref: Pose | None) -> tuple[float, ...]:
-        return ()
-
-    def reach(self, own: Reach, ref: Reach | None) -> Reach:
-        return own  # a lane clause places nothing beyond what the position part does
+    def allowed(self, own: Pose, ref: Pose | None, road: SceneRoad | None) -> bool:
+        if road is None:
+            return False  # never asked: lanes need a road (require_lanes)
+        return self.clause.holds(road.entity(own), None if ref is None else road.entity(ref), self.config)
 
 
 def printable_id(lane: str) -> bool:
@@ -373,8 +392,8 @@ class LanePart(Part):
 
 
 LANE_PRELUDE = '''\
-# Lanes (r2sgen's LANE clause): each object records its lane clause as the property dsl__lane (the recorded
-# lanes as regions and requirements over them: docs/scenic.md).
+# Lanes (r2sgen's LANE clause): each object records its lane clause as the property dsl__lane, and a requirement
+# after it keeps it there, over the recorded road's regions (the road section, below; docs/scenic.md).
 '''
 
 LANE = LanePart()
