@@ -15,7 +15,7 @@ here (Scenic draws radians; a uniform draw is the same distribution in either un
   disc for the centre, an arc for the heading (synth.collision_rule keeps only the pairs of boxes that can meet);
 - `allowed`: a requirement beyond the box (`requires`), which the emitted text states as a `require` line: Scenic
   rejects a scene that fails it, the chain a move. It sees the entity's pose, its reference's, and the scene's
-  road (synth.lane_facts.SceneRoad: the lane facts of a pose), so a clause can keep its entity in a region.
+  road (synth.scene_road.SceneRoad: the lane facts of a pose), so a clause can keep its entity in a region.
 
 A `Requirement` is a clause that draws nothing and only constrains (a lane clause: its entity's centre in a
 region of the recorded road): an empty box, and reads of both poses so that every move of either asks it again.
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 if TYPE_CHECKING:
-    from synth.lane_facts import SceneRoad
+    from synth.scene_road import SceneRoad
 
 # Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
 REACH_SLACK = 1e-6

@@ -46,10 +46,10 @@ from synth.collision_rule import CollisionRule, collision_rule
 from synth.config import DEFAULT_BURN_IN, DEFAULT_THIN, SynthConfig
 from synth.dsl import Program
 from synth.errors import SamplingError
-from synth.lane_facts import SceneRoad
 from synth.overlap import box_radius, boxes_overlap
 from synth.parameters import SPEED, Parameterisation, Pose, inside, parameterise
 from synth.scene import Entity, Scene, make_scene
+from synth.scene_road import SceneRoad
 
 DEFAULT_START_SWEEPS = 200  # sweeps to find a valid start when the given scene is not one
 MAX_DRAWS = 8  # draws per move: the first from the whole box, each next from a box shrunk after a rejection

@@ -19,13 +19,12 @@ intersection (an intersection feature, or a lane flagged as an intersection lane
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
 
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
-from synth.scene import Entity, Scene
 
 EPS = 2.0 ** -53
 # Shewchuk, "Adaptive precision floating-point arithmetic and fast robust geometric predicates" (1997):
@@ -221,7 +220,6 @@ def local_direction(f: MapFeature, x: float, y: float) -> float | None:
     return seg.direction_near(x, y) if seg is not None else None
 
 
-MAX_REMEMBERED = 100_000  # lane facts of poses a SceneRoad keeps
 BANDS = 64  # at most, per polygon (about one per four edges)
 
 
@@ -270,70 +268,3 @@ class Cells:
 
     def near(self, x: float, y: float) -> list[tuple[Banded, MapFeature]]:
         return self.cells.get((math.floor(x / CELL), math.floor(y / CELL)), [])
-
-
-class SceneRoad:
-    """A scene's road (in its ego frame) and the lane facts of entities placed in it, headings as scenes give them
-    (degrees counter-clockwise from +y, where the facts' directions are from +x): what the variant sampler asks
-    of every pose it tries (a lane clause's requirement) and what every variant carries."""
-
-    def __init__(self, road: RoadMap) -> None:
-        self.road = road
-        self.index = RoadIndex(road)
-        # One pose at a time in plain Python (the sampler asks for one per move; numpy's per-call cost would
-        # dominate): bounding boxes, then the exact crossing test over the edges of the point's band (Banded).
-        self.areas = {kind: Cells([(Banded(f.polygon), f) for f in road.of_kind(kind)])
-                      for kind in (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA)}
-        self._facts: dict[tuple[float, float, float], LaneFacts] = {}
-        self._graph = None
-
-    def _containing(self, kind: str, x: float, y: float) -> list[MapFeature]:
-        return [f for ring, f in self.areas[kind].near(x, y) if ring.contains(x, y)]
-
-    def facts(self, x: float, y: float, heading: float) -> LaneFacts:
-        """The lane facts of one pose: RoadIndex.facts's, for one point (remembered: a chain asks for the same
-        pose again, a reference's for each of its dependants)."""
-        key = (x, y, heading)
-        if key not in self._facts:
-            if len(self._facts) >= MAX_REMEMBERED:
-                self._facts.clear()
-            self._facts[key] = self._decide(x, y, heading)
-        return self._facts[key]
-
-    def _decide(self, x: float, y: float, heading: float) -> LaneFacts:
-        lanes = self._containing(LANE, x, y)
-        chosen = self.index.choose_lane(lanes, x, y, (heading + 90.0) % 360.0)
-        return LaneFacts(
-            lanes=tuple(sorted(f.feature_id for f in lanes)),
-            lane=chosen.feature_id if chosen is not None else None,
-            in_intersection=bool(self._containing(INTERSECTION, x, y)) or any(f.is_intersection for f in lanes),
-            on_crosswalk=bool(self._containing(CROSSWALK, x, y)),
-            off_road=not lanes and not self._containing(DRIVABLE_AREA, x, y),
-        )
-
-    @property
-    def graph(self):
-        """The lane graph of the road (synth.lane_relations), built once: what a lane relation reads."""
-        if self._graph is None:
-            from synth.lane_relations import LaneGraph
-
-            self._graph = LaneGraph(self.road)
-        return self._graph
-
-    def entity(self, pose) -> Entity:
-        """A pose (x, y, heading: a synth.draws.Pose) as an entity on this road: its lane facts and the lane
-        graph, all that a lane clause's semantics reads."""
-        f = self.facts(pose.x, pose.y, pose.heading)
-        return Entity("placed", "Car", pose.x, pose.y, pose.heading, lanes=f.lanes, lane=f.lane,
-                      in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk, off_road=f.off_road,
-                      lane_graph=self.graph)
-
-    def placed(self, scene: Scene) -> Scene:
-        """The scene on this road, every entity with its lane facts decided again where it now is (and the lane
-        graph, built once for all variants)."""
-        ents = scene.entities
-        facts = self.index.facts(np.array([e.x for e in ents]), np.array([e.y for e in ents]),
-                                 np.array([(e.heading + 90.0) % 360.0 for e in ents]))
-        return replace(scene, road=self.road, entities=tuple(
-            replace(e, lanes=f.lanes, lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
-                    off_road=f.off_road, lane_graph=self.graph) for e, f in zip(ents, facts)))

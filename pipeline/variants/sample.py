@@ -52,8 +52,8 @@ from synth.emit_scenic import (
 )
 from synth.geometry import normalize
 from synth.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
-from synth.lane_facts import SceneRoad
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
+from synth.scene_road import SceneRoad
 from synth.semantics import check
 
 

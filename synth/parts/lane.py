@@ -41,7 +41,7 @@ from synth.syntax import DslError, Line
 from synth.tables import NONE, SceneArrays, no_self_witness
 
 if TYPE_CHECKING:
-    from synth.lane_facts import SceneRoad
+    from synth.scene_road import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
 
 # The facts a cost-1 clause names, in the order the fallback tries them (the Entity field or rule of each).
@@ -236,7 +236,7 @@ class Anywhere(LaneClause):
 @dataclass(frozen=True)
 class LaneDraws(Requirement):
     """What the sampler asks of a lane clause: nothing drawn; its entity (and its reference) placed where the
-    clause holds, by the clause's own semantics on the lane facts of the poses (synth.lane_facts.SceneRoad)."""
+    clause holds, by the clause's own semantics on the lane facts of the poses (synth.scene_road.SceneRoad)."""
 
     clause: LaneClause
     config: SynthConfig

@@ -32,7 +32,7 @@ from synth.syntax import Line, Range, fmt_number, printed
 from synth.tables import GUARD, NONE, UNDECIDED, SceneArrays, mark, no_self_witness
 
 if TYPE_CHECKING:
-    from synth.lane_facts import SceneRoad
+    from synth.scene_road import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
 
 MOTION_NAMES = ("stationary", "like")  # index = code in the tables

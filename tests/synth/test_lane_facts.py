@@ -11,8 +11,9 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.lane_facts import Banded, PolygonIndex, RoadIndex, SceneRoad, contains, orientation
+from synth.lane_facts import Banded, PolygonIndex, RoadIndex, contains, orientation
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
+from synth.scene_road import SceneRoad
 
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 

@@ -17,8 +17,9 @@ from hypothesis import strategies as st
 from pipeline.variants.sample import SampleOptions, sample_program
 from synth.config import SynthConfig
 from synth.dsl import parse_program
-from synth.lane_facts import RoadIndex, SceneRoad
+from synth.lane_facts import RoadIndex
 from synth.scene import scene_from_dict, scene_from_json
+from synth.scene_road import SceneRoad
 from synth.synthesize import synthesize
 from tests.support import ROOT, overlapping, run_r2s
 from tests.support.lanes import BruteLanes, random_lane_scene
