@@ -14,7 +14,7 @@ map. A map that breaks a rule is a MapError: one line, exit 2.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -230,18 +230,30 @@ def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[Ma
     return out
 
 
-def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: float) -> RoadMap:
+# A feature within this many metres of an entity's centre stays in its scene's road whatever the radius: the
+# lane facts were decided exactly at extraction, and the float distance must not drop a polygon that holds one.
+TOUCHING = 1.0
+
+
+def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: float,
+                 entities: Sequence[tuple[float, float]] = (), named: Collection[str] = ()) -> RoadMap:
     """The features of a map that come within `radius` of a pose (x, y, heading degrees CCW from +x, in the map's
     frame), in that pose's ego frame (+x right, +y forward, as frames and scenes are): the road of one scene.
-    Links to lanes left out are dropped. Near is decided by GEOS's distance, in float: which features a scene
-    shows is a matter of display, not of the lane facts (those are the extraction's, exact)."""
+    Also kept, however far: the features named in `named` (the lanes the entities' facts name) and those within
+    TOUCHING of a point of `entities` (their centres, in the map's frame), so that a radius smaller than the
+    extraction's never leaves a lane fact or a lane clause without its polygon. Links to lanes left out are
+    dropped. Near is decided by GEOS's distance, in float: which features a scene shows is a matter of display,
+    not of the lane facts (those are the extraction's, exact)."""
     import shapely
 
     kept = []
     origin = shapely.Point(x, y)
+    centres = shapely.MultiPoint(list(entities)) if len(entities) else None
+    named = set(named)
     for f in road.features:
         geom = shapely.Polygon(f.polygon) if f.polygon else shapely.LineString(f.line)
-        if geom.distance(origin) <= radius:
+        if (geom.distance(origin) <= radius or f.feature_id in named
+                or (centres is not None and geom.distance(centres) <= TOUCHING)):
             kept.append(f)
     yaw = math.radians(heading)
     c, s = math.cos(yaw), math.sin(yaw)

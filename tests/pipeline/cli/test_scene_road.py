@@ -37,10 +37,13 @@ def test_a_scene_carries_the_map_features_near_ego_in_its_ego_frame_and_the_enti
         doc = json.loads(proc.stdout)
         ego = rows[rows.is_ego].iloc[0]
         road = maps[ego.map_id]
-        # the features kept: exactly those within 30 m of ego in the map's frame (GEOS distance)
+        # the features kept: exactly those within 30 m of ego in the map's frame (GEOS distance), the lanes the
+        # entities' facts name, and those within 1 m of an entity's centre (however far from ego)
+        centres = shapely.MultiPoint(list(zip(rows.map_x, rows.map_y)))
+        named = {lane for ids in rows.lanes for lane in ids}
         near = {f.feature_id for f in road.features
-                if (shapely.Polygon(f.polygon) if f.polygon else shapely.LineString(f.line)).distance(
-                    shapely.Point(ego.map_x, ego.map_y)) <= 30}
+                if (g := shapely.Polygon(f.polygon) if f.polygon else shapely.LineString(f.line)).distance(
+                    shapely.Point(ego.map_x, ego.map_y)) <= 30 or f.feature_id in named or g.distance(centres) <= 1}
         assert doc["road"]["map_id"] == ego.map_id and {f["id"] for f in doc["road"]["features"]} == near
         # every point is its map point seen from ego: rotate back by the ego's heading and add its place
         yaw = math.radians(ego.map_heading)
@@ -106,3 +109,18 @@ def test_frames_without_a_map_give_a_scene_without_a_road(tmp_path):
     proc = run_r2s("scene", str(out), fid)
     assert proc.returncode == 0 and "road" not in json.loads(proc.stdout)
     assert all("lanes" not in e for e in json.loads(proc.stdout)["entities"])
+
+
+def test_a_small_radius_keeps_what_the_entities_stand_on_so_a_lane_program_samples(extracted, tmp_path):
+    # --radius below the extraction's left lanes the entities' facts name out of the road: `in lane "ID"` could
+    # never hold and r2s sample found no variant.
+    scene = tmp_path / "s.json"
+    assert run_r2s("scene", str(extracted), "scene-0103/0", "--radius", "10", "--out", str(scene)).returncode == 0
+    doc = json.loads(scene.read_text())
+    assert {lane for e in doc["entities"] for lane in e.get("lanes", [])} <= {f["id"] for f in doc["road"]["features"]}
+    program = tmp_path / "p.scenic"
+    proc = run_r2s("synth", str(scene), "--lanes", "--format", "scenic")
+    assert proc.returncode == 0, proc.stderr
+    program.write_text(proc.stdout)
+    proc = run_r2s("sample", str(program), "--n", "2", "--out", str(tmp_path / "v"))
+    assert proc.returncode == 0, proc.stderr
