@@ -7,7 +7,8 @@ A pattern is a program in the DSL, parsed by the same parser, with these differe
 - a statement may leave out its position or heading clause (or both): any position, any heading;
 - a position may be a distance alone, `within Range(a, b) of REF` (WithinDistance: any direction);
 - a line `ego CLAUSE, ...` constrains the frame's ego by clauses of the optional parts (its motion: `ego
-  stationary`, `ego moving Range(5, 15) m/s`, `ego moving like car`), its references declared above it.
+  stationary`, `ego moving Range(5, 15) m/s`, `ego moving like car`; its lane: `ego in intersection`, `ego in
+  lane of car`), its references declared above it.
 A match of a pattern in a scene is an injective binding of its names to the scene's non-ego entities, of
 matching types, under which every statement holds by the DSL semantics, REF resolved through the binding
 (synth.semantics: the same functions `r2s check` uses). This module is the definition; pipeline.query.mining is the
@@ -76,9 +77,8 @@ class WithinDistance(Clause):
         raise NotImplementedError(PATTERN_ONLY)
 
 
-# The parts an `ego ...` line may use: motion. (Lane clauses on ego wait until the lane engine of
-# pipeline/query/lanes.py is checked on ego's row.)
-EGO_PARTS = ("motion",)
+# The parts an `ego ...` line may use: motion and lane (the engine reads ego's row as any other: pipeline.query.lanes).
+EGO_PARTS = ("motion", "lane")
 
 # Pattern-only clause kinds, by the part whose place they take.
 PATTERN_CLAUSES: dict[str, tuple[type[Clause], ...]] = {"position": (WithinDistance,)}

@@ -32,13 +32,16 @@ LANE_PART = "lane"
 
 def uses_lanes(pattern: Pattern) -> bool:
     """Does a statement carry a LANE clause (which needs the frames' road columns and their maps)?"""
-    return any(st.lane is not None for st in pattern.statements)
+    return any(st.lane is not None for st in (*pattern.statements, *([pattern.ego] if pattern.ego else [])))
 
 
 def without_lanes(pattern: Pattern) -> Pattern:
     """The pattern with its lane clauses left out: what the Python re-check decides (SQL decides those exactly)."""
-    return Pattern(tuple(Statement(st.id, st.type, parts=tuple((n, c) for n, c in st.parts if n != LANE_PART))
-                         for st in pattern.statements), pattern.ego)  # the ego line (motion only) is kept
+    def strip(st: Statement) -> Statement:
+        return Statement(st.id, st.type, parts=tuple((n, c) for n, c in st.parts if n != LANE_PART))
+
+    ego = strip(pattern.ego) if pattern.ego is not None else None  # its motion clauses stay for the re-check
+    return Pattern(tuple(strip(st) for st in pattern.statements), ego if ego is not None and ego.parts else None)
 
 
 def lane_sets(roads: Iterable[RoadMap]) -> pa.Table:

@@ -29,6 +29,13 @@ MORE = [
     f"a = new Vehicle {ANYWHERE}, in lane of ego\nb = new Vehicle behind a by Range(0, 40), facing Range(0, 360) deg, "
     "in lane of a",
     f"a = new Vehicle {ANYWHERE}, in lane right of ego\nb = new Vehicle {ANYWHERE}, in oncoming lane of a",
+    # the ego line: ego's own lane facts, and ego in a lane related to a name's
+    f"v = new Vehicle {ANYWHERE}\nego in intersection",
+    f"v = new Object {ANYWHERE}\nego off lane",
+    f"v = new Vehicle {ANYWHERE}\nego in lane of v",
+    f"v = new Vehicle {ANYWHERE}\nego in lane left of v",
+    f"v = new Vehicle {ANYWHERE}\nego in oncoming lane of v",
+    f"v = new Vehicle {ANYWHERE}, in lane of ego\nego moving Range(0, 100) m/s, in lane of v",
 ]
 
 
