@@ -5,31 +5,20 @@ rows naming the missing road."""
 from __future__ import annotations
 
 import pandas as pd
-import pytest
 
 from tests.support import ROOT, run_r2s
 
-EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt"
 
-
-@pytest.fixture(scope="module")
-def extracted(tmp_path_factory):
-    out = tmp_path_factory.mktemp("run-lanes") / "frames"
-    proc = run_r2s("extract", "scenarionet", str(EXCERPT / "scenarionet"), "--categories", "all", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    return out
-
-
-def test_every_program_of_a_lanes_run_holds_on_the_scene_r2s_scene_writes(extracted, tmp_path):
+def test_every_program_of_a_lanes_run_holds_on_the_scene_r2s_scene_writes(excerpt_frames, tmp_path):
     out = tmp_path / "programs"
-    proc = run_r2s("run", str(extracted), "--lanes", "--out", str(out), "--jobs", "1")
+    proc = run_r2s("run", str(excerpt_frames), "--lanes", "--out", str(out), "--jobs", "1")
     assert proc.returncode == 0, proc.stderr
     programs = pd.read_parquet(out)
-    assert len(programs) == pd.read_parquet(extracted, columns=["frame_id"]).frame_id.nunique()
+    assert len(programs) == pd.read_parquet(excerpt_frames, columns=["frame_id"]).frame_id.nunique()
     assert (programs.status == "optimal").all(), programs.error.tolist()
     for row in programs.itertuples():
         scene, program = tmp_path / "scene.json", tmp_path / "program.dsl"
-        proc = run_r2s("scene", str(extracted), row.frame_id, "--out", str(scene))
+        proc = run_r2s("scene", str(excerpt_frames), row.frame_id, "--out", str(scene))
         assert proc.returncode == 0, proc.stderr
         program.write_text(row.program)
         assert all(", in " in line or ", on " in line or ", off " in line for line in row.program.splitlines())

@@ -8,7 +8,6 @@ import math
 
 import numpy as np
 import pandas as pd
-import pytest
 import shapely
 
 from extractors.maps import read_maps
@@ -19,20 +18,13 @@ from tests.support import ROOT, assert_one_line_error, run_r2s
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt"
 
 
-@pytest.fixture(scope="module")
-def extracted(tmp_path_factory):
-    out = tmp_path_factory.mktemp("road") / "frames"
-    proc = run_r2s("extract", "scenarionet", str(EXCERPT / "scenarionet"), "--categories", "all", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    return out
 
-
-def test_a_scene_carries_the_map_features_near_ego_in_its_ego_frame_and_the_entities_lane_facts(extracted):
-    frames = pd.read_parquet(extracted)
-    maps = {m.map_id: m for m in read_maps(extracted / "_maps")}
+def test_a_scene_carries_the_map_features_near_ego_in_its_ego_frame_and_the_entities_lane_facts(excerpt_frames):
+    frames = pd.read_parquet(excerpt_frames)
+    maps = {m.map_id: m for m in read_maps(excerpt_frames / "_maps")}
     for fid in frames.frame_id.unique():
         rows = frames[frames.frame_id == fid]
-        proc = run_r2s("scene", str(extracted), fid, "--radius", "30")
+        proc = run_r2s("scene", str(excerpt_frames), fid, "--radius", "30")
         assert proc.returncode == 0, proc.stderr
         doc = json.loads(proc.stdout)
         ego = rows[rows.is_ego].iloc[0]
@@ -73,10 +65,10 @@ def test_a_scene_carries_the_map_features_near_ego_in_its_ego_frame_and_the_enti
         assert scene.to_json() == proc.stdout
 
 
-def test_synthesis_reads_a_scene_with_a_road_and_a_bad_road_is_one_line(extracted, tmp_path):
-    fid = pd.read_parquet(extracted, columns=["frame_id"]).frame_id.iloc[0]
+def test_synthesis_reads_a_scene_with_a_road_and_a_bad_road_is_one_line(excerpt_frames, tmp_path):
+    fid = pd.read_parquet(excerpt_frames, columns=["frame_id"]).frame_id.iloc[0]
     scene = tmp_path / "scene.json"
-    assert run_r2s("scene", str(extracted), fid, "--out", str(scene)).returncode == 0
+    assert run_r2s("scene", str(excerpt_frames), fid, "--out", str(scene)).returncode == 0
     doc = json.loads(scene.read_text())
     plain = {**doc, "entities": [{k: v for k, v in e.items() if k not in (
         "lanes", "lane", "in_intersection", "on_crosswalk", "off_road")} for e in doc["entities"]]}
@@ -111,11 +103,11 @@ def test_frames_without_a_map_give_a_scene_without_a_road(tmp_path):
     assert all("lanes" not in e for e in json.loads(proc.stdout)["entities"])
 
 
-def test_a_small_radius_keeps_what_the_entities_stand_on_so_a_lane_program_samples(extracted, tmp_path):
+def test_a_small_radius_keeps_what_the_entities_stand_on_so_a_lane_program_samples(excerpt_frames, tmp_path):
     # --radius below the extraction's left lanes the entities' facts name out of the road: `in lane "ID"` could
     # never hold and r2s sample found no variant.
     scene = tmp_path / "s.json"
-    assert run_r2s("scene", str(extracted), "scene-0103/0", "--radius", "10", "--out", str(scene)).returncode == 0
+    assert run_r2s("scene", str(excerpt_frames), "scene-0103/0", "--radius", "10", "--out", str(scene)).returncode == 0
     doc = json.loads(scene.read_text())
     assert {lane for e in doc["entities"] for lane in e.get("lanes", [])} <= {f["id"] for f in doc["road"]["features"]}
     program = tmp_path / "p.scenic"

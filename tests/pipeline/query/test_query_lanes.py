@@ -15,7 +15,6 @@ from pipeline.query import query
 from synth.pattern import matches, parse_pattern
 from tests.support import ROOT, assert_one_line_error, run_r2s
 
-EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt"
 AV2_LOG = Path("/work/shared/data/argoverse2/test_data/sensor_dataset_logs/adcf7d18-0510-35b0-a2fa-b4cea13a6d76")
 LANE_PATTERNS = sorted((ROOT / "data" / "patterns" / "lanes").glob("*.dsl"))
 ANYWHERE = "on Range(-999, 999) @ Range(-999, 999), facing Range(0, 360) deg"
@@ -62,10 +61,6 @@ def _extract(tmp_path_factory, source: str, path) -> str:
     return str(out)
 
 
-@pytest.fixture(scope="module")
-def nuscenes(tmp_path_factory):
-    return _extract(tmp_path_factory, "scenarionet", EXCERPT / "scenarionet")
-
 
 @pytest.fixture(scope="module")
 def av2(tmp_path_factory):
@@ -75,9 +70,9 @@ def av2(tmp_path_factory):
 
 
 @pytest.mark.parametrize("text", [p.read_text() for p in LANE_PATTERNS] + MORE)
-def test_lane_patterns_match_exactly_the_definition_on_the_shipped_excerpt(nuscenes, text):
+def test_lane_patterns_match_exactly_the_definition_on_the_shipped_excerpt(excerpt_frames, text):
     pattern = parse_pattern(text)
-    assert engine(nuscenes, pattern) == brute(nuscenes, pattern)
+    assert engine(excerpt_frames, pattern) == brute(excerpt_frames, pattern)
 
 
 def test_lane_patterns_match_exactly_the_definition_on_the_argoverse2_log(av2):
@@ -98,8 +93,8 @@ def test_lane_patterns_need_frames_with_a_map(tmp_path):
     assert not (tmp_path / "m.parquet").exists()
 
 
-def test_a_temporal_pattern_with_a_lane_clause_is_one_line(nuscenes, tmp_path):
+def test_a_temporal_pattern_with_a_lane_clause_is_one_line(excerpt_frames, tmp_path):
     path = tmp_path / "p.dsl"
     path.write_text(f"v = new Vehicle {ANYWHERE}, in lane of ego\nfor at least 1 s\n")
-    proc = run_r2s("query", nuscenes, str(path), "--out", str(tmp_path / "m.parquet"))
+    proc = run_r2s("query", str(excerpt_frames), str(path), "--out", str(tmp_path / "m.parquet"))
     assert_one_line_error(proc, 2, "temporal")
