@@ -175,7 +175,7 @@ class FrameRoads:
         road = self.map_named(ego["map_id"])
         if road is None:
             return None, ego["map_id"]
-        placed = rows[rows["map_x"].notna() & rows["map_y"].notna()] if "map_x" in rows.columns else rows[:0]
+        placed = rows[rows["map_x"].notna() & rows["map_y"].notna()]  # map_x is there: ego's was read above
         centres = list(zip(placed["map_x"].astype(float), placed["map_y"].astype(float)))
         named = {lane for ids in rows["lanes"] if ids is not None for lane in ids} if "lanes" in rows.columns else ()
         return in_ego_frame(road, float(ego["map_x"]), float(ego["map_y"]), float(ego["map_heading"]),
