@@ -9,6 +9,7 @@ on this scene (synth.robust) gets the robust table and the robust solver questio
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,6 +36,8 @@ class RelationOracle:
     parts: tuple[Part, ...] = ()
     # The paper's M_smt: (relation, target index, reference index) -> does the relation hold.
     cache: dict[tuple[str, int, int], bool] = field(default_factory=dict)
+    # A window's oracle (synth.window): each entity's poses in the frames it is in, over which its fallback is weighed.
+    poses: Mapping[str, tuple[Entity, ...]] | None = None
 
     @property
     def complete(self) -> bool:
@@ -74,15 +77,16 @@ class RelationOracle:
         return NONE
 
     def holds(self, k: int, code: int, r: int, e: int) -> bool:
-        """Does relation `code` of part k hold between r and e, not only the one the table records? A part's
-        relations are disjoint but for one that needs no reference (Part.refless), recorded in ego's row over the
-        others (stationary over `moving like ego`): only there is another one asked (synth.window needs it, as a
-        window's frames may agree on the masked one alone)."""
+        """Does relation `code` of part k hold between r and e, not only the one the table records? A disjoint
+        part's relations exclude each other but for one that needs no reference (Part.refless), recorded in ego's
+        row over the others (stationary over `moving like ego`): only there is another one asked; a part whose
+        relations are not disjoint (Part.disjoint: lanes) is asked wherever one holds (synth.window needs it, as
+        a window's frames may agree on a relation the table does not record)."""
         part = self.parts[k]
         found = self.relation(k, r, e)
         if found == code or found == NONE:
             return found == code
-        if found not in part.refless or r != 0:
+        if part.disjoint and (found not in part.refless or r != 0):
             return False
         ents = self.entities()
         if self.backend is None:  # closed form: exact, or conservative for a robust part (settle_conservatively)
@@ -91,6 +95,13 @@ class RelationOracle:
         if key not in self.cache:
             self.cache[key] = part.ask(self.backend, code, ents[r], ents[e])
         return self.cache[key]
+
+    def fallback_cost(self, k: int, e: int) -> int:
+        """What part k costs entity e without a witness (Part.fallback_cost; a window's oracle: over the frames e
+        is in, Part.window_fallback_cost)."""
+        if self.poses is not None:
+            return self.parts[k].window_fallback_cost(self.poses[self.ids[e]], self.config)
+        return self.parts[k].fallback_cost(self.entities()[e], self.config)
 
     def full_table(self) -> RelationTable:
         """Every pair answered (the smt oracle asks the solver for each one it has not asked yet)."""

@@ -7,8 +7,10 @@ window is declared once and describes the frames it is in: a frame's program is 
 of the entities present in that frame (frame_program), which is why a reference must be present wherever its
 target is (its statement would otherwise name an entity the frame lacks). Each frame's statements are written by
 Alg. 4 on that frame with the window's choice of reference and relation, and the window's clause of an entity is
-the widening of its frames' clauses (Clause.widened: Ranges become the hull of the frames' Ranges, so they cover
-every frame's measure). Every frame's program is certified on its frame. docs/dsl.md, "Programs over a window".
+its part's merge of its frames' clauses (Part.merged: by default their widening, Clause.widened, Ranges the hull
+of the frames' Ranges so they cover every frame's measure; the lane part's fallback is decided on the entity's
+place in every frame, and the search weighs it so, Part.window_fallback_cost). Every frame's program is certified
+on its frame. docs/dsl.md, "Programs over a window".
 
 How windows tile a scene's frames (tile) is here too: it is arithmetic on timestamps, values in and out.
 """
@@ -140,12 +142,17 @@ def window_table(oracles: Sequence[Any], ids: tuple[str, ...]):
         for oracle in oracles:
             at = np.array([where[i] for i in oracle.ids])
             cells = oracle.table[part.name]
-            masked = np.flatnonzero(np.isin(cells[0], list(part.refless)))  # ego's row: others may hold too
+            # The cells where a relation other than the recorded one may hold too (RelationOracle.holds): ego's
+            # row where a refless code is recorded; for a part whose relations are not disjoint, every witness.
+            if part.disjoint:
+                asked = [(0, int(e)) for e in np.flatnonzero(np.isin(cells[0], list(part.refless)))]
+            else:
+                asked = [(int(r), int(e)) for r, e in np.argwhere(cells != NONE)]
             for c, window in holds.items():
                 frame = np.zeros((n, len(at)), dtype=bool)  # references absent from the frame: never
                 frame[at, :] = cells == c
-                for e in masked:
-                    frame[0, e] = oracle.holds(k, c, 0, int(e))
+                for r, e in asked:
+                    frame[at[r], e] = oracle.holds(k, c, r, e)
                 window[:, at[1:]] &= frame[:, 1:]
         table = np.full((n, n), NONE, dtype=np.int8)
         for c in reversed(part.codes_from(True)):
@@ -158,15 +165,10 @@ def window_table(oracles: Sequence[Any], ids: tuple[str, ...]):
 
 
 def check_window_config(config: SynthConfig) -> None:
-    """What a window cannot be synthesized with yet: one line, before any work (r2s run checks it up front)."""
+    """What a window cannot be synthesized with: one line, before any work (r2s run checks it up front)."""
     if config.strategy == "monolithic":
         raise ConfigError("strategy 'monolithic' encodes one frame; a window is searched on its relation table "
                           "(any other strategy)")
-    if config.lanes:
-        # A lane fallback depends on where the entity is in each frame (off lane, intersection, a lane id), and
-        # there is no rule yet that merges one entity's per-frame lane clauses into one that holds in them all.
-        raise ConfigError("lanes are not yet synthesized over a window: run --window without --lanes, or --lanes "
-                          "one frame at a time")
 
 
 def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
@@ -179,6 +181,7 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     from synth.emit_scenic import render_scenic
     from synth.oracle import RelationOracle, make_oracle
     from synth.parts import parts_for
+    from synth.parts.lane import require_lanes
     from synth.search import Budget, CostModel, search
     from synth.smt.certify import certify
     from synth.statement import choose_references, write_statements
@@ -188,9 +191,11 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     config = as_config(config)
     check_window_config(config)
     ids, present = clip_entities(scenes)
-    if config.motion:
-        for scene in scenes:
+    for scene in scenes:
+        if config.motion:
             require_speeds(scene)
+        if config.lanes:
+            require_lanes(scene)
     started = time.perf_counter()
     budget = Budget(config.time_limit, config.memory_limit)
     oracles = [make_oracle(scene, config) for scene in scenes]
@@ -200,7 +205,9 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     first = {e.id: e for scene in reversed(scenes) for e in scene.others}
     shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road, scenes[0].world)
     all_ids = (shown.ego.id,) + ids
-    window = RelationOracle(shown, config, all_ids, window_table(oracles, all_ids), parts=parts_for(config))
+    # Each entity's poses in the frames it is in: what a part's window fallback is decided on.
+    poses = {i: tuple(scenes[k].by_id()[i] for k in present[i]) for i in ids}
+    window = RelationOracle(shown, config, all_ids, window_table(oracles, all_ids), parts=parts_for(config), poses=poses)
     t = time.perf_counter()
     oracle_s = t - started
     found = search(config.strategy, CostModel(window), budget)
@@ -218,20 +225,19 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
         return math.hypot(rx - x, ry - y)
 
     choices = dict(zip(order, choose_references(window, order, distance)))
-    clauses: dict[str, dict[str, Any]] = {}
+    written: dict[str, dict[str, list]] = {}  # per entity, per part: the clause of each frame it is in
     for oracle in oracles:
         at = {i: k for k, i in enumerate(oracle.ids)}  # window id -> the frame oracle's index
         mine = [i for i in order if all_ids[i] in at]
         rows = [tuple((at[all_ids[r]], c) for r, c in choices[i]) for i in mine]
         for st in write_statements(oracle, tuple(at[all_ids[i]] for i in mine), rows, config):
-            held = clauses.setdefault(st.id, {})
             for part, clause in st.parts:
-                wider = held[part].widened(clause) if part in held else clause
-                if wider is None:
-                    raise AssertionError(f"{st.id}: frames disagree on its {part} clause ({held[part]}, {clause})")
-                held[part] = wider
-    program = Program(tuple(Statement(all_ids[i], first[all_ids[i]].type, parts=tuple(clauses[all_ids[i]].items()))
-                            for i in order))
+                written.setdefault(st.id, {}).setdefault(part, []).append(clause)
+    by_name = {p.name: p for p in window.parts}
+    program = Program(tuple(
+        Statement(i, first[i].type, parts=tuple((part, by_name[part].merged(frames, poses[i], config))
+                                                for part, frames in written[i].items()))
+        for i in (all_ids[j] for j in order)))
     if program.cost != found.cost:
         raise AssertionError(f"window program cost {program.cost} differs from the search's {found.cost}")
     ranges_s = time.perf_counter() - t

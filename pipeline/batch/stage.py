@@ -301,10 +301,13 @@ class _WindowRun(_Run):
             spec.config_hash(self.config)
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
+        from extractors.maps import maps_dir
         from pipeline.batch.window_task import WindowTask
 
         spec = self.options.window
-        parts = tuple((p.path, p.columns) for p in dataset.parts)
+        # With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only)
+        maps = str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
+        parts = tuple((p.path, p.columns + (p.road if maps is not None else ())) for p in dataset.parts)
         windows = self._windows
         if len(done):
             windows = [w for w, kept in zip(windows, done.contains(*frame_hashes([w.frames[0].frame_id
@@ -315,5 +318,6 @@ class _WindowRun(_Run):
         while at < len(windows):
             size = next(sizes)
             yield WindowTask(f"w{n}", dataset.url, parts, tuple(windows[at:at + size]), self.config, spec,
-                             spec.config_hash(self.config), hard_cap=pool.own_processes, progress_dir=progress_dir)
+                             spec.config_hash(self.config), hard_cap=pool.own_processes, progress_dir=progress_dir,
+                             maps=maps)
             at, n = at + size, n + 1

@@ -19,7 +19,8 @@ import pyarrow as pa
 from extractors.frame_hash import frame_hashes_of
 from extractors.frames import FramesError, frame_to_scene
 from extractors.frames_dataset import read_frame_rows
-from pipeline.batch.task import ChunkInvalid, ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, one_line
+from extractors.maps import FrameRoads
+from pipeline.batch.task import ChunkInvalid, ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, _road, one_line
 from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
 from synth.config import SynthConfig
@@ -40,6 +41,7 @@ class WindowTask(Units):
     config_hash: str  # the rows' (WindowSpec.config_hash)
     hard_cap: bool = False
     progress_dir: str | None = None
+    maps: str | None = None  # with lanes: the maps beside the frames, each frame's road as r2s scene gives it
 
     def read(self, unit: WindowUnit) -> tuple[list, str]:
         """The window's frames' rows (one DataFrame each, in order) and the window's hash of them as read."""
@@ -69,12 +71,13 @@ class WindowTask(Units):
     def run(self) -> pa.Table:
         """A row per window, in order. Never raises for a window, only when rows cannot be read at all."""
         marker = self.marker()
+        roads = FrameRoads(self.maps) if self.maps is not None else None  # read once for the task's windows
         out = []
         for i, unit in enumerate(self.frames):
             if marker is not None:
                 with open(marker, "w") as f:  # its mtime is when this window started (the wall-clock guard)
                     f.write(str(i))
-            out.append(self._run_window(unit))
+            out.append(self._run_window(unit, roads))
         if marker is not None:
             try:
                 os.unlink(marker)
@@ -82,12 +85,12 @@ class WindowTask(Units):
                 pass
         return programs_table(out, WINDOW_SCHEMA)
 
-    def _run_window(self, unit: WindowUnit) -> dict:
+    def _run_window(self, unit: WindowUnit, roads: FrameRoads | None) -> dict:
         started = time.perf_counter()
         frames, digest = self.read(unit)
         n_entities = max(len(f) for f in frames) - 1
         try:
-            scenes = [frame_to_scene(f) for f in frames]
+            scenes = [frame_to_scene(f, _road(roads, f) if roads is not None else None) for f in frames]
         except FramesError as exc:  # one bad frame is an error row for its window; the run goes on
             return self._failure(unit, "error", str(exc), n_entities, digest)
         _reset_peak_rss()

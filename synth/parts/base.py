@@ -6,11 +6,12 @@ absolute form (cost 2). Each form of its grammar is a clause kind: a class (Clau
 (text, cost, report kind, semantics, exact test, SMT formulas, Scenic value, what the sampler draws). The part
 holds what its clauses share, in small interfaces the core asks one at a time:
 
-  Relations (its relation table)    relations, refless, codes_from, perturbed, closed_form, robust_closed_form,
-                                    exact, relation, robust_relation, any_relation, ask
+  Relations (its relation table)    relations, refless, disjoint, codes_from, perturbed, closed_form,
+                                    robust_closed_form, exact, relation, robust_relation, any_relation, ask
                                         -> relations, oracle, robust, search (c(e, E) sums over parts)
   Measured (synth.smt.backend)      exact_measure, measure_terms, solver_measure  -> smt (Range values)
   Part                              quantity, float_measure, clause, robust_clause  -> statement (Alg. 4)
+                                    window_fallback_cost, merged                   -> window (a clip's program)
                                     parse, optional, starts                        -> dsl (the grammar)
                                     keyword, scenic_prelude                        -> emit_scenic
                                     clauses, clause_kinds, kinds                   -> the report, the pictures
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING, ClassVar
@@ -50,6 +52,10 @@ class Relations(ABC):
     relations: ClassVar[tuple[str, ...]]  # witness relations (cost 0); code = index
     # Codes that need no reference: always available, like ego, so they are recorded in ego's row (index 0).
     refless: ClassVar[frozenset[int]] = frozenset()
+    # Can two of its relations hold of one pair at once? The paper's parts' cannot (sectors 90 degrees apart,
+    # toward / away from); where they can (lanes: a lane where two merge is on both their chains), the table
+    # records the first and a window asks for the others (RelationOracle.holds).
+    disjoint: ClassVar[bool] = True
 
     def codes_from(self, ref_is_ego: bool) -> tuple[int, ...]:
         """The codes that may hold with a reference (refless codes only in ego's row), asked in this order."""
@@ -160,6 +166,26 @@ class Part(Relations, Measured):
     @abstractmethod
     def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
         """The same with Ranges that cover every perturbation (robust synthesis)."""
+
+    # ------------------------------------------------------------------------------- windows (synth.window)
+    def window_fallback_cost(self, frames: Sequence[Entity], config: SynthConfig) -> int:
+        """What the part costs for an entity without a window witness, `frames` its poses in the frames of the
+        window it is in: the cost of the clause `merged` then writes. By default the most a frame's fallback costs
+        (the paper's parts: 1, as their fallback is one form whose Ranges widen)."""
+        return max(self.fallback_cost(e, config) for e in frames)
+
+    def merged(self, clauses: Sequence[Clause], frames: Sequence[Entity], config: SynthConfig) -> Clause:
+        """The window's clause of an entity: from the clause Alg. 4 wrote in each frame it is in (with the window's
+        reference and relation) and its poses there, one clause that holds in each of those frames. By default the
+        clauses widened into one (Clause.widened: the same form, each Range the hull of the frames' Ranges); a
+        part whose fallback depends on where the entity is (lanes) overrides it."""
+        out = clauses[0]
+        for clause in clauses[1:]:
+            wider = out.widened(clause)
+            if wider is None:
+                raise AssertionError(f"frames disagree on a {self.name} clause ({out}, {clause})")
+            out = wider
+        return out
 
     # ------------------------------------------------------------------------------- syntax, Scenic
     def parse(self, ln: Line, declared: set[str]) -> Clause:

@@ -18,6 +18,8 @@ fact: 1 for the first of intersection, crosswalk, off road, off lane that holds,
 (Part.fallback_cost: the search weighs it). Robust: a relation holds only if it holds for every lane the
 entity (and its reference) may be in under the bounds (synth.lane_relations.places), and the fallback is the
 first fact that holds wherever the entity may be, else its lane by id if it cannot leave it, else `anywhere`.
+Over a window (synth.window), two relations may hold at once (a merged lane is on both chains: disjoint = False),
+and the fallback is decided on the entity's place in every frame it is in (window_fallback, merged).
 """
 
 from __future__ import annotations
@@ -247,6 +249,28 @@ class LaneDraws(Requirement):
         return self.clause.holds(road.entity(own), None if ref is None else road.entity(ref), self.config)
 
 
+def _place(e: Entity, config: SynthConfig, robust: bool) -> tuple[frozenset[str], str | None]:
+    """Where the fallback reads e to be: the cost-1 facts sure to hold of it, and the one lane it is sure to be in
+    (None: in no lane, or, robustly, possibly in several or in none)."""
+    if robust:
+        p = _robust_places(e, config)
+        return p.sure, (next(iter(p.lanes)) if not p.laneless and len(p.lanes) == 1 else None)
+    return facts_of(e), e.lane
+
+
+def _fallback_at(where: Sequence[tuple[frozenset[str], str | None]]) -> Clause:
+    """The cheapest clause without a reference true at every one of these places: the first fact sure at all of
+    them (cost 1), else `in lane "ID"` when all are surely in the one lane ID (and ID can be quoted), else
+    anywhere (cost 2)."""
+    sure = frozenset.intersection(*(facts for facts, _ in where))
+    fact = next((f for f in FACTS if f in sure), None)
+    if fact is not None:
+        return LaneFact(fact)
+    lanes = {lane for _, lane in where}
+    lane = next(iter(lanes)) if len(lanes) == 1 else None
+    return InLane(lane) if lane is not None and printable_id(lane) else Anywhere()
+
+
 def printable_id(lane: str) -> bool:
     """Can `in lane "ID"` quote this id: 1-256 printable ASCII characters but the quote, the backslash (a Scenic
     string) and # (a DSL comment)?"""
@@ -259,6 +283,7 @@ class LanePart(Part):
     keyword = "with dsl__lane"
     clauses = (LaneRelation, LaneFact, InLane, Anywhere)
     optional = True  # `, LANE` ends a statement when the program has lanes
+    disjoint = False  # a lane where two lanes merge is on both their chains: same lane and lane left at once
 
     def enabled(self, config: SynthConfig) -> bool:
         return config.lanes
@@ -318,18 +343,29 @@ class LanePart(Part):
     def fallback(self, e: Entity, config: SynthConfig, robust: bool) -> Clause:
         """The clause of an entity without a witness: its first fact (cost 1), else its lane by id (cost 2), else
         (robust, when the bounds leave its lane open) anywhere."""
-        if robust:
-            p = _robust_places(e, config)
-            sure, lane = p.sure, (next(iter(p.lanes)) if not p.laneless and len(p.lanes) == 1 else None)
-        else:
-            sure, lane = facts_of(e), e.lane
-        fact = next((f for f in FACTS if f in sure), None)
-        if fact is not None:
-            return LaneFact(fact)
-        return InLane(lane) if lane is not None and printable_id(lane) else Anywhere()
+        return _fallback_at([_place(e, config, robust)])
 
     def fallback_cost(self, e: Entity, config: SynthConfig) -> int:
         return self.fallback(e, config, self.perturbed(bounds_of(e, config))).cost
+
+    # ------------------------------------------------------------------------------- windows
+    def window_fallback(self, frames: Sequence[Entity], config: SynthConfig) -> Clause:
+        """The clause of an entity without a window witness, `frames` its poses in the frames it is in: the first
+        fact that holds in every one of them (cost 1), else its lane by id if it is in that one lane in all of
+        them, else anywhere (cost 2). Each frame's place is read as the frame's own fallback reads it (robustly
+        where the entity's bounds are not zero), so one frame gives the single-frame fallback."""
+        return _fallback_at([_place(e, config, self.perturbed(bounds_of(e, config))) for e in frames])
+
+    def window_fallback_cost(self, frames: Sequence[Entity], config: SynthConfig) -> int:
+        return self.window_fallback(frames, config).cost
+
+    def merged(self, clauses: Sequence[Clause], frames: Sequence[Entity], config: SynthConfig) -> Clause:
+        # A window witness is one relation with one reference in every frame (the frames' clauses are that one
+        # clause); without one, each frame wrote its own fallback (a fact, a lane), which need not hold in the
+        # others: the window's fallback is decided on every frame's place at once.
+        if clauses[0].ref is not None:
+            return super().merged(clauses, frames, config)
+        return self.window_fallback(frames, config)
 
     def clause(self, code: int, ref_id: str, values: tuple[Fraction, ...], config: SynthConfig) -> Clause:
         if code == NONE:

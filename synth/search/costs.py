@@ -2,8 +2,8 @@
 
 Each statement part costs 0 when some declared reference is a witness of e for it (for position: e is ahead
 of / behind / left of / right of it; for heading: e faces toward / away from it), else its fallback's cost (1,
-relative to ego, for the paper's parts; the lane part's depends on e: Part.fallback_cost); c(e, E) is the sum
-over the parts. It depends only on the set E, never on its order (the paper's
+relative to ego, for the paper's parts; the lane part's depends on e, and over a window on e's frames:
+RelationOracle.fallback_cost); c(e, E) is the sum over the parts. It depends only on the set E, never on its order (the paper's
 Common Prefix Abstraction), and only falls as E grows. Sets are Python ints used as bitsets over the entities to
 declare, numbered 0..n-1 in scene order.
 """
@@ -31,7 +31,7 @@ class CostModel:
         # c(e, E) stays a count of unmet units: unit (k, j) is unmet iff part k has no declared witness and the
         # fallback costs j or more.
         ents = oracle.entities()[1:]
-        weights = [[p.fallback_cost(e, oracle.config) for e in ents] for p in oracle.parts]
+        weights = [[oracle.fallback_cost(k, e) for e in range(1, n + 1)] for k in range(len(oracle.parts))]
         self.unit_part = [k for k, w in enumerate(weights) for _ in range(max(w, default=1))]
         level = [j for w in weights for j in range(1, max(w, default=1) + 1)]
         free = [sum(1 << e for e in range(n) if weights[k][e] < j) for k, j in zip(self.unit_part, level)]

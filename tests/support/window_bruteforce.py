@@ -6,6 +6,11 @@ tests.support.bruteforce does; a (reference, relation) witnesses e for the windo
 e is present (which also says the reference is present there), and the optimum is the DP over
 subsets of the window's entities, best[S] = min over e in S of best[S - e] + c(e, S - e). Exponential: up to ~14
 entities in the whole window.
+
+With lanes, the lane relations of each frame come from tests.support.lanes (walks spelled out, GEOS geometry:
+every relation that holds, not the first), and an entity without a lane witness pays 1 if one lane fact (in
+intersection, on crosswalk, off road, off lane) holds in every frame it is in, else 2 (its lane by id, or
+anywhere): the cheapest clause without a reference that holds in all of them.
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ from collections.abc import Sequence
 
 from synth.config import SynthConfig
 from synth.geometry import angular_difference, bearing
-from synth.scene import Scene
+from synth.scene import Entity, Scene
+from tests.support.lanes import SIDES, BruteLanes
 
 EGO, ALWAYS = "ego", "*"  # the references every declaration may use: ego and a witness that needs none
 
@@ -44,7 +50,41 @@ def frame_witnesses(scene: Scene, config: SynthConfig) -> list[dict[str, set[tup
                 heading[e.id].add((r.id, "toward"))
             if angular_difference(e.heading, b) <= config.delta2:
                 heading[e.id].add((r.id, "away"))
-    return [position, heading] + ([motion] if config.motion else [])
+    return [position, heading] + ([motion] if config.motion else []) + ([lane_witnesses(scene)] if config.lanes else [])
+
+
+def lane_witnesses(scene: Scene) -> dict[str, set[tuple[str, str]]]:
+    """Per entity: every (reference id, side) whose lane relation holds in this frame (the brute force's chains)."""
+    brute = BruteLanes(scene.road)
+    related: dict[tuple[str, str], set[str]] = {}
+    out: dict[str, set] = {}
+    for e in scene.others:
+        out[e.id] = set()
+        for r in scene.entities:
+            if r.id == e.id or e.lane is None or r.lane is None:
+                continue
+            for side in SIDES:
+                if (r.lane, side) not in related:
+                    related[r.lane, side] = brute.related(r.lane, side)
+                if e.lane in related[r.lane, side]:
+                    out[e.id].add((r.id, side))
+    return out
+
+
+def lane_facts(e: Entity) -> set[str]:
+    """The cost-1 lane facts of an entity as recorded."""
+    off_lane = not e.lanes and e.off_road is False
+    return {name for name, held in (("intersection", e.in_intersection), ("crosswalk", e.on_crosswalk),
+                                    ("off road", e.off_road), ("off lane", off_lane)) if held}
+
+
+def lane_weights(scenes: Sequence[Scene]) -> dict[str, int]:
+    """Per entity: its lane fallback over the window, 1 if a fact holds in every frame it is in, else 2."""
+    facts: dict[str, set[str]] = {}
+    for scene in scenes:
+        for e in scene.others:
+            facts[e.id] = facts[e.id] & lane_facts(e) if e.id in facts else lane_facts(e)
+    return {i: 1 if f else 2 for i, f in facts.items()}
 
 
 def window_witnesses(scenes: Sequence[Scene], config: SynthConfig) -> list[dict[str, set[tuple[str, str]]]]:
@@ -65,9 +105,13 @@ def optimal_window_cost(scenes: Sequence[Scene], config: SynthConfig | None = No
     ids = sorted({e.id for s in scenes for e in s.others})
     n = len(ids)
 
+    weights = [{i: 1 for i in ids} for _ in parts]
+    if config.lanes:
+        weights[-1] = lane_weights(scenes)
+
     def c(e: int, declared: int) -> int:
         avail = {EGO, ALWAYS} | {ids[r] for r in range(n) if declared >> r & 1}
-        return sum(not any(r in avail for r, _ in part[ids[e]]) for part in parts)
+        return sum(0 if any(r in avail for r, _ in part[ids[e]]) else w[ids[e]] for part, w in zip(parts, weights))
 
     best = [0] * (1 << n)
     for s in range(1, 1 << n):
@@ -75,4 +119,4 @@ def optimal_window_cost(scenes: Sequence[Scene], config: SynthConfig | None = No
     return best[-1]
 
 
-__all__ = ["frame_witnesses", "optimal_window_cost", "window_witnesses"]
+__all__ = ["frame_witnesses", "lane_weights", "lane_witnesses", "optimal_window_cost", "window_witnesses"]

@@ -33,16 +33,24 @@ def clips(tmp_path_factory) -> Path:
     return path
 
 
-def expected_windows(frames: Path, window_s: float, stride_s: float | None = None):
-    """(scene, [frame ids], [Scenes], [timestamps]) of every window, from the frames read whole with pandas."""
-    df = read_frames(frames)
+def expected_windows(frames: Path, window_s: float, stride_s: float | None = None, roads: bool = False):
+    """(scene, [frame ids], [Scenes], [timestamps]) of every window, from the frames read whole with pandas (with
+    `roads`: each frame with the road r2s scene gives it, from the maps beside the frames)."""
+    import pandas as pd
+
+    from extractors.maps import FrameRoads, maps_dir
+
+    df = pd.read_parquet(frames) if roads else read_frames(frames)
+    found = FrameRoads(maps_dir(frames)) if roads else None
     out = []
     for scene, rows in df.groupby("scene", sort=True):
         heads = rows.drop_duplicates("frame_id").sort_values("frame_index")
         ids, stamps = heads.frame_id.tolist(), [int(t) for t in heads.timestamp_us]
         by = {fid: g for fid, g in rows.groupby("frame_id", sort=False)}
         for a, b in tile(stamps, round(window_s * 1e6), None if stride_s is None else round(stride_s * 1e6)):
-            out.append((scene, ids[a:b + 1], [frame_to_scene(by[f]) for f in ids[a:b + 1]], stamps[a:b + 1]))
+            scenes = [frame_to_scene(by[f], found.road(by[f])[0] if found is not None else None)
+                      for f in ids[a:b + 1]]
+            out.append((scene, ids[a:b + 1], scenes, stamps[a:b + 1]))
     return out
 
 
@@ -110,11 +118,34 @@ def test_resume_keeps_a_window_only_for_the_same_rows_and_options(clips, tmp_pat
     assert len(strided) > n
 
 
+def test_window_runs_with_lanes_give_each_frame_its_road(excerpt_frames, tmp_path):
+    """`r2s run --window --lanes` on the shipped excerpt extracted with its maps: each row is synth.window's
+    program of its frames, each with the road r2s scene gives it, and holds in each of them; frames without a
+    map are error rows that name the missing road, and the run goes on."""
+    out = tmp_path / "lanes"
+    _run(excerpt_frames, out, "--window", "2", "--lanes")
+    full = pq.read_table(out).to_pandas().set_index("frame_id")
+    expected = expected_windows(excerpt_frames, 2.0, roads=True)
+    assert len(full) == len(expected) and any(len(ids) > 2 for _, ids, _, _ in expected)
+    config = SynthConfig(lanes=True)
+    for _, ids, scenes, _ in expected:
+        row = full.loc[ids[0]]
+        result = synthesize_window(scenes, config)
+        assert (row.status, row.cost, row.program, bool(row.certified)) == \
+            (result.status, result.cost, str(result.program), True)
+        assert all(st.lane is not None for st in result.program.statements)
+        assert all(v.ok for v in check_window(row.program, scenes, config))
+    bare = tmp_path / "bare.parquet"
+    write_frames(read_frames(excerpt_frames), bare)  # the same frames, no maps beside them
+    _run(bare, tmp_path / "bare-out", "--window", "2", "--lanes")
+    rows = pq.read_table(tmp_path / "bare-out").to_pandas()
+    assert (rows.status == "error").all() and rows.error.str.contains("has no road").all()
+
+
 def test_bad_window_runs_are_one_line_and_write_nothing(clips, tmp_path):
     out = tmp_path / "w"
     for args, words in ((("--stride", "1"), "need --window"), (("--window", "0"), "positive"),
                         (("--window", "nan"), "positive"), (("--window", "1", "--max-gap", "-1"), "positive"),
-                        (("--window", "1", "--lanes"), "not yet synthesized over a window"),
                         (("--window", "1", "--strategy", "monolithic"), "encodes one frame")):
         assert_one_line_error(run_r2s("run", str(clips), "--out", str(out), *args), 2, words)
         assert not out.exists()
