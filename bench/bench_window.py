@@ -5,6 +5,10 @@ Frames: the shipped nuScenes-mini keyframes (data/nuscenes-mini-keyframes: 6 sce
 Argoverse 2 log excerpt (data/argoverse2-log-excerpt: one log at 10 Hz). Each scene is tiled into windows of 1 s
 and of 2 s (synth.window.tile: consecutive, not overlapping, no gap limit) and each window synthesized with the
 default configuration (auto, hybrid, z3 certification, frame by frame); every frame is also synthesized alone.
+With lanes (`--lanes`): the same recordings extracted with their maps (the shipped files carry none), from
+../shared/data (nuScenes-mini through ScenarioNet: the same 242 keyframes; the Argoverse 2 log: the same 156
+frames), each frame with the road `r2s scene` gives it (extractors.maps.FrameRoads); without ../shared/data, the
+shipped nuScenes excerpt with its maps (data/nuscenes-mini-excerpt) stands in.
 Reported per dataset and window: CPU time per window (this process's: z3 runs in it) against the CPU time of
 its frames alone (CPU seconds, not wall clock: the machine is shared), the window's cost
 against its frames' own optima, and how long programs stay the same (the share of consecutive windows of a scene
@@ -19,6 +23,7 @@ import os
 import re
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -29,51 +34,75 @@ sys.path.insert(0, str(HERE))
 from common import machine, write_results  # noqa: E402
 
 from extractors.frames import frame_to_scene  # noqa: E402
-from synth import synthesize, synthesize_window, tile  # noqa: E402
+from synth import SynthConfig, synthesize, synthesize_window, tile  # noqa: E402
 from synth.window import check_window  # noqa: E402
 
 DATASETS = {
     "nuScenes-mini keyframes (2 Hz)": ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet",
     "Argoverse 2 log excerpt (10 Hz)": ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet",
 }
+SHARED = Path("/work/shared/data")
+LANE_SOURCES = {  # name: (r2s extract source, input), the recordings above with their maps
+    "nuScenes-mini keyframes (2 Hz), --lanes": ("scenarionet", SHARED / "nuscenes-mini" / "scenarionet"),
+    "Argoverse 2 log excerpt (10 Hz), --lanes": (
+        "argoverse2", SHARED / "argoverse2" / "test_data" / "sensor_dataset_logs" / "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"),
+}
+SHIPPED_LANES = {"nuScenes excerpt (shipped, 2 Hz), --lanes": ("scenarionet", ROOT / "data" / "nuscenes-mini-excerpt"
+                                                                 / "scenarionet")}
 WINDOWS_S = (1.0, 2.0)
 
 
-def scenes_of(path: Path):
-    """(scene name, [(timestamp_us, Scene)] in frame order) for each scene of a frames file."""
-    import pyarrow.parquet as pq
+def extracted(source: str, path: Path, out: Path) -> Path:
+    """The recording extracted with its maps (a frames dataset with _maps/ beside), as `r2s extract` writes it."""
+    from pipeline.cli import main as r2s
 
-    df = pq.read_table(path).to_pandas()
+    if r2s(["extract", source, str(path), "--categories", "all", "--out", str(out)]):
+        raise SystemExit(f"bench_window: r2s extract {source} {path} failed")
+    return out
+
+
+def scenes_of(path: Path, roads: bool = False):
+    """(scene name, [(timestamp_us, Scene)] in frame order) for each scene of a frames file or dataset (with
+    `roads`: each frame with the road r2s scene gives it, from the maps beside the frames)."""
+    import pandas as pd
+
+    from extractors.maps import FrameRoads, maps_dir
+
+    found = FrameRoads(maps_dir(path)) if roads else None
+    df = pd.read_parquet(path)
     for name, rows in df.groupby("scene", sort=True):
         rows = rows.sort_values(["frame_index"], kind="stable")
-        frames = [(int(g.timestamp_us.iloc[0]), frame_to_scene(g)) for _, g in rows.groupby("frame_id", sort=False)]
+        frames = [(int(g.timestamp_us.iloc[0]), frame_to_scene(g, found.road(g)[0] if found is not None else None))
+                  for _, g in rows.groupby("frame_id", sort=False)]
         yield str(name), frames
 
 
-def measure(path: Path) -> dict:
+def measure(path: Path, config: SynthConfig, roads: bool = False) -> dict:
     out = {"frames": 0, "scenes": 0, "windows": {}}
-    for name, frames in scenes_of(path):
+    for name, frames in scenes_of(path, roads):
         out["scenes"] += 1
         out["frames"] += len(frames)
         alone = []
         for _, scene in frames:
             t = time.process_time()
-            result = synthesize(scene)
-            alone.append((time.process_time() - t, result.cost))
+            result = synthesize(scene, config)
+            alone.append((time.process_time() - t, result.cost, result.status))
         for window_s in WINDOWS_S:
             rows = out["windows"].setdefault(str(window_s), [])
             previous = previous_shape = None
             for first, last in tile([t for t, _ in frames], int(window_s * 1e6)):
                 scenes = [s for _, s in frames[first:last + 1]]
                 t = time.process_time()
-                result = synthesize_window(scenes)
+                result = synthesize_window(scenes, config)
                 seconds = time.process_time() - t
-                ok = all(v.ok for v in check_window(result.program, scenes))
+                ok = all(v.ok for v in check_window(result.program, scenes, config))
                 text = str(result.program)
                 shape = re.sub(r"Range\([^)]*\)", "Range", text)  # the relations, Range values aside
                 rows.append({"scene": name, "first": first, "last": last, "n_frames": len(scenes), "seconds": seconds,
-                             "alone_seconds": sum(a for a, _ in alone[first:last + 1]), "cost": result.cost,
-                             "frame_costs": [c for _, c in alone[first:last + 1]], "optimal": result.status == "optimal",
+                             "alone_seconds": sum(a for a, _, _ in alone[first:last + 1]), "cost": result.cost,
+                             "frame_costs": [c for _, c, _ in alone[first:last + 1]],
+                             "frames_optimal": all(s == "optimal" for _, _, s in alone[first:last + 1]),
+                             "optimal": result.status == "optimal",
                              "certified": result.certified, "consistent": ok, "entities": result.n_entities,
                              "same_as_previous": None if previous is None else text == previous,
                              "same_relations_as_previous": None if previous_shape is None else shape == previous_shape,
@@ -100,6 +129,7 @@ def summary(rows: list[dict]) -> dict:
         "all_optimal": all(r["optimal"] for r in rows),
         "all_certified": all(r["certified"] for r in rows),
         "all_consistent": all(r["consistent"] for r in rows),
+        "frames_alone_all_optimal": all(r["frames_optimal"] for r in rows),
         "ms_per_window_median": 1000 * statistics.median(r["seconds"] for r in rows),
         "ms_per_frame_alone_median": 1000 * statistics.median(r["alone_seconds"] / r["n_frames"] for r in rows),
         "window_over_its_frames_alone": sum(r["seconds"] for r in rows) / sum(r["alone_seconds"] for r in rows),
@@ -120,7 +150,12 @@ def summary(rows: list[dict]) -> dict:
 def main() -> None:
     load0 = os.getloadavg()[0]
     started = time.perf_counter()
-    results = {name: measure(path) for name, path in DATASETS.items()}
+    results = {name: measure(path, SynthConfig()) for name, path in DATASETS.items()}
+    with tempfile.TemporaryDirectory(prefix="bench-window-") as tmp:
+        lanes = LANE_SOURCES if all(p.exists() for _, p in LANE_SOURCES.values()) else SHIPPED_LANES
+        for k, (name, (source, path)) in enumerate(lanes.items()):
+            frames = extracted(source, path, Path(tmp) / f"lanes{k}")
+            results[name] = measure(frames, SynthConfig(lanes=True), roads=True)
     total = time.perf_counter() - started
     load1 = os.getloadavg()[0]
     m = machine()
@@ -138,7 +173,9 @@ def main() -> None:
              "(a lower bound on it). Identical: the share of consecutive windows of a scene with the same program "
              "text; same relations: the same text once every Range is blanked; statements kept: of the entities "
              "declared in two consecutive windows, those whose statement is the same, Range values aside (as `r2s "
-             "report` counts them).", "",
+             "report` counts them). Rows marked `--lanes`: the same recordings extracted with their maps (from "
+             "../shared/data; the shipped files carry no map), each frame with the road `r2s scene` gives it, "
+             "synthesized with lanes on, windows and frames alone alike.", "",
              "| data | W | windows | frames/window | optimal, certified, consistent | CPU ms per window (median) | "
              "CPU ms per frame alone (median) | window CPU time / its frames alone | mean window cost | mean max frame "
              "cost | mean frame cost | windows costing more than every frame | identical consecutive | same "
@@ -148,6 +185,7 @@ def main() -> None:
         for w, data in r["windows"].items():
             s = data["summary"]
             ok = "yes" if s["all_optimal"] and s["all_certified"] and s["all_consistent"] else "NO"
+            ok += "" if s["frames_alone_all_optimal"] else " (a frame alone not optimal)"
             same = "n/a" if s["identical_share"] is None else \
                 f"{100 * s['identical_share']:.0f}% of {s['consecutive_pairs']}"
             shape = "n/a" if s["same_relations_share"] is None else f"{100 * s['same_relations_share']:.0f}%"
