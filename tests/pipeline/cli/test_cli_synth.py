@@ -176,3 +176,30 @@ def test_a_clip_is_one_program_for_its_frames(tmp_path):
     assert_one_line_error(run_r2s("synth", paths[0], paths[0]), 2, "twice")
     assert_one_line_error(run_r2s("synth", paths[0], "-", input="{}"), 2, "standard input")
     assert_one_line_error(run_r2s("synth", *paths, "--strategy", "monolithic"), 2, "monolithic")
+
+
+def test_a_clip_with_lanes_as_a_user_runs_it(excerpt_frames, tmp_path):
+    """`r2s scene` on frames extracted with their maps, then `r2s synth A.json B.json C.json --lanes`: the program
+    synthesize_window writes, every statement with a lane clause, each frame's program accepted by
+    `r2s check` on its frame; a frame without its road is one line, exit 2."""
+    from synth import SynthConfig, frame_program, scene_from_json, synthesize_window
+
+    paths = []
+    for k in range(3):
+        path = tmp_path / f"f{k}.json"
+        proc = run_r2s("scene", str(excerpt_frames), f"scene-0103/{k}", "--out", str(path))
+        assert proc.returncode == 0, proc.stderr
+        paths.append(str(path))
+    proc = run_r2s("synth", *paths, "--lanes")
+    assert proc.returncode == 0, proc.stderr
+    scenes = [scene_from_json(open(p).read()) for p in paths]
+    program = synthesize_window(scenes, SynthConfig(lanes=True)).program
+    assert proc.stdout == str(program) and all(st.lane is not None for st in program.statements)
+    for path, scene in zip(paths, scenes):
+        text = tmp_path / "frame.dsl"
+        text.write_text(str(frame_program(program, scene)))
+        assert run_r2s("check", path, str(text)).returncode == 0
+    bare = tmp_path / "bare.json"
+    doc = json.loads(open(paths[1]).read())
+    bare.write_text(json.dumps({k: v for k, v in doc.items() if k != "road"}))
+    assert_one_line_error(run_r2s("synth", paths[0], str(bare), "--lanes"), 2, "has no road")
