@@ -7,29 +7,35 @@ Why each step keeps the optimum (c(e, E) depends only on the set E and only fall
    keeping each component's internal order, never raises anyone's cost (each entity then sees all of its
    upstream witnesses), so each component is solved alone with its upstream already declared.
 3. A* over declared subsets of one component (CPA: key = set), zero-regret moves forced at every state, with
-   h = sum of floors + the least regret of any next move (no forced move means the next entity pays at least
-   one over its floor), an incumbent from greedy completion, and branch and bound on it. Anytime: on budget
-   exhaustion, the incumbent and the least f in the open list.
+   f = g + max(h, h_closed) (below), an incumbent from greedy completion, and branch and bound on it: the
+   best order found once no open node's f is below its cost is the answer. Anytime: on budget exhaustion, the
+   incumbent and the bound at the component's root.
 
 A state carries, per statement part, the set of entities that have a witness but none declared yet (CostModel.
 unmet), so a move costs a few bitset operations: declaring e changes only the entities e witnesses.
 
-A stronger bound (closed sources). Per part, a source component of the witness graph among the undeclared
-entities whose members all lack a declared witness (two people facing each other whom nobody else stands in
-line with, say) makes its first member pay one over its floor; distinct sources are disjoint, so
-h_closed = sum of floors + the number of such sources, over the parts, is admissible. It is also consistent:
-declaring e removes only the one source of each part that holds e, and then e pays that part; no new source
-ever appears (a component that becomes a source was fed by what was just declared). So the closed sources of a
-state are the root's that no declaration has touched, and h_closed costs a few bit operations.
+h is the sum of floors + the least regret of any next move (no forced move means the next entity pays at least one
+over its floor). A stronger bound (closed sources). Per part, a source component of the witness graph among the
+undeclared entities whose members all lack a declared witness (two people facing each other whom nobody else
+stands in line with, say; the cars of one lane chain, each `in lane of` every other) makes its first member pay
+one over its floor; distinct sources are disjoint, so h_closed = sum of floors + the number of such sources, over
+the parts, is admissible. (Per part it is the minimum spanning arborescence of the undeclared entities from a root
+whose edges are the declared witnesses and the fallbacks: its witness edges cost 0, so the arborescence pays one
+root edge per closed source; a lane fallback of weight 2 is two units, so a source pays its cheapest member's
+weight.) It is also consistent: declaring e removes only the one source of each part that holds e, and then e pays
+that part; no new source ever appears (a component that becomes a source was fed by what was just declared). So
+the closed sources of a state are the root's that no declaration has touched, and h_closed costs a few bit
+operations.
 
-Same answer, fewer nodes. The answer of step 3 is the first improvement on the greedy incumbent that reaches the
-optimum, in the plain A*'s order. On crowds the plain A* meets it only at its very last node, after every state
-whose f = g + h is below the optimum (h counts one regret where there are a dozen closed sources). So pass 1
-finds the optimum's cost by A* on g + max(h, h_closed), and pass 2 replays the plain A* keeping only the nodes
-with g + h_closed <= optimum: with a consistent bound those are the nodes that can still reach the optimum,
-their children are theirs alone, and they are pushed and popped in the same relative order (ties are numbered
-by push), so the replay meets the same first optimal improvement, having skipped the rest (tests/
-test_crowd_golden.py holds it to the plain A*'s programs).
+Why not replay the plain A* (issue 24). Until then a second pass replayed the A* on g + h, pruned by h_closed, to
+return the very program that A* finds. But h_closed is exact where groups are independent: a state is then the
+set of sources opened so far, every one of the 2^k subsets of k sources lies on an optimal path, and the A* on the
+weaker h pops all of them before it meets a complete program (crowds of a dozen closed sources: 2^10 nodes; lane
+chains join most cars of a street into sources: 2^15 nodes and half a minute on scene-0061/18). With h_closed
+exact, the A* on it goes straight down, one node a source. So the answer is its own: the best order it has found
+when no open node's f is below that order's cost (deeper nodes first among equal f, then first pushed). It is as
+cheap as the replay's and may differ from it in order only; on the pinned crowds and frames
+(tests/synth/test_crowd_golden.py, test_static_golden.py) it is the same program.
 """
 
 from __future__ import annotations
@@ -234,9 +240,9 @@ def _move(cost_model: CostModel, comp: int, g: int, order: tuple[int, ...], decl
 
 
 def _optimum(cost_model: CostModel, comp: int, root: tuple, ub: int, bound: _Bound,
-             budget: Budget) -> tuple[int, tuple, int]:
-    """Pass 1: the optimal cost of the component, by A* on g + max(h, h_closed) (admissible) with branch and bound
-    on the incumbent. Returns (cost, an order reaching it, the least f left when the budget ran out, else cost)."""
+             budget: Budget) -> tuple[int, tuple | None]:
+    """The optimum of the component, by A* on g + max(h, h_closed) (admissible) with branch and bound on the
+    incumbent of cost ub. Returns (cost, an order reaching it; None when nothing beats the incumbent)."""
     root_order, root_declared, root_unmet, root_g = root
     best_order = None
     heap = [(root_g + bound(root_declared), 0, 0, root_g, root_declared, root_order, root_unmet)]
@@ -263,7 +269,7 @@ def _optimum(cost_model: CostModel, comp: int, root: tuple, ub: int, bound: _Bou
             best_g[declared2] = g2
             tie += 1
             heapq.heappush(heap, (f2, -len(order2), tie, g2, declared2, order2, unmet2))
-    return ub, best_order, ub
+    return ub, best_order
 
 
 def solve_component(
@@ -271,18 +277,8 @@ def solve_component(
 ) -> tuple[tuple[int, ...], int, int, str | None]:
     """Optimal order of one component given `base` declared. Returns (order, cost, lower bound, stop reason).
 
-    The answer is the one the plain A* (f = g + h, deeper first among equal f, then first pushed) finds: its first
-    improvement on the greedy incumbent that reaches the optimum. Pass 1 finds the optimum's cost with the closed
-    group bound; pass 2 replays the plain A* but drops every node whose g + h_closed exceeds that cost, which
-    (h_closed being consistent) keeps the nodes on the way to that first optimal improvement in the same order.
-    """
-
-    def h(declared: int, unmet: Unmet) -> int:
-        todo = comp & ~declared
-        if not todo:
-            return 0
-        return cost_model.floor_sum(todo) + _least_regret(cost_model, unmet, todo)[0]
-
+    The answer is the greedy incumbent when nothing beats it (the closed group bound meets it, or the A* finds no
+    cheaper order), else the A*'s best order once no open node's f is below its cost (module note)."""
     root = closure(cost_model, (), base, cost_model.unmet(base), comp)
     root_order, root_declared, root_unmet, root_g = root
     if root_declared & comp == comp:
@@ -293,42 +289,12 @@ def solve_component(
     if root_g + bound(root_declared) >= ub:
         return ub_order, ub, ub, None  # the greedy incumbent meets the bound
     try:
-        opt, opt_order, _ = _optimum(cost_model, comp, root, ub, bound, budget)
+        opt, opt_order = _optimum(cost_model, comp, root, ub, bound, budget)
     except BudgetExhausted as stop:
         return ub_order, ub, root_g + bound(root_declared), stop.reason
-    if opt == ub:
+    if opt_order is None:
         return ub_order, ub, ub, None  # no improvement on the incumbent exists
-    heap = [(root_g + h(root_declared, root_unmet), 0, 0, root_g, root_declared, root_order, root_unmet)]
-    best_g = {root_declared: root_g}
-    tie = 0
-    try:
-        while heap and heap[0][0] < ub:
-            budget.tick()
-            f, _, _, g, declared, order, unmet = heapq.heappop(heap)
-            if g > best_g.get(declared, g):
-                continue
-            slack = opt - (g + bound(declared))  # how much this node may still waste and reach the optimum
-            if slack < 0:
-                continue
-            for e in bits(_moves(cost_model, bound, comp & ~declared, declared, unmet, slack > 0)):
-                g2, order2, declared2, unmet2 = _move(cost_model, comp, g, order, declared, unmet, e)
-                if declared2 & comp == comp:
-                    if g2 < ub:
-                        ub, ub_order = g2, order2
-                        if ub == opt:
-                            return ub_order, ub, ub, None
-                    continue
-                if declared2 in best_g and best_g[declared2] <= g2:
-                    continue
-                f2 = g2 + h(declared2, unmet2)
-                if f2 >= ub or g2 + bound(declared2) > opt:
-                    continue
-                best_g[declared2] = g2
-                tie += 1
-                heapq.heappush(heap, (f2, -len(order2), tie, g2, declared2, order2, unmet2))
-        raise AssertionError("the replay lost the optimum")  # pass 1 proved a program of cost opt exists
-    except BudgetExhausted as stop:
-        return opt_order, opt, opt, stop.reason
+    return opt_order, opt, opt, None
 
 
 def auto(cost_model: CostModel, budget: Budget) -> SearchResult:
