@@ -146,6 +146,8 @@ def run_query(frames: Path, pattern: Path) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--frames", type=int, default=200_000, help="frames to replicate to (default 200,000)")
+    ap.add_argument("--synthesis-only", action="store_true",
+                    help="run part 1 only; the query table of bench/results/lanes.json is kept as it was measured")
     ap.add_argument("--one", nargs=2, metavar=("FRAMES", "PATTERN"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
@@ -163,6 +165,15 @@ def main() -> int:
             extracted[name] = Path(tmp) / f"{len(extracted)}-{source}" / "frames"
             extract(source, path, extracted[name])
             synth_runs.append(synthesis(name, scenes_of(extracted[name])))
+        if args.synthesis_only:
+            previous = HERE / "results" / "lanes.json"
+            payload = json.loads(previous.read_text()) if previous.exists() else {
+                "machine": machine(), "load_before": load_before, "load_after": load(), "queries": [],
+                "query_target_s": QUERY_TARGET_S, "query_log": ""}
+            payload.update(synth_target=SYNTH_TARGET, synthesis=synth_runs,
+                           synthesis_run={"machine": machine(), "load_before": load_before, "load_after": load()})
+            write_results("lanes", payload, markdown(payload))
+            return 0
         log = extracted.get(SOURCES[2][0]) or extracted[SOURCES[0][0]]
         single = {p.name: run_query(log, p) for p in PATTERNS}
         frames = Path(tmp) / "replicated"
@@ -182,13 +193,10 @@ def main() -> int:
 
 
 def markdown(p: dict) -> str:
-    m = p["machine"]
     md = [
         "# Lanes: synthesis with `--lanes` and lane patterns in `r2s query`", "",
-        f"Machine: {m['cpu']} ({m['cores']} cores), Python {m['python']}, {m['date']}, commit {m['commit']}. "
-        f"Load average (1 / 5 / 15 min) before: {p['load_before']}, after: {p['load_after']} (shared machine: "
-        "compare the two sides of one run, not runs).", "",
         "## Synthesis per frame, without and with lanes", "",
+        provenance(p.get("synthesis_run", p)), "",
         "Every frame as `r2s scene` writes it (its road within 50 m of ego); default configuration (strategy auto, "
         f"oracle hybrid), then with lanes on, in turn in one warmed process. Target: at most {p['synth_target']:.0f}x.",
         "",
@@ -201,7 +209,7 @@ def markdown(p: dict) -> str:
                   f"{r['lanes']['median_ms']:.1f} ms | {r['ratio_median']:.2f}x | {r['plain']['max_ms']:.1f} ms | "
                   f"{r['lanes']['max_ms']:.1f} ms | {r['ratio_max']:.2f}x | {r['plain']['median_cost']:g} / "
                   f"{r['lanes']['median_cost']:g} |")
-    md += ["", "## Lane patterns at scale", "",
+    md += ["", "## Lane patterns at scale", "", provenance(p), "",
            "The log with its map replicated as distinct scenes (four part files, one map shared by every copy); each "
            "shipped lane pattern (data/patterns/lanes) in a fresh process, wall clock including the validation of "
            f"the rows, the lane relations of the map and writing the output. Target: under {p['query_target_s']:.0f} "
@@ -211,8 +219,17 @@ def markdown(p: dict) -> str:
     for r in p["queries"]:
         md.append(f"| {r['n_frames']:,} | {r['rows']:,} | {r['pattern']} | {r['wall_s']:.1f} | {r['matched']:,} | "
                   f"{r['scales']} | {r['peak_rss_mb']:.0f} |")
-    md += ["", "Reproduce: `python bench/bench_lanes.py` (`--frames N` for another size).", ""]
+    md += ["", "Reproduce: `python bench/bench_lanes.py` (`--frames N` for another size; `--synthesis-only` for the "
+           "first table alone).", ""]
     return "\n".join(md)
+
+
+def provenance(run: dict) -> str:
+    """Where and when a table was measured (the two tables may come from different runs: --synthesis-only)."""
+    m = run["machine"]
+    return (f"Machine: {m['cpu']} ({m['cores']} cores), Python {m['python']}, {m['date']}, commit {m['commit']}. "
+            f"Load average (1 / 5 / 15 min) before: {run['load_before']}, after: {run['load_after']} (shared "
+            "machine: compare the two sides of one run, not runs).")
 
 
 if __name__ == "__main__":
