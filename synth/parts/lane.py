@@ -35,7 +35,7 @@ import numpy as np
 from synth.config import SynthConfig
 from synth.draws import Draws, Pose, Requirement
 from synth.errors import InputError
-from synth.lane_relations import RELATION_NAMES, SIDES, Places, places
+from synth.lane_relations import RELATION_NAMES, SIDES, LaneGraph, Places, places
 from synth.parts.base import Clause, Part
 from synth.perturbation import Bounds, bounds_of
 from synth.scene import Entity, Scene
@@ -302,7 +302,27 @@ class LanePart(Part):
         return no_self_witness(codes)
 
     def closed_form(self, arrays: SceneArrays, config: SynthConfig) -> np.ndarray:
-        return self._table(arrays.entities, lambda c, ref, e: self.exact(c, ref, e, config))
+        # What `exact` decides for a pair depends only on the reference's graph and lane and the target's lane, so
+        # each pair of lanes is decided once and fills the block of its entities (a street of 140 entities stands
+        # on a few dozen lanes; pair by pair, this table was most of the time lanes added to synthesis: issue 24).
+        # A reference or target in no lane, or a reference without a graph, witnesses nothing (LaneRelation.holds).
+        refs: dict[tuple[int, str], tuple[LaneGraph, list[int]]] = {}
+        targets: dict[str, list[int]] = {}
+        for i, e in enumerate(arrays.entities):
+            if e.lane is None:
+                continue
+            targets.setdefault(e.lane, []).append(i)
+            if e.lane_graph is not None:
+                refs.setdefault((id(e.lane_graph), e.lane), (e.lane_graph, []))[1].append(i)
+        n = len(arrays.entities)
+        codes = np.full((n, n), NONE, dtype=np.int8)
+        for (_, lane), (graph, rows) in refs.items():
+            related = [graph.related(lane, side) for side in SIDES]
+            for target, cols in targets.items():
+                code = next((c for c, lanes in enumerate(related) if target in lanes), NONE)
+                if code != NONE:
+                    codes[np.ix_(rows, cols)] = code
+        return no_self_witness(codes)
 
     def robust_closed_form(self, arrays: SceneArrays, bounds: list[Bounds], config: SynthConfig) -> np.ndarray:
         return self._table(arrays.entities, lambda c, ref, e: self.robust_code(c, ref, e, config))
