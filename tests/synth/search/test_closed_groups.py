@@ -51,6 +51,10 @@ class _Oracle:
     def entities(self) -> list:
         return [None, *range(len(self.ids) - 1)]
 
+    def fallback_cost(self, k: int, e: int) -> int:
+        """Part k's fallback weight for oracle index e (0 is ego, entity i is i + 1)."""
+        return self.parts[k].fallback_cost(e - 1, self.config)
+
 
 def brute_force(n: int, parts: list[Part]) -> int:
     """best[S] = min over e in S of best[S - e] + c(e, S - e), c from the witness sets alone."""
