@@ -63,8 +63,13 @@ def run(args: argparse.Namespace) -> int:
     check_apart(args.out, [("config", args.config)], directory=not str(args.out).endswith(".parquet"))  # and the frames: run_frames checks them
     config = synthesis_config(args)
     # SIGTERM (a scheduler's stop) ends the run like Ctrl-C: the finished rows are kept, and it says so.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))
-    run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
-               chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every,
-               window_s=args.window, stride_s=args.stride, max_gap_s=args.max_gap)
+    # The previous handler comes back afterwards: `main(["run", ...])` called in a process that goes on (a test, a
+    # notebook) must not leave that process exiting on a later SIGTERM from inside whatever it runs next.
+    previous = signal.signal(signal.SIGTERM, lambda *_: sys.exit(ExitCode.TERMINATED))
+    try:
+        run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
+                   chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every,
+                   window_s=args.window, stride_s=args.stride, max_gap_s=args.max_gap)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     return 0

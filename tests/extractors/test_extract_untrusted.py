@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import pickle
 import shutil
+import signal
 
 import numpy as np
 import pyarrow as pa
@@ -198,6 +199,10 @@ def test_frames_with_smuggled_or_clashing_ids_are_refused_whole(tmp_path, capsys
     with pytest.raises(FramesError, match=message):
         write_frames(bad, tmp_path / "never.parquet")
     assert not (tmp_path / "never.parquet").exists()
+    before = signal.getsignal(signal.SIGTERM)
     res = r2s(capsys, "run", str(path), "--out", str(tmp_path / "programs.parquet"))
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "programs.parquet").exists()
+    # `r2s run` in this process leaves no SIGTERM handler of its own behind (it used to: a later SIGTERM to the
+    # test process became its SystemExit(143) in whatever test ran then).
+    assert signal.getsignal(signal.SIGTERM) is before
