@@ -90,7 +90,9 @@ class RelationOracle:
             return False
         ents = self.entities()
         if self.backend is None:  # closed form: exact, or conservative for a robust part (settle_conservatively)
-            return not part.is_robust(self.scene, self.config) and part.exact(code, ents[r], ents[e], self.config)
+            if not part.is_robust(self.scene, self.config):
+                return part.exact(code, ents[r], ents[e], self.config)
+            return bool(part.robust_exact(code, ents[r], ents[e], self.config))
         key = (part.relations[code], e, r)
         if key not in self.cache:
             self.cache[key] = part.ask(self.backend, code, ents[r], ents[e])

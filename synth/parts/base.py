@@ -7,7 +7,8 @@ absolute form (cost 2). Each form of its grammar is a clause kind: a class (Clau
 holds what its clauses share, in small interfaces the core asks one at a time:
 
   Relations (its relation table)    relations, refless, disjoint, codes_from, perturbed, closed_form,
-                                    robust_closed_form, exact, relation, robust_relation, any_relation, ask
+                                    robust_closed_form, exact, robust_exact, relation, robust_relation,
+                                    any_relation, ask
                                         -> relations, oracle, robust, search (c(e, E) sums over parts)
   Measured (synth.smt.backend)      exact_measure, measure_terms, solver_measure  -> smt (Range values)
   Part                              quantity, float_measure, clause, robust_clause  -> statement (Alg. 4)
@@ -83,6 +84,12 @@ class Relations(ABC):
     @abstractmethod
     def exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool:
         """Does relation `code` hold, decided in exact rational arithmetic (what the solver encodes too)?"""
+
+    def robust_exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool | None:
+        """Does relation `code` hold for every perturbation, decided without a solver; None where only a solver
+        can tell (the closed-form oracle then claims nothing). The paper's parts: None; the lane part's questions
+        are lookups."""
+        return None
 
     # ------------------------------------------------------------------------------- SMT
     @abstractmethod

@@ -330,6 +330,9 @@ class LanePart(Part):
     def exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool:
         return LaneRelation(SIDES[code], ref.id).holds(e, ref, config)
 
+    def robust_exact(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool | None:
+        return self.robust_code(code, ref, e, config)
+
     def robust_code(self, code: int, ref: Entity, e: Entity, config: SynthConfig) -> bool:
         """Relation `code` for every lane e and ref may be in under their bounds (none of them laneless)."""
         if not self.pair_is_robust(ref, e, config):

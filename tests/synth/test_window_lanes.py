@@ -165,6 +165,18 @@ def test_a_relation_the_frames_agree_on_that_no_frame_records_first():
     assert all(v.ok for v in check_window(result.program, scenes, config))
 
 
+@pytest.mark.parametrize("oracle", ["hybrid", "smt", "closed-form"])
+def test_the_merge_under_uncertainty_with_every_oracle(oracle):
+    """The same under a position uncertainty that keeps car1 in its lane in both frames: every oracle finds the
+    robust `in lane left of ego` (the closed-form one too: lane questions need no solver)."""
+    scenes = merge_clip((-1.75, 30.0), (-3.5, 10.0))
+    config = SynthConfig(lanes=True, oracle=oracle, pos_uncertainty=0.3)
+    result = synthesize_window(scenes, config)
+    assert str(result.program.statements[0].lane) == "in lane left of ego"
+    assert result.certified == (oracle != "closed-form")
+    assert all(v.ok for v in check_window(result.program, scenes, config))
+
+
 def test_the_window_fallback_reads_every_frame():
     """In the intersection and on the crosswalk, then on the crosswalk only: `on crosswalk` (each frame alone
     would write `in intersection` first); in one lane throughout: that lane; in two lanes: anywhere."""
