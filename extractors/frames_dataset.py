@@ -175,22 +175,29 @@ class FramesDataset:
                 yield FrameRuns(k, *last)
 
     def read_all(self) -> pa.Table:
-        """Every row, checked, as one table (small data: tests, `r2s eval-frontend`; runs stream instead)."""
+        """Every row, checked, as one table (small data: tests, `r2s eval-frontend`; runs stream instead): the
+        frames columns, then the optional and road columns that some part has (null in the parts without them), so
+        that a reader sees what `r2s query` and `r2s scene` see (map_heading, the lane facts)."""
         self.check()
-        optional = [c for c in OPTIONAL_COLUMNS if any(c in p.optional for p in self.parts)]
-        schema = pa.schema(list(FRAMES_SCHEMA) + [(c, OPTIONAL_COLUMNS[c]) for c in optional])
+        extra = {**OPTIONAL_COLUMNS, **ROAD_COLUMNS}
+        optional = [c for c in extra if any(c in (*p.optional, *p.road) for p in self.parts)]
+        schema = pa.schema(list(FRAMES_SCHEMA) + [(c, extra[c]) for c in optional])
         tables = []
         for part in self.parts:
             try:
-                table = open_file(self.url, part.path).read(columns=list(part.columns))
+                table = open_file(self.url, part.path).read(columns=list(part.columns + part.road))
             except (pa.ArrowException, OSError) as exc:  # the check read some columns; a page of another is bad
                 raise FramesError(f"{self.where(part)} is not a readable Parquet file "
                                   f"({type(exc).__name__}: {str(exc)[:120]})") from None
             _valid(table, self.where(part))
             for c in optional:
-                if c not in part.optional:
-                    table = table.append_column(c, pa.nulls(table.num_rows, OPTIONAL_COLUMNS[c]))
-            tables.append(table.select(schema.names).cast(schema))
+                if c not in part.optional and c not in part.road:
+                    table = table.append_column(c, pa.nulls(table.num_rows, extra[c]))
+            try:  # the footer check holds the frames and optional columns to their kinds, not the road columns
+                tables.append(table.select(schema.names).cast(schema))
+            except (pa.ArrowException, ValueError) as exc:
+                raise FramesError(f"{self.where(part)}: a road column does not have the schema's type "
+                                  f"({str(exc)[:120]})") from None
         return pa.concat_tables(tables)
 
     def find(self, frame_id: str) -> pa.Table | None:

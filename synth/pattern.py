@@ -98,6 +98,11 @@ class Pattern:
         """Does a statement (or the ego line) carry a MOTION clause (which needs the entities' speeds)?"""
         return any(s.motion is not None for s in (*self.statements, *([self.ego] if self.ego else [])))
 
+    @property
+    def uses_lanes(self) -> bool:
+        """Does a statement (or the ego line) carry a LANE clause (which needs the frames' lane columns and maps)?"""
+        return any(s.lane is not None for s in (*self.statements, *([self.ego] if self.ego else [])))
+
     def __str__(self) -> str:
         ego = f"{EGO_ID} {', '.join(str(c) for _, c in self.ego.clauses())}\n" if self.ego is not None else ""
         return "".join(f"{s}\n" for s in self.statements) + ego

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from synth.dsl import DslError
 from synth.geometry import normalize
 from synth.pattern import Pattern, parse_pattern
+from synth.scene import EGO_ID
 
 # Behaviours of a track over time, read from its own frames (speeds in m/s, timestamps in microseconds).
 SPEED_CHANGE = 1.0  # accelerating / braking: a speed change of at least this, m/s ...
@@ -27,25 +28,31 @@ STOP_WINDOW_US = 3_000_000
 # clockwise / clockwise, since a frame of the track at most TURN_WINDOW_US before (turn_of: the signed turn).
 TURN_ANGLE = 30.0
 TURN_WINDOW_US = 3_000_000
+# changing lanes: the track's lane at p is on the chain of the left or right neighbour of its lane at a frame at most
+# LANE_CHANGE_WINDOW_US before (`in lane left of` / `in lane right of` its earlier self, synth.lane_relations).
+LANE_CHANGE_WINDOW_US = 3_000_000
 SPEED_BEHAVIOURS = ("accelerating", "braking", "stopping")
 TURNING = ("turning left", "turning right")
-BEHAVIOURS = SPEED_BEHAVIOURS + TURNING
-NOT_YET = {"changing": "changing lanes needs lane columns in the frames, which they do not carry yet"}
-_FIRST_WORDS = {b.split()[0] for b in BEHAVIOURS} | set(NOT_YET)
+LANE_BEHAVIOURS = ("changing lanes",)
+BEHAVIOURS = SPEED_BEHAVIOURS + TURNING + LANE_BEHAVIOURS
+_FIRST_WORDS = {b.split()[0] for b in BEHAVIOURS}
 
 _THEN = re.compile(r"then(?:\s+within\s+(?P<t>\S+)\s+s)?\Z")
 _FOR = re.compile(r"for\s+at\s+least\s+(?P<t>\S+)\s+s\Z")
 _BEHAVIOUR = re.compile(r",\s*(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")
+# An ego line of behaviours alone has no comma after `ego`: `ego turning left` (`ego changing lanes, braking`).
+_EGO_BEHAVIOUR = re.compile(rf"\A\s*{EGO_ID}\s+(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")
+_HEAD = re.compile(r"\s*(?P<id>[A-Za-z_][A-Za-z0-9_]*)")
 
 
 @dataclass(frozen=True)
 class Step:
-    """One step: its statements (a one-frame pattern), the behaviours its variables show in the same frames,
-    the longest gap from the previous step's last frame to this step's first (None: any; microseconds), and the
-    least time it lasts (microseconds, from its first frame to its last)."""
+    """One step: its statements (a one-frame pattern), the behaviours its variables (and ego) show in the same
+    frames, the longest gap from the previous step's last frame to this step's first (None: any; microseconds), and
+    the least time it lasts (microseconds, from its first frame to its last)."""
 
     pattern: Pattern
-    behaviours: tuple[tuple[str, str], ...] = ()  # (variable, behaviour), in the order written
+    behaviours: tuple[tuple[str, str], ...] = ()  # (variable or ego, behaviour), in the order written
     within_us: int | None = None
     for_at_least_us: int = 0
 
@@ -71,7 +78,16 @@ class TemporalPattern:
     @property
     def uses_world_heading(self) -> bool:
         """Does it need the tracks' headings in the world (turning)?"""
-        return any(b in TURNING for s in self.steps for _, b in s.behaviours)
+        return bool(self.behaving(TURNING))
+
+    @property
+    def uses_lanes(self) -> bool:
+        """Does it need the frames' lane columns and maps (a lane clause in a step, changing lanes)?"""
+        return any(s.pattern.uses_lanes for s in self.steps) or bool(self.behaving(LANE_BEHAVIOURS))
+
+    def behaving(self, kinds: tuple[str, ...]) -> frozenset[str]:
+        """The names (variables, or ego) that show one of these behaviours somewhere."""
+        return frozenset(n for s in self.steps for n, b in s.behaviours if b in kinds)
 
     @property
     def needs_timestamps(self) -> bool:
@@ -86,6 +102,9 @@ class TemporalPattern:
             for name, b in s.behaviours:
                 behaviours.setdefault(name, []).append(b)
             out += [f"{st}" + "".join(f", {b}" for b in behaviours.get(st.id, [])) for st in s.pattern.statements]
+            ego = [str(c) for _, c in s.pattern.ego.clauses()] if s.pattern.ego is not None else []
+            if ego or EGO_ID in behaviours:
+                out.append(f"{EGO_ID} {', '.join(ego + behaviours.get(EGO_ID, []))}")
             if s.for_at_least_us:
                 out.append(f"for at least {_seconds(s.for_at_least_us)} s")
         return "".join(f"{line}\n" for line in out)
@@ -113,18 +132,16 @@ def duration_us(text: str, where: str) -> int:
     return round(t * 1e6)
 
 
-def _strip_behaviours(line: str, lineno: int) -> tuple[str, tuple[str, ...]]:
+def _strip_behaviours(line: str) -> tuple[str, tuple[str, ...]]:
+    """The statement without its trailing behaviour clauses, and those clauses. An ego line's first clause may be
+    a behaviour too (`ego turning left`); an ego line of behaviours alone leaves no statement ("")."""
     found: list[str] = []
-    while (m := _BEHAVIOUR.search(line)) is not None:
-        word = m.group("b")
-        first = word.split()[0]
-        if word in BEHAVIOURS:
-            found.insert(0, word)
-        elif first in NOT_YET:
-            raise DslError(f"line {lineno} column {m.start('b') + 1}: {NOT_YET[first]}")
-        else:
-            break  # a DSL clause (stationary, ...): the statement parser reads it
+    while (m := _BEHAVIOUR.search(line)) is not None and m.group("b") in BEHAVIOURS:
+        found.insert(0, m.group("b"))
         line = line[:m.start()]
+    # else a DSL clause (stationary, ...) ends the line: the statement parser reads it
+    if (m := _EGO_BEHAVIOUR.match(line)) is not None and m.group("b") in BEHAVIOURS:
+        return "", (m.group("b"), *found)
     return line, tuple(found)
 
 
@@ -134,7 +151,7 @@ def is_temporal(text: str) -> bool:
         line = raw.split("#", 1)[0].strip()
         if _THEN.match(line) or _FOR.match(line) or line.startswith(("then ", "for ")) or line == "then":
             return True
-        if (m := _BEHAVIOUR.search(line)) and m.group("b").split()[0] in _FIRST_WORDS:
+        if (m := _BEHAVIOUR.search(line) or _EGO_BEHAVIOUR.match(line)) and m.group("b").split()[0] in _FIRST_WORDS:
             return True
     return False
 
@@ -163,32 +180,35 @@ def parse_temporal(text: str) -> TemporalPattern:
         if blocks[-1]["for_line"] is not None:
             raise DslError(f"line {lineno}: a statement after `for at least` (line {blocks[-1]['for_line']}): "
                            "start the next step with `then`")
-        statement, behaviours = _strip_behaviours(raw.split("#", 1)[0], lineno)
+        statement, behaviours = _strip_behaviours(raw.split("#", 1)[0])
         blocks[-1]["lines"][lineno] = statement
-        blocks[-1]["behaviours"].append((lineno, behaviours))
+        blocks[-1]["behaviours"] += [(_head(statement or EGO_ID), b) for b in behaviours]
     if not blocks[-1]["lines"]:
         raise DslError(f"line {len(lines)}: the pattern ends with `then` and no step after it")
     steps = []
     for block in blocks:
+        if all(text == "" or _head(text) == EGO_ID for text in block["lines"].values()):
+            raise DslError(f"line {min(block['lines'])}: a step declares at least one name (NAME = new TYPE ...); "
+                           "ego's line alone is no step")
         # The step's statements at their own line numbers, so a DSL error names the line of the file.
         step_text = "\n".join(block["lines"].get(n, "") for n in range(1, max(block["lines"]) + 1))
         pattern = parse_pattern(step_text)
-        names = {ln: st.id for ln, st in zip(sorted(block["lines"]), pattern.statements)}
-        behaviours = tuple((names[ln], b) for ln, bs in block["behaviours"] for b in bs)
-        steps.append(Step(pattern, behaviours, block["within"], block["for"]))
+        steps.append(Step(pattern, tuple(block["behaviours"]), block["within"], block["for"]))
     pattern = TemporalPattern(tuple(steps))
     if len(steps) > 1:
         for name in pattern.names:
             where = [k for k, s in enumerate(steps) if name in s.names]
             if len(where) == 1:
-                line = next(ln for ln, n in _declared_lines(blocks[where[0]], steps[where[0]]) if n == name)
+                line = next(ln for ln, text in sorted(blocks[where[0]]["lines"].items()) if _head(text) == name)
                 raise DslError(f"line {line}: {name!r} is mentioned in one step only; a variable binds one track "
                                "across the steps, so declare it in another step too (or drop it)")
     return pattern
 
 
-def _declared_lines(block: dict, step: Step):
-    return zip(sorted(block["lines"]), step.names)
+def _head(statement: str) -> str:
+    """The name a statement line is about (its declared name, or ego)."""
+    m = _HEAD.match(statement)
+    return m.group("id") if m else ""
 
 
 def parse_query_pattern(text: str) -> Pattern | TemporalPattern:

@@ -30,11 +30,6 @@ RELATION_COLUMNS = tuple(f"rel_{side}" for side in SIDES)
 LANE_PART = "lane"
 
 
-def uses_lanes(pattern: Pattern) -> bool:
-    """Does a statement carry a LANE clause (which needs the frames' road columns and their maps)?"""
-    return any(st.lane is not None for st in (*pattern.statements, *([pattern.ego] if pattern.ego else [])))
-
-
 def without_lanes(pattern: Pattern) -> Pattern:
     """The pattern with its lane clauses left out: what the Python re-check decides (SQL decides those exactly)."""
     def strip(st: Statement) -> Statement:

@@ -37,7 +37,7 @@ from extractors.frames_schema import ROAD_COLUMNS
 from extractors.maps import maps_dir, read_maps
 from pipeline.errors import UserError
 from pipeline.query.events import events_select
-from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, uses_lanes, without_lanes
+from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, without_lanes
 from pipeline.query.notes import absent_types_note
 from pipeline.query.sql import (
     EXACT_UDF,
@@ -57,7 +57,7 @@ from storage.atomic import atomic_path
 from synth.config import SynthConfig
 from synth.pattern import Pattern, binding_holds, matched_types
 from synth.scene import EGO_ID, Entity
-from synth.temporal import TemporalPattern, parse_query_pattern
+from synth.temporal import TURNING, TemporalPattern, parse_query_pattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -291,11 +291,8 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
         raise UserError("--min-duration is a length of events: it needs --events")
     if events and all_bindings:
         raise UserError("--events and --all are two outputs: choose one")
-    sets = None
-    if temporal and any(uses_lanes(step.pattern) for step in pattern.steps):
-        raise UserError("lane clauses are for one-frame patterns: a temporal pattern's steps cannot carry them yet")
-    if not temporal and uses_lanes(pattern):
-        sets = _lane_sets(frames, dataset)
+    # Lane clauses (in any step) and `changing lanes` read the lane relations of the frames' maps.
+    sets = _lane_sets(frames, dataset) if pattern.uses_lanes else None
     select = events_select(min_duration_s) if events else matches_select(all_bindings)
     out = Path(out)
     created = []
@@ -324,7 +321,7 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
     """The query in its DuckDB session, its spill folder beside `out`; returns (events, frames matched, bindings,
     exact checks)."""
     # lane clauses are exact SQL (pipeline.query.lanes): the re-check decides the others
-    check = _ExactCheck(pattern.steps[0].pattern if temporal else without_lanes(pattern), config)
+    check = _ExactCheck(without_lanes(pattern.steps[0].pattern if temporal else pattern), config)
     estimate = temporal_estimate_query if temporal else estimate_query
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill, \
             leftover(spill, "tree"):
@@ -333,7 +330,7 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
                     has_world=world and any("map_heading" in part.road for part in dataset.parts))
         try:
             if world:
-                _require_world_heading(con, frames)
+                _require_world_heading(con, frames, pattern.behaving(TURNING))
             if min_duration_s is not None:
                 _require_timestamps(con, frames, "--min-duration")
             if temporal and pattern.needs_timestamps:
@@ -344,7 +341,8 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
             with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
                 if temporal:
                     def register(step_pattern):
-                        check.pattern = step_pattern  # each step's query runs alone, re-checked by its own statements
+                        # each step's query runs alone, re-checked by its own statements but the lane clauses
+                        check.pattern = without_lanes(step_pattern)
                     bindings = prepare(con, pattern, config, register)
                 else:
                     bindings = bindings_query(pattern, config)
@@ -381,27 +379,33 @@ def _note_absent_types(con, patterns: list[Pattern], frames, log: Callable[[str]
 def _lane_sets(frames, dataset: FramesDataset) -> pa.Table:
     """The lane relations of every map the frames name (pipeline.query.lanes), read from the maps beside them."""
     if not all(len(part.road) == len(ROAD_COLUMNS) for part in dataset.parts):
-        raise FramesError(f"{frames} has no lane columns: the pattern's lane clauses need frames extracted with a "
-                          "map (r2s extract of a source whose recordings carry one)")
+        raise FramesError(f"{frames} has no lane columns: the pattern's lane clauses (or changing lanes) need frames "
+                          "extracted with a map (r2s extract of a source whose recordings carry one)")
     where = maps_dir(frames)
     with duckdb.connect() as con:  # the distinct map ids, streamed (a dataset names few maps over many rows)
         wanted = {m for (m,) in con.execute(f"SELECT DISTINCT map_id FROM read_parquet("
                                              f"{_sql_list([part.path for part in dataset.parts])}, union_by_name = true) "
                                              "WHERE map_id IS NOT NULL").fetchall()}
-    roads = list(read_maps(where, wanted)) if wanted and where.exists() else []
+    if not wanted:  # lane columns, all null: a source without a map (MCAP, a log without one)
+        raise FramesError(f"{frames}: no frame names a map (map_id): the pattern's lane clauses (or changing lanes) "
+                          "need frames extracted with a map")
+    roads = list(read_maps(where, wanted)) if where.exists() else []
     missing = sorted(wanted - {r.map_id for r in roads})
     if missing:
         raise FramesError(f"{frames}: the frames name map {missing[0]!r}, which is not in {where}")
     return lane_sets(roads)
 
 
-def _require_world_heading(con, frames) -> None:
+def _require_world_heading(con, frames, turners: frozenset[str]) -> None:
     """Turning reads each track's heading in the world (map_heading), which frames carry where their source gives
-    a map or a world pose; without any, the behaviour is one line."""
-    (n,) = con.execute(f"SELECT count(*) FROM {ROWS} WHERE NOT is_ego AND isfinite(map_heading)").fetchall()[0]
-    if not n:
-        raise FramesError(f"{frames}: turning needs each track's heading in the world (map_heading), which these "
-                          "frames do not carry: their source gave no map or world pose")
+    a map or a world pose; without any (on ego's rows for ego's turns, on the others' for a variable's), the
+    behaviour is one line."""
+    for ego in sorted({n == EGO_ID for n in turners}):
+        (n,) = con.execute(f"SELECT count(*) FROM {ROWS} WHERE is_ego = {ego} AND isfinite(map_heading)").fetchall()[0]
+        if not n:
+            whose = "ego's" if ego else "each track's"
+            raise FramesError(f"{frames}: turning needs {whose} heading in the world (map_heading), which these "
+                              "frames do not carry: their source gave no map or world pose")
 
 
 def _require_timestamps(con, frames, what: str) -> None:

@@ -283,7 +283,7 @@ def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> 
     nothing as the candidate filter (`sure` says whether they surely hold). They read the CTE `ego` (EGO_CTE)."""
     cols = ("f.fk, f.frame_id, f.scene, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, "
             "f.s, f.wild")
-    if lanes.uses_lanes(pattern):  # the lane facts and relation lists of each row (pipeline.query.lanes)
+    if pattern.uses_lanes:  # the lane facts and relation lists of each row (pipeline.query.lanes)
         cols += _lane_columns("f.")
     ctes = []
     for st in pattern.statements:
@@ -318,7 +318,7 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
     name."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ctes = [ego_cte(lanes.uses_lanes(pattern)), *_name_ctes(pattern, config, alias)]
+    ctes = [ego_cte(pattern.uses_lanes), *_name_ctes(pattern, config, alias)]
     first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
     for k, st in enumerate(pattern.statements):
@@ -400,7 +400,7 @@ ESTIMATE_FRAMES = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS sce
 def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_frame: bool = False) -> str:
     """One aggregate over estimate_ctes: (largest product, its frame id, that frame's non-ego rows, sum of the
     products), or with per_frame one row per frame (frame id, product)."""
-    ctes = [ego_cte(lanes.uses_lanes(pattern)), ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
+    ctes = [ego_cte(pattern.uses_lanes), ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
     return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "0", per_frame)
 
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from pipeline.query.sql import (
-    EGO_CTE,
     ESTIMATE_FRAMES,
     ROWS,
     bindings_query,
+    ego_cte,
     estimate_ctes,
     estimate_select,
     positional,
@@ -31,7 +31,10 @@ from pipeline.query.sql import (
 from synth.config import SynthConfig
 from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern
+from synth.scene import EGO_ID
 from synth.temporal import (
+    LANE_BEHAVIOURS,
+    LANE_CHANGE_WINDOW_US,
     MOVING_SPEED,
     SPEED_BEHAVIOURS,
     SPEED_CHANGE,
@@ -46,9 +49,16 @@ from synth.temporal import (
 POSITIONS = "r2s_fpos"
 BEHAVIOUR_TABLE = "r2s_behaviour"
 TURNING_TABLE = "r2s_turning"
-# Where each behaviour is read: (table, column).
+LANE_CHANGE_TABLE = "r2s_lane_change"
+# Where each behaviour is read: (table, column). Ego's behaviours are in the same tables suffixed EGO_SUFFIX, over
+# ego's rows (EGO_ROWS: one track per scene, EGO_TRACK); the variables' over the other rows (OTHER_ROWS).
 BEHAVIOUR_COLUMNS = ({b: (BEHAVIOUR_TABLE, b) for b in SPEED_BEHAVIOURS}
-                     | {b: (TURNING_TABLE, b.replace(" ", "_")) for b in TURNING})
+                     | {b: (TURNING_TABLE, b.replace(" ", "_")) for b in TURNING}
+                     | {b: (LANE_CHANGE_TABLE, b.replace(" ", "_")) for b in LANE_BEHAVIOURS})
+EGO_SUFFIX = "_ego"
+EGO_TRACK = "'ego'"
+OTHER_ROWS = f"(SELECT * FROM {ROWS} WHERE NOT is_ego)"
+EGO_ROWS = f"(SELECT * REPLACE ({EGO_TRACK} AS track_id) FROM {ROWS} WHERE is_ego)"
 IDS = "r2s_ids"
 CANDIDATES = "r2s_candidates"
 
@@ -63,8 +73,9 @@ def _lit(v: float) -> str:
     return f"'{float(v)!r}'::DOUBLE"
 
 
-def behaviour_sql(config: SynthConfig) -> str:
-    """One row per (scene, frame, track) of a non-ego entity: is it accelerating, braking, stopping there?
+def behaviour_sql(config: SynthConfig, rows: str = OTHER_ROWS, table: str = BEHAVIOUR_TABLE) -> str:
+    """One row per (scene, frame, track) of `rows` (non-ego entities, or ego's): is it accelerating, braking,
+    stopping there?
     A track's earlier frames are those of the same scene whose timestamp is within the window before (RANGE
     over the integer timestamps); rows without a speed take part in none. Exact: the extreme speed of the window
     decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff some v' has `v - v' >= A`."""
@@ -72,33 +83,61 @@ def behaviour_sql(config: SynthConfig) -> str:
               "AND 1 PRECEDING")
     stop = f"PARTITION BY scene, track_id ORDER BY timestamp_us RANGE BETWEEN {STOP_WINDOW_US} PRECEDING AND 1 PRECEDING"
     return (
-        f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT scene, frame_id, track_id, "
+        f"CREATE TEMP TABLE {table} AS SELECT scene, frame_id, track_id, "
         f"bool_or(coalesce(accelerating, FALSE)) AS accelerating, bool_or(coalesce(braking, FALSE)) AS braking, "
         f"bool_or(coalesce(stopping, FALSE)) AS stopping FROM ("
         f"SELECT scene, frame_id, track_id, speed - min(speed) OVER ({change}) >= {_lit(SPEED_CHANGE)} AS accelerating, "
         f"max(speed) OVER ({change}) - speed >= {_lit(SPEED_CHANGE)} AS braking, "
         f"speed <= {_lit(config.v_stop + SPEED_EPS)} AND max(speed) OVER ({stop}) >= {_lit(MOVING_SPEED)} AS stopping "
-        f"FROM {ROWS} WHERE NOT is_ego) GROUP BY scene, frame_id, track_id"
+        f"FROM {rows}) GROUP BY scene, frame_id, track_id"
     )
 
 
-def turning_sql() -> str:
-    """One row per (scene, frame, track) of a non-ego entity that has an earlier row within TURN_WINDOW_US: has it
+def turning_sql(rows: str = OTHER_ROWS, table: str = TURNING_TABLE) -> str:
+    """One row per (scene, frame, track) of `rows` that has an earlier row within TURN_WINDOW_US: has it
     turned left, right since one of them? Every earlier row of the track in the window is compared (a self-join
     on the track: headings wrap, so no window extreme decides), by synth.temporal.turn_of's operations on
     map_heading (r2s_norm is synth.geometry.normalize); rows without a finite map_heading or a timestamp take part
     in none."""
-    rows = (f"SELECT scene, frame_id, track_id, timestamp_us, map_heading AS h FROM {ROWS} WHERE NOT is_ego "
-            "AND isfinite(map_heading) AND timestamp_us IS NOT NULL")
+    rows = (f"SELECT scene, frame_id, track_id, timestamp_us, map_heading AS h FROM {rows} "
+            "WHERE isfinite(map_heading) AND timestamp_us IS NOT NULL")
     turn = "r2s_norm(p.h - q.h + 180.0) - 180.0"
     return (
-        f"CREATE TEMP TABLE {TURNING_TABLE} AS WITH h AS ({rows}) "
+        f"CREATE TEMP TABLE {table} AS WITH h AS ({rows}) "
         f"SELECT p.scene, p.frame_id, p.track_id, bool_or({turn} >= {_lit(TURN_ANGLE)}) AS turning_left, "
         f"bool_or({turn} <= {_lit(-TURN_ANGLE)}) AS turning_right "
         f"FROM h p JOIN h q ON p.scene = q.scene AND p.track_id = q.track_id "
         f"AND q.timestamp_us >= p.timestamp_us - {TURN_WINDOW_US} AND q.timestamp_us < p.timestamp_us "
         "GROUP BY p.scene, p.frame_id, p.track_id"
     )
+
+
+def lane_change_sql(rows: str = OTHER_ROWS, table: str = LANE_CHANGE_TABLE) -> str:
+    """One row per (scene, frame, track) of `rows` in a lane: is it changing lanes there, its lane on the chain of
+    the left or right neighbour of its lane at one of its rows within LANE_CHANGE_WINDOW_US before, in the same map?
+    The window collects those earlier rows' relation lists (the `rel_left`, `rel_right` of pipeline.query.lanes,
+    LaneGraph.related of their lane), so the test is the list lookup of `in lane left of`; rows in no lane or
+    without a timestamp take part in none."""
+    window = (f"PARTITION BY scene, track_id, map_id ORDER BY timestamp_us RANGE BETWEEN {LANE_CHANGE_WINDOW_US} "
+              "PRECEDING AND 1 PRECEDING")
+    return (
+        f"CREATE TEMP TABLE {table} AS SELECT scene, frame_id, track_id, "
+        f"bool_or(coalesce(changing_lanes, FALSE)) AS changing_lanes FROM ("
+        f"SELECT scene, frame_id, track_id, list_contains(flatten(list(list_concat(coalesce(rel_left, []), "
+        f"coalesce(rel_right, []))) OVER ({window})), lane) AS changing_lanes "
+        f"FROM {rows} WHERE lane IS NOT NULL AND timestamp_us IS NOT NULL) GROUP BY scene, frame_id, track_id"
+    )
+
+
+# The SQL of each behaviour table, by the table it makes (rows, table) -> statement.
+BEHAVIOUR_SQL = {BEHAVIOUR_TABLE: lambda config, rows, table: behaviour_sql(config, rows, table),
+                 TURNING_TABLE: lambda config, rows, table: turning_sql(rows, table),
+                 LANE_CHANGE_TABLE: lambda config, rows, table: lane_change_sql(rows, table)}
+
+
+def _behaviour_of(n: str, names: tuple[str, ...]) -> tuple[str, str]:
+    """(table suffix, SQL of the track) of a step's name or ego, for the behaviour join."""
+    return (EGO_SUFFIX, EGO_TRACK) if n == EGO_ID else ("", f'm.tracks."{names.index(n)}"')
 
 
 def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], variables: tuple[str, ...],
@@ -108,8 +147,9 @@ def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], 
     names = pattern.names
     cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(names))
     joins = "".join(
-        f" JOIN {BEHAVIOUR_COLUMNS[b][0]} b{j} ON b{j}.frame_id = m.frame_id AND b{j}.track_id = "
-        f"m.tracks.\"{names.index(n)}\" AND b{j}.{BEHAVIOUR_COLUMNS[b][1]}" for j, (n, b) in enumerate(behaviours))
+        f" JOIN {BEHAVIOUR_COLUMNS[b][0]}{_behaviour_of(n, names)[0]} b{j} ON b{j}.frame_id = m.frame_id AND "
+        f"b{j}.track_id = {_behaviour_of(n, names)[1]} AND b{j}.{BEHAVIOUR_COLUMNS[b][1]}"
+        for j, (n, b) in enumerate(behaviours))
     return (f"CREATE TEMP TABLE r2s_step{k} AS {bindings_query(pattern, config)}\n"
             f"SELECT DISTINCT m.scene, m.frame_pos, m.timestamp_us, {cols} FROM m{joins}")
 
@@ -173,11 +213,9 @@ def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Cal
                 f"(PARTITION BY scene ORDER BY frame_index, ord) AS frame_pos, timestamp_us FROM {ROWS} WHERE is_ego")
     con.execute(f"CREATE TEMP TABLE {IDS} AS SELECT scene, track_id, min(entity_id) AS entity_id FROM {ROWS} "
                 "WHERE NOT is_ego GROUP BY scene, track_id")
-    used = {b for s in pattern.steps for _, b in s.behaviours}
-    if used & set(SPEED_BEHAVIOURS):
-        con.execute(behaviour_sql(config))
-    if used & set(TURNING):
-        con.execute(turning_sql())
+    used = {(BEHAVIOUR_COLUMNS[b][0], n == EGO_ID) for s in pattern.steps for n, b in s.behaviours}
+    for table, ego in sorted(used):
+        con.execute(BEHAVIOUR_SQL[table](config, EGO_ROWS if ego else OTHER_ROWS, table + (EGO_SUFFIX if ego else "")))
     for k, step in enumerate(pattern.steps):
         exact_check(step.pattern)
         con.execute(step_sql(k, step.pattern, step.behaviours, pattern.names, config))
@@ -204,7 +242,7 @@ def estimate_query(pattern: TemporalPattern, config: SynthConfig, fanout: bool, 
     tracks of the scene that one of its statements may bind), the least over the steps. With per_frame, one row per
     frame and step (frame id, step, product)."""
     names = pattern.names
-    ctes = [EGO_CTE, ESTIMATE_FRAMES]
+    ctes = [ego_cte(pattern.uses_lanes), ESTIMATE_FRAMES]
     for k, step in enumerate(pattern.steps):
         ctes += estimate_ctes(step.pattern, config, fanout, label=f"s{k}")
     steps = " UNION ALL ".join(f"SELECT {k} AS step, frame_id, rows, p, scene FROM s{k}"
