@@ -137,8 +137,10 @@ def test_a_scenario_id_held_twice_is_read_once_with_a_warning_naming_both_files(
     kept = merged / "../mini/sd_nuscenes_v1.0-mini_scene-0103.pkl"
     assert warning == f"r2s extract: skipping {skipped}: scenario 'scene-0103' was already read from {kept}"
     df = read_frames(out)
-    alone = frames_of(extract, mini, categories=ALL)[list(df.columns)]  # read_frames reads no road columns
-    pd.testing.assert_frame_equal(df, alone.astype(df.dtypes.to_dict()), check_dtype=False)
+    alone = frames_of(extract, mini, categories=ALL)
+    # the extractor's rows carry no lane facts (the writer decides them, with the maps): the columns both have
+    common = [c for c in df.columns if c in alone.columns]
+    pd.testing.assert_frame_equal(df[common], alone[common].astype(df[common].dtypes.to_dict()), check_dtype=False)
     assert summary == (f"r2s extract: 4 scenarios, {df.frame_id.nunique()} frames, {len(df)} rows -> {out}; "
                        "skipped 1 scenarios (duplicate scenario id x1)")
 

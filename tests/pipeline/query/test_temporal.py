@@ -9,7 +9,6 @@ import tempfile
 from pathlib import Path
 
 import pandas as pd
-import pyarrow.parquet as pq
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -252,10 +251,6 @@ def mapped_frames(tmp_path_factory):
     return out
 
 
-def _rows(path: Path) -> pd.DataFrame:
-    return pq.read_table(path).to_pandas()  # every column (read_frames keeps the frames schema's only)
-
-
 @pytest.mark.parametrize("data", ["excerpt", "shared-nuscenes"])
 @pytest.mark.parametrize("k", range(2))
 def test_turning_on_real_scenes_is_the_brute_force(mapped_frames, data, k, tmp_path):
@@ -263,7 +258,7 @@ def test_turning_on_real_scenes_is_the_brute_force(mapped_frames, data, k, tmp_p
         pytest.skip(f"{data}: /work/shared/data is not on this machine")
     frames = mapped_frames[data]
     got = engine_temporal(frames, TURNS[k], tmp_path)
-    assert got == brute_temporal(_rows(frames), parse_temporal(TURNS[k]))
+    assert got == brute_temporal(read_frames(frames), parse_temporal(TURNS[k]))
     if data == "shared-nuscenes":
         assert len(got) > 20  # vehicles do turn in the six scenes (69 frames left, 57 right)
 
@@ -305,7 +300,7 @@ def test_turning_on_random_tracks_is_the_brute_force(tmp_path, scenes, text):
         with pytest.raises(FramesError, match="turning needs"):
             engine_temporal(path, text, here)
         return
-    assert engine_temporal(path, text, here) == brute_temporal(_rows(path), parse_temporal(text))
+    assert engine_temporal(path, text, here) == brute_temporal(read_frames(path), parse_temporal(text))
 
 
 @pytest.mark.parametrize("behaviour,headings,extra,expect", [
@@ -326,7 +321,7 @@ def test_turning_boundaries_by_hand(tmp_path, behaviour, headings, extra, expect
     text = f"a = new Object ahead of ego by Range(0, 8), facing Range(0, 360) deg, {behaviour}\n"
     got = engine_temporal(path, text, tmp_path)
     assert (f"s0/{len(headings)}" in got) is expect
-    assert got == brute_temporal(_rows(path), parse_temporal(text))
+    assert got == brute_temporal(read_frames(path), parse_temporal(text))
 
 
 def test_turning_without_headings_in_the_world_is_one_line(tmp_path):
