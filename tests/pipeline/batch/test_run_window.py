@@ -10,6 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from extractors.frames import frame_to_scene, read_frames, write_frames
+from extractors.frames_schema import ROAD_COLUMNS
 from pipeline.programs import read_programs
 from synth import check_window, synthesize_window, tile
 from synth.config import SynthConfig
@@ -136,7 +137,8 @@ def test_window_runs_with_lanes_give_each_frame_its_road(excerpt_frames, tmp_pat
         assert all(st.lane is not None for st in result.program.statements)
         assert all(v.ok for v in check_window(row.program, scenes, config))
     bare = tmp_path / "bare.parquet"
-    write_frames(read_frames(excerpt_frames), bare)  # the same frames, no maps beside them
+    plain = read_frames(excerpt_frames)  # the same frames without their road columns, no maps beside them
+    write_frames(plain.drop(columns=[c for c in ROAD_COLUMNS if c in plain]), bare)
     _run(bare, tmp_path / "bare-out", "--window", "2", "--lanes")
     rows = pq.read_table(tmp_path / "bare-out").to_pandas()
     assert (rows.status == "error").all() and rows.error.str.contains("has no road").all()
