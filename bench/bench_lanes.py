@@ -148,6 +148,8 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=200_000, help="frames to replicate to (default 200,000)")
     ap.add_argument("--synthesis-only", action="store_true",
                     help="run part 1 only; the query table of bench/results/lanes.json is kept as it was measured")
+    ap.add_argument("--queries-only", action="store_true",
+                    help="run part 2 only; the synthesis table of bench/results/lanes.json is kept as it was measured")
     ap.add_argument("--one", nargs=2, metavar=("FRAMES", "PATTERN"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
@@ -159,12 +161,15 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="r2s-bench-lanes-") as tmp:
         extracted = {}
         for name, source, path in SOURCES:
+            if args.queries_only and name != SOURCES[2][0] and (name != SOURCES[0][0] or SOURCES[2][2].exists()):
+                continue  # the query log only
             if not path.exists():
                 print(f"  {name}: not here ({path}), skipped", flush=True)
                 continue
             extracted[name] = Path(tmp) / f"{len(extracted)}-{source}" / "frames"
             extract(source, path, extracted[name])
-            synth_runs.append(synthesis(name, scenes_of(extracted[name])))
+            if not args.queries_only:
+                synth_runs.append(synthesis(name, scenes_of(extracted[name])))
         if args.synthesis_only:
             previous = HERE / "results" / "lanes.json"
             payload = json.loads(previous.read_text()) if previous.exists() else {
@@ -188,6 +193,10 @@ def main() -> int:
     payload = {"machine": machine(), "load_before": load_before, "load_after": load(), "synth_target": SYNTH_TARGET,
                "query_target_s": QUERY_TARGET_S, "synthesis": synth_runs, "queries": query_runs,
                "query_log": str(log.parent.name)}
+    if args.queries_only:  # the synthesis table as it was measured, with its own provenance
+        previous = json.loads((HERE / "results" / "lanes.json").read_text())
+        payload.update(synthesis=previous["synthesis"], synthesis_run=previous.get("synthesis_run") or {
+            k: previous[k] for k in ("machine", "load_before", "load_after")})
     write_results("lanes", payload, markdown(payload))
     return 0
 
@@ -220,7 +229,7 @@ def markdown(p: dict) -> str:
         md.append(f"| {r['n_frames']:,} | {r['rows']:,} | {r['pattern']} | {r['wall_s']:.1f} | {r['matched']:,} | "
                   f"{r['scales']} | {r['peak_rss_mb']:.0f} |")
     md += ["", "Reproduce: `python bench/bench_lanes.py` (`--frames N` for another size; `--synthesis-only` for the "
-           "first table alone).", ""]
+           "first table alone, `--queries-only` for the second).", ""]
     return "\n".join(md)
 
 
