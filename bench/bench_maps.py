@@ -17,6 +17,8 @@ Writes bench/results/maps.json and maps.md.
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import sys
 import time
@@ -129,10 +131,20 @@ def width() -> dict:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--extraction-only", action="store_true",
+                    help="only section 2; sections 1 and 3 are kept from the last run's maps.json")
+    args = ap.parse_args()
     if not (LOG.is_dir() and SCENARIONET.is_dir()):
         sys.exit(f"bench_maps needs {LOG} and {SCENARIONET}")
     load_before = os.getloadavg()[0]
-    result = {"machine": machine(), "agreement": agreement(), "extraction": extraction(), "width": width()}
+    if args.extraction_only:
+        last = json.loads((HERE / "results" / "maps.json").read_text())
+        result = {"machine": machine(), "agreement": last["agreement"], "extraction": extraction(),
+                  "width": last["width"], "kept_from": last.get("kept_from") or {"machine": last["machine"],
+                                                                                "load": last["load"]}}
+    else:
+        result = {"machine": machine(), "agreement": agreement(), "extraction": extraction(), "width": width()}
     result["load"] = [load_before, os.getloadavg()[0]]
     a, e, w = result["agreement"], result["extraction"], result["width"]
     lines = [
@@ -140,6 +152,9 @@ def main() -> None:
         f"Machine: {result['machine']['cpu']}, {result['machine']['cores']} cores; commit "
         f"{result['machine']['commit']}; {result['machine']['date']}; load average {load_before:.1f} -> "
         f"{result['load'][1]:.1f} (shared machine).", "",
+        *([f"Sections 1 and 3 are those of an earlier run (commit {k['machine']['commit']}, {k['machine']['date']}, "
+           f"load {k['load'][0]:.1f} -> {k['load'][1]:.1f}); section 2 is this run's "
+           "(`python bench/bench_maps.py --extraction-only`).", ""] if (k := result.get("kept_from")) else []),
         f"## 1. Lane facts of every box of the Argoverse 2 test log ({a['boxes']} boxes and egos, log {a['log']})",
         "",
         "r2sgen's facts (ground-plane placement, exact containment, its own polygons) against av2's map API "

@@ -30,6 +30,7 @@ from extractors.base import (
     MapSink,
     RecordedObject,
     Source,
+    prefetch_facts,
     quaternion_yaw,
     require_path,
     vehicle_to_ego,
@@ -198,6 +199,15 @@ def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder,
     bounds = list(starts) + [len(order)]
     places = CityPlaces.of(cols, poses, stamps)
     speed, ego_speed = ground_speeds(cols, places, stamps)
+    if road is not None:  # every place a frame below will ask for: the boxes' within the radius (and a hair
+        # beyond: FrameBuilder decides it again) and the ego's, where placed
+        reach = builder.options.radius * (1 + 1e-9) + 1e-9
+        with np.errstate(invalid="ignore"):
+            boxes = np.isfinite(places.x) & (np.hypot(x, y) <= reach)
+        egos = np.isfinite(places.ego_x)
+        prefetch_facts(road, zip([*places.x[boxes].tolist(), *places.ego_x[egos].tolist()],
+                                 [*places.y[boxes].tolist(), *places.ego_y[egos].tolist()],
+                                 [*places.yaw[boxes].tolist(), *places.ego_yaw[egos].tolist()]))
     for index, stamp in enumerate(stamps):
         if index % builder.options.every:
             continue

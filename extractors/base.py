@@ -315,13 +315,24 @@ def world_places(entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
 def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
     """Name the map in every entity and add the lane facts of those the source places in the map's frame."""
     placed = [(b, e) for b, e in entities if b.world is not None]
-    facts = road.facts([b.world[0] for b, _ in placed], [b.world[1] for b, _ in placed],
-                       [math.degrees(b.world[2]) % 360.0 for b, _ in placed]) if placed else []
+    facts = road.facts(*_facts_args([b.world for b, _ in placed])) if placed else []
     for _, e in entities:
         e["map_id"] = road.road.map_id
     for (_, e), f in zip(placed, facts):
         e.update(lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
                  off_road=f.off_road)
+
+
+def prefetch_facts(road: RoadIndex, worlds: Iterable[tuple[float, float, float]]) -> None:
+    """Decide at once the lane facts of every world place (x, y, yaw) a scenario's frames will ask for (its
+    entities' RecordedObject.world in all its frames): road_facts then looks them up (RoadIndex.prefetch)."""
+    road.prefetch(*_facts_args(list(worlds)))
+
+
+def _facts_args(worlds: list[tuple[float, float, float]]) -> tuple[list[float], list[float], list[float]]:
+    """RoadIndex.facts's points and headings (degrees CCW from +x) of world places, the same for prefetch_facts
+    and road_facts, so that a prefetched point is found again."""
+    return [w[0] for w in worlds], [w[1] for w in worlds], [math.degrees(w[2]) % 360.0 for w in worlds]
 
 
 def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:

@@ -31,6 +31,7 @@ from extractors.base import (
     RecordedObject,
     Source,
     global_to_ego,
+    prefetch_facts,
     require_path,
 )
 from extractors.categories import Taxonomy
@@ -328,10 +329,14 @@ def scenario_frames(
     ego_i = ids.index(_as_id(sdc))
 
     stride = NUSCENES_KEYFRAME_STEP if nuscenes else 1
-    for step in range(0, steps, stride):
+    kept = [step for step in range(0, steps, stride) if not (step // stride) % options.every and valid[ego_i, step]]
+    if road is not None and kept:
+        tracks_at, steps_at = np.nonzero(valid[:, kept])
+        at = np.asarray(kept)[steps_at]
+        prefetch_facts(road, zip(pos[tracks_at, at, 0].tolist(), pos[tracks_at, at, 1].tolist(),
+                                 yaw[tracks_at, at].tolist()))
+    for step in kept:
         index = step // stride
-        if index % options.every or not valid[ego_i, step]:
-            continue
         ex, ey = pos[ego_i, step]
         ego_yaw = float(yaw[ego_i, step])
         others = [i for i in np.flatnonzero(valid[:, step]) if i != ego_i]

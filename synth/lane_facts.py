@@ -24,7 +24,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
+from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap, packed
 
 EPS = 2.0 ** -53
 # Shewchuk, "Adaptive precision floating-point arithmetic and fast robust geometric predicates" (1997):
@@ -71,50 +71,98 @@ def covers(edges, px: float, py: float) -> bool:
     return inside
 
 
+BANDS = 64  # at most, per polygon (about one per four edges)
+
+
 class PolygonIndex:
     """The polygons of some features as flat arrays, to test many points at once with the exact answer of
-    `contains`: bounding boxes first, then every edge of the candidates in float with the error bound, and
-    `contains` itself for a (point, polygon) pair with an edge the float cannot decide."""
+    `contains`: bounding boxes first (found through an R-tree, then compared exactly), then every edge of the
+    candidates in float with the error bound, and `contains` itself for a (point, polygon) pair with an edge the
+    float cannot decide."""
 
     def __init__(self, features: tuple[MapFeature, ...]) -> None:
         self.features = features
-        rings = [np.asarray(f.polygon, dtype=float).reshape(-1, 2) for f in features]
-        self.box = np.array([[r[:, 0].min(), r[:, 1].min(), r[:, 0].max(), r[:, 1].max()] for r in rings]) \
-            if rings else np.zeros((0, 4))
-        counts = np.array([len(r) for r in rings], dtype=np.int64)
-        self.start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if rings else counts
-        self.count = counts
-        a = np.concatenate(rings) if rings else np.zeros((0, 2))
-        b = np.concatenate([np.roll(r, -1, axis=0) for r in rings]) if rings else np.zeros((0, 2))
-        self.ax, self.ay, self.bx, self.by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+        xy, counts = packed([f.polygon for f in features])
+        start = np.cumsum(counts) - counts
+        self.start, self.count = start, counts
+        if len(features):
+            self.box = np.stack([np.minimum.reduceat(xy[:, 0], start), np.minimum.reduceat(xy[:, 1], start),
+                                 np.maximum.reduceat(xy[:, 0], start), np.maximum.reduceat(xy[:, 1], start)], 1)
+        else:
+            self.box = np.zeros((0, 4))
+        nxt = np.arange(1, len(xy) + 1)
+        nxt[start + counts - 1] = start  # each ring's last vertex closes onto its first
+        self.ax, self.ay = xy[:, 0], xy[:, 1]
+        self.bx, self.by = xy[nxt, 0] if len(xy) else self.ax, xy[nxt, 1] if len(xy) else self.ay
+        # A repeated vertex makes an edge of length 0: it crosses no horizontal line, and a point on it is the
+        # vertex, on the next (non-degenerate) edge too; so it decides nothing and is left out of the float test
+        # (its determinant, exactly 0, would otherwise send every point near it to the exact test).
+        self.point_edge = (self.ax == self.bx) & (self.ay == self.by)
+        self._tree = None
+        # Horizontal bands, as Banded cuts them: a point's crossing and on-edge tests only need the edges whose
+        # y-range holds its y, all filed under its band (band_of is monotonic in y), a few of a polygon's dozens.
+        # band_edges lists the edges of band g (of all polygons' bands, polygon by polygon) from band_start[g].
+        self.bands = np.maximum(1, np.minimum(BANDS, counts // 4))
+        self.band_height = (self.box[:, 3] - self.box[:, 1]) / self.bands
+        self.band_height[self.band_height == 0] = 1.0
+        self.band_first = np.cumsum(self.bands) - self.bands
+        poly = np.repeat(np.arange(len(features)), counts)
+        lo = self.band_of(np.minimum(self.ay, self.by), poly)
+        hi = self.band_of(np.maximum(self.ay, self.by), poly)
+        span = hi - lo + 1
+        filed = np.repeat(np.arange(len(xy)), span)
+        band = np.repeat(self.band_first[poly] + lo - (np.cumsum(span) - span), span) + np.arange(span.sum())
+        order = np.argsort(band, kind="stable")
+        self.band_edges = filed[order]
+        self.band_start = np.searchsorted(band[order], np.arange(int(self.bands.sum()) + 1))
+
+    def band_of(self, y: np.ndarray, poly: np.ndarray) -> np.ndarray:
+        """The band (within its polygon) of each y, for y in that polygon's y-extent: Banded._band's formula."""
+        k = ((y - self.box[poly, 1]) / self.band_height[poly]).astype(np.int64)
+        return np.minimum(self.bands[poly] - 1, np.maximum(0, k))
+
+    def candidates(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point index, polygon index) of every pair whose polygon's box holds the point, in row-major order.
+        An R-tree over the boxes, each widened by a margin (so that it finds a superset whatever it rounds),
+        proposes; the exact float comparison with the box decides, as a full points x boxes test would."""
+        import shapely
+
+        if self._tree is None:
+            b = self.box
+            m = 1e-9 * (1.0 + np.abs(b))
+            self._tree = shapely.STRtree(shapely.box(b[:, 0] - m[:, 0], b[:, 1] - m[:, 1], b[:, 2] + m[:, 2],
+                                                     b[:, 3] + m[:, 3]))
+        pi, fi = self._tree.query(shapely.points(xs, ys))
+        b = self.box[fi]
+        keep = (b[:, 0] <= xs[pi]) & (xs[pi] <= b[:, 2]) & (b[:, 1] <= ys[pi]) & (ys[pi] <= b[:, 3])
+        pi, fi = pi[keep], fi[keep]
+        order = np.lexsort((fi, pi))
+        return pi[order], fi[order]
 
     def containing(self, xs: np.ndarray, ys: np.ndarray) -> list[list[int]]:
         """For each point, the indices (into features, ascending) of the polygons that contain it."""
-        xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+        xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
         out: list[list[int]] = [[] for _ in range(len(xs))]
         if not len(self.features) or not len(xs):
             return out
-        b = self.box
-        inbox = (b[None, :, 0] <= xs[:, None]) & (xs[:, None] <= b[None, :, 2]) & \
-                (b[None, :, 1] <= ys[:, None]) & (ys[:, None] <= b[None, :, 3])
-        pi, fi = np.nonzero(inbox)
+        pi, fi = self.candidates(xs, ys)
         if not len(pi):
             return out
-        # Every edge of every candidate pair: pair k owns edges start[f] .. start[f] + count[f].
-        n = self.count[fi]
+        # The edges of the point's band of every candidate pair: pair k owns band_edges[band_start[g]:][:n].
+        g = self.band_first[fi] + self.band_of(ys[pi], fi)
+        n = self.band_start[g + 1] - self.band_start[g]
         pair = np.repeat(np.arange(len(pi)), n)
-        edge = np.repeat(self.start[fi] - np.concatenate([[0], np.cumsum(n)[:-1]]), n) + np.arange(n.sum())
+        edge = self.band_edges[np.repeat(self.band_start[g] - (np.cumsum(n) - n), n) + np.arange(n.sum())]
         px, py = xs[pi][pair], ys[pi][pair]
         ax, ay, bx, by = self.ax[edge], self.ay[edge], self.bx[edge], self.by[edge]
         detleft = (bx - ax) * (py - ay)
         detright = (by - ay) * (px - ax)
         det = detleft - detright
-        sure = np.abs(det) > CCW_ERRBOUND * (np.abs(detleft) + np.abs(detright))
+        sure = (np.abs(det) > CCW_ERRBOUND * (np.abs(detleft) + np.abs(detright))) | self.point_edge[edge]
         straddle = (ay > py) != (by > py)
         crossing = straddle & np.where(by > ay, det > 0, det < 0)
         # An edge whose sign the float cannot prove may be one p lies on, or one it crosses: decide exactly.
-        doubtful = np.zeros(len(pi), dtype=bool)
-        np.logical_or.at(doubtful, pair, ~sure)
+        doubtful = np.bincount(pair, weights=~sure, minlength=len(pi)) > 0
         inside = np.bincount(pair, weights=crossing & sure, minlength=len(pi)).astype(np.int64) % 2 == 1
         for k in np.flatnonzero(doubtful):
             inside[k] = contains(self.features[int(fi[k])].polygon, float(xs[pi[k]]), float(ys[pi[k]]))
@@ -145,18 +193,49 @@ class RoadIndex:
         self.intersections = PolygonIndex(road.of_kind(INTERSECTION))
         self.drivable = PolygonIndex(road.of_kind(DRIVABLE_AREA))
         self._segments: dict[str, Segments | None] = {}
+        self._packed_segments: PackedSegments | None = None
+        self._ahead: dict[tuple[float, float, float], LaneFacts] = {}
+
+    def prefetch(self, xs, ys, headings) -> None:
+        """Decide the facts of many points at once (every entity of a scenario in every frame) and keep them, in
+        place of those kept before, for `facts` to answer by lookup: one vectorised pass instead of one per frame
+        (numpy's per-call cost dominates a frame's few dozen points). A point asked for later is looked up by its
+        exact (x, y, heading); any other is decided then, the same way, so the facts never depend on it."""
+        xs, ys, hs = (np.asarray(v, dtype=float).reshape(-1) for v in (xs, ys, headings))
+        self._ahead = dict(zip(zip(xs.tolist(), ys.tolist(), hs.tolist()), self._decide(xs, ys, hs)))
 
     def facts(self, xs, ys, headings) -> list[LaneFacts]:
         """Lane facts of points (map frame) of entities with these headings (degrees CCW from +x, map frame)."""
-        xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+        xs, ys, hs = (np.asarray(v, dtype=float).reshape(-1) for v in (xs, ys, headings))
+        out = [self._ahead.get(k) for k in zip(xs.tolist(), ys.tolist(), hs.tolist())]
+        todo = [i for i, f in enumerate(out) if f is None]
+        if todo:
+            for i, f in zip(todo, self._decide(xs[todo], ys[todo], hs[todo])):
+                out[i] = f
+        return out
+
+    def _decide(self, xs: np.ndarray, ys: np.ndarray, headings: np.ndarray) -> list[LaneFacts]:
         in_lanes = self.lanes.containing(xs, ys)
         on_cross = self.crosswalks.containing(xs, ys)
         in_inter = self.intersections.containing(xs, ys)
         in_drive = self.drivable.containing(xs, ys)
+        # the direction of every lane at every point in several (the tie rule's), in one pass
+        shared = [(i, k) for i, idx in enumerate(in_lanes) if len(idx) > 1 for k in idx]
+        near = dict(zip(shared, self.directions_near([k for _, k in shared], xs[[i for i, _ in shared]],
+                                                     ys[[i for i, _ in shared]]))) if shared else {}
         out = []
+        nowhere: dict[tuple[bool, bool, bool], LaneFacts] = {}  # the facts of a point in no lane, by the rest
         for i, idx in enumerate(in_lanes):
+            if not idx:
+                key = (bool(in_inter[i]), bool(on_cross[i]), not in_drive[i])
+                if key not in nowhere:
+                    nowhere[key] = LaneFacts((), None, *key)
+                out.append(nowhere[key])
+                continue
             lanes = [self.lanes.features[k] for k in idx]
-            chosen = self.choose_lane(lanes, float(xs[i]), float(ys[i]), float(headings[i]))
+            h = float(headings[i])
+            chosen = lanes[0] if len(idx) == 1 else self.lanes.features[min(
+                idx, key=lambda k: (lane_difference(h, near[i, k]), self.lanes.features[k].feature_id))]
             out.append(LaneFacts(
                 lanes=tuple(sorted(f.feature_id for f in lanes)),
                 lane=chosen.feature_id if chosen is not None else None,
@@ -176,11 +255,17 @@ class RoadIndex:
             if f.feature_id not in self._segments:
                 self._segments[f.feature_id] = Segments.of(f.line)
             seg = self._segments[f.feature_id]
-            d = seg.direction_near(x, y) if seg is not None else None
-            diff = 180.0 if d is None else abs((heading - d + 180.0) % 360.0 - 180.0)
-            return (diff, f.feature_id)
+            return (lane_difference(heading, seg.direction_near(x, y) if seg is not None else None), f.feature_id)
 
         return min(lanes, key=key)
+
+    def directions_near(self, lanes: list[int], xs: np.ndarray, ys: np.ndarray) -> list[float | None]:
+        """Segments.direction_near of lane lanes[j] (an index into self.lanes.features) at (xs[j], ys[j]), for
+        many pairs at once: the same float operations on the same values, the first nearest segment of each
+        (np.argmin's), so the same directions; None for a lane without a segment."""
+        if self._packed_segments is None:
+            self._packed_segments = PackedSegments.of([f.line for f in self.lanes.features])
+        return self._packed_segments.directions_near(np.asarray(lanes, dtype=np.int64), xs, ys)
 
 
 @dataclass(frozen=True)
@@ -214,13 +299,63 @@ class Segments:
         return math.degrees(math.atan2(self.d[k, 1], self.d[k, 0])) % 360.0
 
 
+def lane_difference(heading: float, direction: float | None) -> float:
+    """How far a lane's local direction is from a heading (degrees, in [0, 180]); 180 for a lane without one."""
+    return 180.0 if direction is None else abs((heading - direction + 180.0) % 360.0 - 180.0)
+
+
+@dataclass(frozen=True)
+class PackedSegments:
+    """The Segments of many lines in flat arrays (line j's from start[j], count[j] of them), to find the nearest
+    segment of many (line, point) pairs in one pass with Segments.nearest's own arithmetic."""
+
+    a: np.ndarray
+    d: np.ndarray
+    length2: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+
+    @classmethod
+    def of(cls, lines: list) -> PackedSegments:
+        xy, counts = packed(lines)
+        a, d = xy[:-1], np.diff(xy, axis=0)
+        length2 = (d * d).sum(axis=1)
+        line = np.repeat(np.arange(len(lines)), counts)[:-1] if len(xy) else np.zeros(0, dtype=np.int64)
+        ends = np.cumsum(counts)
+        # a segment runs from a point to the next of the same line, and has a length (Segments.of's `keep`)
+        keep = (np.arange(len(a)) + 1 < ends[line]) & (length2 > 0) if len(a) else np.zeros(0, dtype=bool)
+        line = line[keep]
+        count = np.bincount(line, minlength=len(lines)).astype(np.int64)
+        return cls(a[keep], d[keep], length2[keep], np.cumsum(count) - count, count)
+
+    def directions_near(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> list[float | None]:
+        n = self.count[lines]
+        pair = np.repeat(np.arange(len(lines)), n)
+        row = np.repeat(self.start[lines] - (np.cumsum(n) - n), n) + np.arange(n.sum())
+        x, y = xs[pair], ys[pair]
+        a0, a1, d0, d1 = self.a[row, 0], self.a[row, 1], self.d[row, 0], self.d[row, 1]
+        t = np.clip(((x - a0) * d0 + (y - a1) * d1) / self.length2[row], 0, 1)
+        gap = np.hypot(a0 + t * d0 - x, a1 + t * d1 - y)
+        has = n > 0
+        first = np.cumsum(n) - n
+        low = np.full(len(lines), np.inf)
+        low[has] = np.minimum.reduceat(gap, first[has]) if has.any() else low[has]
+        # the first row of each pair that reaches its minimum (np.argmin's choice)
+        at = np.flatnonzero(gap == low[pair])
+        pairs_at, first_at = np.unique(pair[at], return_index=True)
+        best = np.full(len(lines), -1, dtype=np.int64)
+        best[pairs_at] = row[at[first_at]]
+        for k in np.flatnonzero(has & (best < 0)):  # NaN gaps (coordinates near overflow): argmin itself
+            mine = pair == k
+            best[k] = row[mine][int(np.argmin(gap[mine]))]
+        d = self.d
+        return [None if j < 0 else math.degrees(math.atan2(d[j, 1], d[j, 0])) % 360.0 for j in best.tolist()]
+
+
 def local_direction(f: MapFeature, x: float, y: float) -> float | None:
     """The heading (degrees CCW from +x) of the segment of f's line nearest (x, y); None without a segment."""
     seg = Segments.of(f.line)
     return seg.direction_near(x, y) if seg is not None else None
-
-
-BANDS = 64  # at most, per polygon (about one per four edges)
 
 
 class Banded:

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from synth.lane_facts import PolygonIndex, Segments
-from synth.roadmap import LANE, MapFeature, Points
+from synth.roadmap import LANE, MapFeature, Points, packed
 
 # The width of a nuScenes lane connector, which the converter gives without polygon or width: the median width
 # (twice the distance from the centre line's halfway point to the polygon's boundary) of the nuScenes lanes that
@@ -32,6 +32,17 @@ NEIGHBOUR_ANGLE = 30.0  # degrees
 
 def dedup(line: Points) -> Points:
     return tuple(p for i, p in enumerate(line) if i == 0 or p != line[i - 1])
+
+
+def dedup_packed(lines: list[Points]) -> tuple[np.ndarray, np.ndarray]:
+    """`dedup` of many lines at once: their points without consecutive repeats, concatenated (N, 2), and how many
+    each line keeps."""
+    xy, counts = packed(lines)
+    line = np.repeat(np.arange(len(lines)), counts)
+    keep = np.ones(len(xy), dtype=bool)
+    keep[1:] = (xy[1:] != xy[:-1]).any(axis=1)
+    keep[(np.cumsum(counts) - counts)[counts > 0]] = True  # a line's first point
+    return xy[keep], np.bincount(line[keep], minlength=len(lines)).astype(np.int64)
 
 
 def lane_polygon(line: Points, left: float | None = None, right: float | None = None) -> Points:
@@ -51,12 +62,13 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
 
     half = DEFAULT_LANE_WIDTH / 2
     out: list[Points] = [()] * len(lines)
-    todo = [i for i, line in enumerate(lines) if len(dedup(line)) >= 2]
+    xy, kept = dedup_packed(lines)
+    todo = np.flatnonzero(kept >= 2).tolist()
     if not todo:
         return out
-    coords = [np.asarray(dedup(lines[i]), dtype=float) for i in todo]
-    geoms = shapely.linestrings(np.concatenate(coords), indices=np.repeat(np.arange(len(todo)),
-                                                                          [len(c) for c in coords]))
+    line = np.repeat(np.arange(len(lines)), kept)
+    used = kept[line] >= 2
+    geoms = shapely.linestrings(xy[used], indices=np.searchsorted(todo, line[used]))
     left = np.array([half if lefts[i] is None else lefts[i] for i in todo], dtype=float)
     right = np.array([half if rights[i] is None else rights[i] for i in todo], dtype=float)
     areas = shapely.buffer(geoms, left, cap_style="flat", join_style="bevel")
@@ -75,6 +87,31 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
     return out
 
 
+def widths_at(lanes: list[MapFeature], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """`width_at` of many lanes, each at its point, in one pass: each ring's segments as Segments.of makes them
+    (closed, those of length 0 left out), Segments.nearest's arithmetic on the same values, the least gap."""
+    out = np.zeros(len(lanes))
+    ok = [k for k, f in enumerate(lanes) if len(f.polygon) >= 3]
+    if not ok:
+        return out
+    xy, counts = packed([lanes[k].polygon for k in ok])
+    start = np.cumsum(counts) - counts
+    nxt = np.arange(1, len(xy) + 1)
+    nxt[start + counts - 1] = start  # the closing segment
+    a, d = xy, xy[nxt] - xy
+    length2 = (d * d).sum(axis=1)
+    lane = np.repeat(np.asarray(ok), counts)
+    keep = length2 > 0
+    a, d, length2, lane = a[keep], d[keep], length2[keep], lane[keep]
+    x, y = xs[lane], ys[lane]
+    t = np.clip(((x - a[:, 0]) * d[:, 0] + (y - a[:, 1]) * d[:, 1]) / length2, 0, 1)
+    gap = np.hypot(a[:, 0] + t * d[:, 0] - x, a[:, 1] + t * d[:, 1] - y)
+    n = np.bincount(lane, minlength=len(lanes))
+    has = n > 0
+    out[has] = 2.0 * np.minimum.reduceat(gap, (np.cumsum(n) - n)[has])
+    return out
+
+
 def width_at(f: MapFeature, x: float, y: float) -> float:
     """A lane's width at a point of its centre line: twice the distance from the point to its polygon's boundary."""
     ring = np.asarray(f.polygon, dtype=float).reshape(-1, 2)
@@ -84,7 +121,11 @@ def width_at(f: MapFeature, x: float, y: float) -> float:
 
 def halfway(line: Points) -> tuple[float, float, float, float] | None:
     """(x, y, ux, uy): the point halfway along a line by arc length and the unit direction of its segment."""
-    p = np.asarray(dedup(line), dtype=float).reshape(-1, 2)
+    return halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2))
+
+
+def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
+    """`halfway` of a line given as an (N, 2) array without consecutive repeats."""
     if len(p) < 2:
         return None
     seg = np.diff(p, axis=0)
@@ -100,13 +141,18 @@ def halfway(line: Points) -> tuple[float, float, float, float] | None:
 def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
     """The lanes with left / right neighbours found by the probing rule (neighbour_rule "geometric")."""
     candidates = tuple(f for f in lanes if f.kind == LANE and not f.is_intersection)
-    segments = [Segments.of(f.line) for f in candidates]
+    segments: dict[int, Segments | None] = {}  # of the lanes a probe falls in, made when first needed
     cos_limit = math.cos(math.radians(NEIGHBOUR_ANGLE))
     # every probe point of every lane, tested in one call: (lane, side, x, y, ux, uy)
     probes = []
-    for i, f in enumerate(candidates):
-        mid = halfway(f.line)
-        w = width_at(f, mid[0], mid[1]) if mid is not None else 0.0
+    xy, kept = dedup_packed([f.line for f in candidates])
+    ends = np.cumsum(kept).tolist()
+    mids = [halfway_of(xy[end - n:end]) for end, n in zip(ends, kept.tolist())]
+    at = [i for i, mid in enumerate(mids) if mid is not None]
+    widths = dict(zip(at, widths_at([candidates[i] for i in at], np.array([mids[i][0] for i in at]),
+                                    np.array([mids[i][1] for i in at])).tolist()))
+    for i, mid in enumerate(mids):
+        w = widths.get(i, 0.0)
         if mid is None or w <= 0:
             continue
         x, y, ux, uy = mid
@@ -117,6 +163,8 @@ def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
     for (i, side, qx, qy, ux, uy), hits in zip(probes, found):
         best = None
         for k in hits:
+            if k not in segments:
+                segments[k] = Segments.of(candidates[k].line)
             if k == i or segments[k] is None:
                 continue
             j, gap = segments[k].nearest(qx, qy)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from itertools import chain
 
 import numpy as np
 
@@ -88,12 +89,13 @@ class RoadMap:
         feats = sorted(features, key=lambda f: (KINDS.index(f.kind) if f.kind in KINDS else len(KINDS),
                                                 f.feature_id))
         seen: dict[str, MapFeature] = {}
+        plain = _plain_finite([pts for f in feats for pts in (f.line, f.polygon)])
         for f in feats:
             if f.map_id != map_id:
                 raise MapError(f"map {map_id!r}: feature {f.feature_id!r} belongs to map {f.map_id!r}")
             if f.feature_id in seen:
                 raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
-            check_feature(f)
+            check_feature(f, coordinates=not plain)
             seen[f.feature_id] = f
         check_simple(feats)
         lanes = {fid for fid, f in seen.items() if f.kind == LANE}
@@ -138,16 +140,35 @@ def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
     return f if all(getattr(f, k) == v for k, v in links.items()) else replace(f, **links)
 
 
-def check_feature(f: MapFeature) -> None:
+def _plain_finite(seqs: Sequence[Points]) -> bool:
+    """Whether every point of every sequence is a pair of finite Python floats or ints (what `points` and the
+    readers make): then check_feature need not look at the coordinates one feature at a time. False for anything
+    else, which check_feature then judges (and names) feature by feature."""
+    pts = list(chain.from_iterable(seqs))
+    try:
+        if not set(map(len, pts)) <= {2}:
+            return False
+    except TypeError:  # a point that is not a sequence
+        return False
+    values = list(chain.from_iterable(pts))
+    if not set(map(type, values)) <= {float, int}:
+        return False
+    try:
+        return bool(np.isfinite(np.array(values, dtype=float)).all())
+    except OverflowError:  # an int beyond a float
+        return False
+
+
+def check_feature(f: MapFeature, coordinates: bool = True) -> None:
     """The rules of one feature but simplicity (`check_simple` takes a map's polygons at once): a known kind,
-    finite coordinates, a polygon of at least three distinct vertices where the kind is an area, a line of two
-    points or more where the kind has one."""
+    finite coordinates (unless `coordinates` is False: the caller checked them), a polygon of at least three
+    distinct vertices where the kind is an area, a line of two points or more where the kind has one."""
     where = f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r}"
     if f.kind not in KINDS:
         raise MapError(f"map {f.map_id!r}: feature {f.feature_id!r} has unknown kind {f.kind!r} "
                        f"(kinds: {', '.join(KINDS)})")
     for name, pts in (("line", f.line), ("polygon", f.polygon)):
-        if not pts:
+        if not pts or not coordinates:
             continue
         try:
             a = np.asarray(pts, dtype=float)
@@ -174,14 +195,29 @@ def check_simple(features: Sequence[MapFeature]) -> None:
     areas = [f for f in features if f.kind in AREA_KINDS]
     if not areas:
         return
-    rings = [_clean_ring(f.polygon) for f in areas]
-    coords = np.concatenate(rings)
-    index = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
+    coords, index = _clean_rings([f.polygon for f in areas])
     simple = shapely.is_simple(shapely.linearrings(coords, indices=index))
     if not simple.all():
         f = areas[int(np.flatnonzero(~simple)[0])]
         raise MapError(f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r} has a self-intersecting "
                        "polygon")
+
+
+def _clean_rings(rings: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
+    """`_clean_ring` of many rings at once: their vertices concatenated and each one's ring index."""
+    xy, counts = packed(rings)
+    ring = np.repeat(np.arange(len(rings)), counts)
+    start = np.cumsum(counts) - counts
+    keep = np.ones(len(xy), dtype=bool)
+    keep[1:] = (xy[1:] != xy[:-1]).any(axis=1)
+    keep[start] = True
+    # the closing repeat: a ring's last kept vertex equal to its first (its run ends the ring), more than one kept
+    last = start + counts - 1
+    kept = np.bincount(ring, weights=keep, minlength=len(rings))
+    closing = (xy[last] == xy[start]).all(axis=1) & (kept > 1)
+    at = np.maximum.reduceat(np.where(keep, np.arange(len(xy)), -1), start)
+    keep[at[closing]] = False
+    return xy[keep], ring[keep]
 
 
 def _clean_ring(ring: Points) -> np.ndarray:
@@ -205,6 +241,15 @@ def points(xs: Iterable[float], ys: Iterable[float]) -> Points:
     if len(xs) != len(ys):
         raise ValueError(f"{len(xs)} x coordinates but {len(ys)} y coordinates")
     return tuple(zip(xs.tolist(), ys.tolist()))
+
+
+def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
+    """Many point sequences as one (N, 2) float array and their lengths: one pass over all coordinates (numpy's
+    conversion of each small tuple on its own costs more than the work done on it). Every point must be a pair."""
+    counts = np.fromiter(map(len, seqs), dtype=np.int64, count=len(seqs))
+    total = int(counts.sum())
+    flat = np.fromiter(chain.from_iterable(chain.from_iterable(seqs)), dtype=float, count=2 * total)
+    return flat.reshape(total, 2), counts
 
 
 def open_ring(pts: Points) -> Points:
