@@ -7,7 +7,6 @@ points exactly on their edges and vertices and a few ulps off them."""
 from __future__ import annotations
 
 import math
-from fractions import Fraction
 
 import numpy as np
 import pandas as pd
@@ -19,6 +18,7 @@ from extractors.maps import maps_dir, read_maps
 from synth.lane_facts import LaneFacts, PolygonIndex, RoadIndex, Segments, contains, lane_difference, local_direction
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 from tests.support.extract import r2s
+from tests.support.polygons import rational_covers
 
 AV2_LOG = ("argoverse2", "test_data", "sensor_dataset_logs", "adcf7d18-0510-35b0-a2fa-b4cea13a6d76")
 
@@ -75,21 +75,6 @@ def test_every_fact_of_the_shared_recordings_is_the_definition(shared_dir, tmp_p
     result = r2s(capsys, "extract", source, str(path), "--categories", "all", "--out", str(out))
     assert result.returncode == 0, result.stderr
     assert assert_extracted_facts_are_the_definition(out) > 1000
-
-
-def rational_covers(ring, px, py) -> bool:
-    """Brute force in fractions: on an edge (collinear and within its box), or an odd number of crossings."""
-    F = Fraction
-    px, py = F(px), F(py)
-    inside = False
-    for (ax, ay), (bx, by) in zip(ring, ring[1:] + ring[:1]):
-        ax, ay, bx, by = F(ax), F(ay), F(bx), F(by)
-        if (bx - ax) * (py - ay) == (by - ay) * (px - ax) and min(ax, bx) <= px <= max(ax, bx) \
-                and min(ay, by) <= py <= max(ay, by):
-            return True
-        if (ay > py) != (by > py) and ax + (py - ay) * (bx - ax) / (by - ay) > px:
-            inside = not inside
-    return inside
 
 
 @st.composite

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from synth.lane_facts import Banded, PolygonIndex, RoadIndex, contains, orientation
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 from synth.scene_road import SceneRoad
+from tests.support.polygons import rational_covers
 
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 
@@ -43,21 +44,6 @@ def star_polygon(draw_radii: list[float], cx: float, cy: float) -> tuple[tuple[f
 
 
 polygons = st.builds(star_polygon, st.lists(st.floats(0.5, 50), min_size=3, max_size=12), coord, coord)
-
-
-def rational_covers(ring, px, py) -> bool:
-    """The brute force: everything in fractions, the crossing's x computed and compared (not a sign test)."""
-    F = Fraction
-    px, py = F(px), F(py)
-    inside = False
-    for (ax, ay), (bx, by) in zip(ring, ring[1:] + ring[:1]):
-        ax, ay, bx, by = F(ax), F(ay), F(bx), F(by)
-        on_line = (bx - ax) * (py - ay) == (by - ay) * (px - ax)
-        if on_line and min(ax, bx) <= px <= max(ax, bx) and min(ay, by) <= py <= max(ay, by):
-            return True
-        if (ay > py) != (by > py) and ax + (py - ay) * (bx - ax) / (by - ay) > px:
-            inside = not inside
-    return inside
 
 
 @given(polygons, st.data())
