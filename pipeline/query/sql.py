@@ -166,8 +166,8 @@ def facing_relation(head: FacingRelation, e: str, r: str | None, config: SynthCo
 
 def _angle_range(heading: str, base: str | None, lo: float, hi: float) -> Condition:
     """synth.semantics._in_angle_range: heading = N(base + alpha) for some alpha in [lo, hi]."""
-    if hi - lo >= 360.0:
-        return Condition("TRUE", "FALSE")
+    if hi - lo >= 360.0:  # every heading, as in the semantics: surely true (a wild entity is still re-checked)
+        return Condition("TRUE", "TRUE")
     offset = f"({heading} - {base})" if base is not None else heading
     past = f"r2s_norm({offset} - {lit(lo)})"
     width, wrap = (hi - lo) + ANGLE_EPS, 360.0 - ANGLE_EPS

@@ -336,3 +336,20 @@ def test_turning_without_headings_in_the_world_is_one_line(tmp_path):
     write_frames(frames, path)
     assert_one_line_error(run_r2s("query", str(path), str(pattern), "--out", str(out)), 2, "map_heading")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("behaviour,before,now", [("braking", (2.0, None), (1.0, None)),
+                                                  ("accelerating", (0.0, None), (1.0, None)),
+                                                  ("turning left", (1.0, 0.0), (1.0, 30.0)),
+                                                  ("turning right", (1.0, 30.0), (1.0, 0.0))])
+def test_behaviours_read_rows_where_the_step_does_not_hold(tmp_path, behaviour, before, now):
+    """A behaviour reads every row of the track in its window, also those of frames where the step's statements
+    do not hold (the engine reads behaviours only for the tracks a step binds, but all of their rows): here the
+    earlier row is 50 m ahead, outside the step's 0..8 m."""
+    frames = [([("a", 0, 50, *before)], 1, 0), ([("b", 0, 50, 1.0, 0.0)], 1, 0), ([("a", 0, 5, *now)], 1, 0)]
+    path = tmp_path / "f.parquet"
+    write_frames(turning_frames([frames]), path)
+    text = f"a = new Object ahead of ego by Range(0, 8), facing Range(0, 360) deg, {behaviour}\n"
+    got = engine_temporal(path, text, tmp_path)
+    assert got == {"s0/3": {("a",)}}
+    assert got == brute_temporal(_rows(path), parse_temporal(text))
