@@ -63,6 +63,15 @@ class FramesPart:
 
 
 @dataclass(frozen=True)
+class CheckedFrames:
+    """What FramesDataset.check found in a valid dataset."""
+
+    frames: int
+    index: FrameIndex  # of the frame ids
+    largest: int  # rows (ego's included) of the largest frame: r2s query bounds its joins by it
+
+
+@dataclass(frozen=True)
 class FramesDataset:
     source: str  # as the user gave it
     parts: tuple[FramesPart, ...]
@@ -111,8 +120,9 @@ class FramesDataset:
         for i in range(len(part.row_groups)):
             yield pf.read_row_group(i, columns=list(columns))
 
-    def check(self, hasher=None) -> tuple[int, FrameIndex]:
-        """Validate every row (streaming); return the number of frames and the index of their ids. A `hasher`
+    def check(self, hasher=None) -> CheckedFrames:
+        """Validate every row (streaming); return the number of frames, the index of their ids and the rows of the
+        largest frame. A `hasher`
         (extractors.frame_hash.FrameHasher) is fed the same row groups, with the columns it hashes, so the
         content of every frame is hashed in the same pass."""
         checker = FramesCheck()
@@ -141,7 +151,7 @@ class FramesDataset:
             raise FramesError(f"{self.source}: {self._split_frame_message(hi[:1], lo[:1])}")
         if checker.ego_problem:
             raise FramesError(f"{self.source}: {checker.ego_problem}")
-        return checker.frames, index
+        return CheckedFrames(checker.frames, index, checker.largest)
 
     def _split_frame_message(self, hi: np.ndarray, lo: np.ndarray) -> str:
         wanted = FrameIndex(hi, lo)
@@ -336,6 +346,7 @@ class FramesCheck:
         self._open: tuple[str, int, set[str]] | None = None  # frame continuing into the next table
         self._good_ids: set[str] = set()
         self.ego_problem: str | None = None
+        self.largest = 0  # rows of the largest frame so far
 
     def feed(self, table: pa.Table) -> None:
         n = table.num_rows
@@ -396,6 +407,10 @@ class FramesCheck:
         self._check_unique_entities(ent, names, starts, lengths, ids, continues)
 
         first_new = 1 if continues else 0
+        sizes = lengths.copy()
+        if continues:  # the open frame's rows so far: its entity ids, each once (checked above)
+            sizes[0] += len(self._open[2])
+        self.largest = max(self.largest, int(sizes.max()))
         if continues:
             self._open[2].update(names[k] for k in ent[: lengths[0]])
         self._hashes.append(frame_hashes(ids[first_new:]))

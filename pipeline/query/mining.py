@@ -242,6 +242,29 @@ def _check_size(con, estimate: Callable[[bool], str]) -> None:
                     "(docs/cli.md, Inputs and their bounds)")
 
 
+def estimate_bound(pattern: Pattern | TemporalPattern, largest_frame: int, rows: int) -> tuple[int, int] | None:
+    """A bound on the estimate of _check_size (its largest product in a frame, its total) that needs no query, or
+    None. A name binds at most the R non-ego rows of its frame (R: the largest frame's rows less ego's), so a step of
+    n names meets at most R^n candidates in a frame and N R^(n - 1) over all (N: the rows); a temporal pattern's
+    candidate bindings in a scene are at most the bindings there of a step that names every variable (None when no
+    step does). Within the bounds, the estimate is too, and need not run: it costs a join of the frames (the steps'
+    own, again), and a pattern of one name a step is never refused."""
+    r = max(largest_frame - 1, 0)
+    steps = [s.pattern for s in pattern.steps] if isinstance(pattern, TemporalPattern) else [pattern]
+    sizes = [len(p.names) for p in steps]
+    total = sum(rows * r ** (n - 1) for n in sizes)
+    if isinstance(pattern, TemporalPattern):
+        whole = [n for n in sizes if n == len(pattern.names)]
+        if not whole:
+            return None
+        total += rows * r ** (min(whole) - 1)
+    return r ** max(sizes), total
+
+
+def _surely_within(bound: tuple[int, int] | None) -> bool:
+    return bound is not None and bound[0] <= MAX_FRAME_BINDINGS and bound[1] <= MAX_BINDINGS
+
+
 def check_pattern_size(pattern: Pattern | TemporalPattern, steps: int) -> None:
     """The bound on a pattern's size, before any frame is read: each name is a join, each step a query."""
     if len(pattern.names) > MAX_PATTERN_NAMES:
@@ -286,7 +309,9 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
     if pattern.uses_motion and not has_speed:
         raise FramesError(f"{frames} has no speed column: the pattern's motion clauses (or behaviours) need one")
     # The frames contract, as every verb checks it (one streaming pass; the same one-line messages).
-    n_frames, _ = dataset.check()
+    checked = dataset.check()
+    n_frames = checked.frames
+    quick = _surely_within(estimate_bound(pattern, checked.largest, sum(part.rows for part in dataset.parts)))
     if min_duration_s is not None and not events:
         raise UserError("--min-duration is a length of events: it needs --events")
     if events and all_bindings:
@@ -305,7 +330,7 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
                 stack.enter_context(leftover(folder, "folder"))
             n_events, matched, bindings, calls = _run(dataset, frames, pattern, temporal, config, select, events,
                                                       out, has_speed, threads, memory_limit_mb, min_duration_s, log,
-                                                      sets)
+                                                      sets, quick)
     except BaseException:
         for folder in reversed(created):  # only the folders this query made, and only while empty
             try:
@@ -317,9 +342,10 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
 
 
 def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: str, events: bool, out: Path, has_speed: bool,
-         threads, memory_limit_mb, min_duration_s, log, sets: pa.Table | None = None) -> tuple[int | None, int, int, int]:
+         threads, memory_limit_mb, min_duration_s, log, sets: pa.Table | None = None,
+         quick: bool = False) -> tuple[int | None, int, int, int]:
     """The query in its DuckDB session, its spill folder beside `out`; returns (events, frames matched, bindings,
-    exact checks)."""
+    exact checks). quick: the pattern is surely within the bounds (estimate_bound), no estimate runs."""
     # lane clauses are exact SQL (pipeline.query.lanes): the re-check decides the others
     check = _ExactCheck(without_lanes(pattern.steps[0].pattern if temporal else pattern), config)
     estimate = temporal_estimate_query if temporal else estimate_query
@@ -336,7 +362,8 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
             if temporal and pattern.needs_timestamps:
                 _require_timestamps(con, frames, "the pattern (its durations or behaviours)")
             _note_absent_types(con, [s.pattern for s in pattern.steps] if temporal else [pattern], frames, log)
-            _check_size(con, lambda fanout: estimate(pattern, config, fanout))
+            if not quick:
+                _check_size(con, lambda fanout: estimate(pattern, config, fanout))
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
                 if temporal:

@@ -5,6 +5,7 @@ rows are cut into row groups and files."""
 from __future__ import annotations
 
 import math
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -166,7 +167,8 @@ def test_streaming_check_agrees_with_brute_force_whatever_the_row_groups(tmp_pat
     path = tmp if len(bounds) > 2 else tmp / "part-000.parquet"
     split_by_files = any(rows[b - 1]["frame_id"] == rows[b]["frame_id"] for b in bounds[1:-1])
     try:
-        n, index = FramesDataset.open(path).check()
+        checked = FramesDataset.open(path).check()
+        n, index = checked.frames, checked.index
         verdict = None
     except FramesError as exc:
         verdict = str(exc)
@@ -176,6 +178,8 @@ def test_streaming_check_agrees_with_brute_force_whatever_the_row_groups(tmp_pat
     elif expected is None:
         assert verdict is None
         assert n == len({r["frame_id"] for r in rows}) == len(index)
+        # the largest frame, however the row groups cut it
+        assert checked.largest == max(Counter(r["frame_id"] for r in rows).values())
     else:
         assert verdict is not None and expected in verdict, (expected, verdict)
     # The in-memory check of a writer refuses the same rows for the same reason.
@@ -219,7 +223,7 @@ def test_a_directory_of_parts_is_one_dataset(tmp_path):
     pq.write_table(table.slice(0, 3), tmp_path / "d" / ".hidden.parquet")  # nor hidden ones
     dataset = FramesDataset.open(tmp_path / "d")
     assert [Path(p.path).name for p in dataset.parts] == ["a.parquet", "b.parquet"]
-    n, _ = dataset.check()
+    n = dataset.check().frames
     assert n == 4
     assert dataset.read_all().equals(table)
     assert dataset.find(SCENES[3].frame_id).num_rows == len(SCENES[3].entities)

@@ -209,6 +209,16 @@ def test_the_estimate_bounds_every_frames_bindings_from_above(k, keyframes, sess
     assert sum(counts.values()) > 0
     if "Barrier" in ONE_FRAME[k] and "Pedestrian" in ONE_FRAME[k] and " of " not in ONE_FRAME[k]:
         assert counts == {f: p[0] for f, p in plain.items()}  # unrelated names of two types: the product is exact
+    _assert_bound_is_above(pattern, session.execute(estimate_query(pattern, SynthConfig(), False)).fetchall()[0])
+
+
+def _assert_bound_is_above(pattern, estimate) -> None:
+    """mining.estimate_bound, which lets a query skip the estimate, is at least the estimate (without fan-outs,
+    the larger): skipping it never lets through a pattern the estimate refuses."""
+    dataset = FramesDataset.open(KEYFRAMES)
+    bound = mining.estimate_bound(pattern, dataset.check().largest, sum(p.rows for p in dataset.parts))
+    worst, _, _, total = estimate
+    assert bound is None or (worst <= bound[0] and total <= bound[1]), (bound, worst, total)
 
 
 # Every shipped temporal pattern, and one whose variables are in two of three steps each (its candidates are a
@@ -269,4 +279,6 @@ def test_the_temporal_estimate_bounds_each_steps_bindings_and_the_candidates(k, 
         assert worst == max(est.values())
         need = sum(sum(step.values()) for step in steps) + _brute_candidates(pattern, by_scene)
         assert need <= total, (need, total)
+        if not fanout:
+            _assert_bound_is_above(pattern, (worst, None, None, total))
     assert sum(sum(step.values()) for step in steps) > 0 or pattern.uses_motion  # keyframes carry no speed
