@@ -136,7 +136,8 @@ class _Run:
         from extractors.frame_hash import FrameHasher
 
         hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
-        n_frames, index = dataset.check(hasher)
+        checked = dataset.check(hasher)
+        n_frames, index = checked.frames, checked.index
         return n_frames, index, hasher.keys(), self.config.hash
 
     def _locked(self, store, dataset, n_frames: int, plan) -> Summary:

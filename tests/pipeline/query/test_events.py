@@ -57,8 +57,9 @@ _frame = st.tuples(st.lists(_entity, max_size=5, unique_by=lambda e: e[0]), st.i
 _scenes = st.lists(st.lists(_frame, min_size=1, max_size=8), min_size=1, max_size=3)
 
 
-def random_frames(scenes, shuffle: bool, timestamps: bool) -> pd.DataFrame:
-    """Frames of random tracks; ids ranked per frame (so they change while track ids stay), steps of 100 ms."""
+def random_frames(scenes, shuffle: bool, timestamps: bool, shared: bool = False) -> pd.DataFrame:
+    """Frames of random tracks; ids ranked per frame (so they change while track ids stay), steps of 100 ms.
+    shared: a track id per type, as another tool's frames may give (a frame then binds the same tracks twice)."""
     rows = []
     blocks = []
     for s, frames in enumerate(scenes):
@@ -72,7 +73,7 @@ def random_frames(scenes, shuffle: bool, timestamps: bool) -> pd.DataFrame:
                           is_ego=True)]
             ranked = sorted(entities, key=lambda e: (e[2] ** 2 + e[3] ** 2, e[0]))
             for r, (track, typ, x, y) in enumerate(ranked, start=1):
-                block.append(dict(block[0], entity_id=f"{typ.lower()}{r}", track_id=track, type=typ,
+                block.append(dict(block[0], entity_id=f"{typ.lower()}{r}", track_id=typ if shared else track, type=typ,
                                   category=typ, x=float(x), y=float(y), heading=float(10 * r), is_ego=False))
             blocks.append((shuffle and late, block))
     for late in (False, True):  # shuffled: some frames come later in the input than their successors
@@ -81,9 +82,9 @@ def random_frames(scenes, shuffle: bool, timestamps: bool) -> pd.DataFrame:
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(_scenes, st.sampled_from([ONE, TWO]), st.booleans(), st.booleans())
-def test_events_on_random_tracks_are_the_brute_force(tmp_path, scenes, text, shuffle, timestamps):
-    frames = random_frames(scenes, shuffle, timestamps)
+@given(_scenes, st.sampled_from([ONE, TWO]), st.booleans(), st.booleans(), st.booleans())
+def test_events_on_random_tracks_are_the_brute_force(tmp_path, scenes, text, shuffle, timestamps, shared):
+    frames = random_frames(scenes, shuffle, timestamps, shared)
     here = Path(tempfile.mkdtemp(dir=tmp_path))  # one directory per example (tmp_path is the test's)
     path = here / "frames.parquet"
     write_frames(frames, path)
@@ -129,3 +130,15 @@ def test_min_duration_without_timestamps_is_one_line(tmp_path):
                    "--events", "--min-duration", "1")
     assert_one_line_error(proc, 2, "timestamps")
     assert not out.exists()
+
+
+def test_a_frame_binding_the_same_tracks_twice_is_one_binding(tmp_path):
+    """Two boxes with one track id (another tool's frames) in each of three frames: one event of three frames, its
+    binding the first box in key order, as the brute force says."""
+    two = [("a", "Car", 0, 5), ("b", "Car", 0, 8)]
+    frames = random_frames([[(two, 1, False)] * 3], shuffle=False, timestamps=True, shared=True)
+    path = tmp_path / "frames.parquet"
+    write_frames(frames, path)
+    got = engine_events(path, ONE, tmp_path)
+    assert got == brute_events(read_frames(path), parse_pattern(ONE))
+    assert [(e["tracks"], e["n_frames"]) for e in got] == [(("Car",), 3)]
