@@ -352,4 +352,4 @@ def test_behaviours_read_rows_where_the_step_does_not_hold(tmp_path, behaviour, 
     text = f"a = new Object ahead of ego by Range(0, 8), facing Range(0, 360) deg, {behaviour}\n"
     got = engine_temporal(path, text, tmp_path)
     assert got == {"s0/3": {("a",)}}
-    assert got == brute_temporal(_rows(path), parse_temporal(text))
+    assert got == brute_temporal(read_frames(path), parse_temporal(text))
