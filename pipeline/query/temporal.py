@@ -3,7 +3,9 @@ as DuckDB statements run one after another in the query's session.
 
 1. Each step is a one-frame pattern: its bindings in every frame come from the one-frame query
    (pipeline.query.sql.bindings_query, with its exact re-check of near-boundary candidates), keyed by the tracks
-   they bind; behaviours filter them (per track and frame, computed with windows over the track's timestamps).
+   they bind. Behaviours filter them: computed only for the tracks those steps bind (r2s_watched; ego in the
+   scenes where a step asks for ego's), in one pass of windows over each such track's own rows (behaviours(): one
+   entry per behaviour, a column of r2s_behaviour).
 2. The candidate bindings of the whole pattern: the steps' track tuples joined on their shared variables, every
    variable a different track.
 3. The steps are chained per (scene, binding) over frame positions with window functions: a step's *feasible
@@ -18,6 +20,7 @@ events are the same selects as for one-frame patterns. Every table is DuckDB's: 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from pipeline.query.sql import (
     ESTIMATE_FRAMES,
@@ -33,32 +36,20 @@ from synth.parts.motion import SPEED_EPS
 from synth.pattern import Pattern
 from synth.scene import EGO_ID
 from synth.temporal import (
-    LANE_BEHAVIOURS,
     LANE_CHANGE_WINDOW_US,
     MOVING_SPEED,
-    SPEED_BEHAVIOURS,
     SPEED_CHANGE,
     SPEED_CHANGE_WINDOW_US,
     STOP_WINDOW_US,
     TURN_ANGLE,
     TURN_WINDOW_US,
-    TURNING,
+    Step,
     TemporalPattern,
 )
 
 POSITIONS = "r2s_fpos"
 BEHAVIOUR_TABLE = "r2s_behaviour"
-TURNING_TABLE = "r2s_turning"
-LANE_CHANGE_TABLE = "r2s_lane_change"
-# Where each behaviour is read: (table, column). Ego's behaviours are in the same tables suffixed EGO_SUFFIX, over
-# ego's rows (EGO_ROWS: one track per scene, EGO_TRACK); the variables' over the other rows (OTHER_ROWS).
-BEHAVIOUR_COLUMNS = ({b: (BEHAVIOUR_TABLE, b) for b in SPEED_BEHAVIOURS}
-                     | {b: (TURNING_TABLE, b.replace(" ", "_")) for b in TURNING}
-                     | {b: (LANE_CHANGE_TABLE, b.replace(" ", "_")) for b in LANE_BEHAVIOURS})
-EGO_SUFFIX = "_ego"
-EGO_TRACK = "'ego'"
-OTHER_ROWS = f"(SELECT * FROM {ROWS} WHERE NOT is_ego)"
-EGO_ROWS = f"(SELECT * REPLACE ({EGO_TRACK} AS track_id) FROM {ROWS} WHERE is_ego)"
+WATCHED = "r2s_watched"
 IDS = "r2s_ids"
 CANDIDATES = "r2s_candidates"
 
@@ -73,85 +64,109 @@ def _lit(v: float) -> str:
     return f"'{float(v)!r}'::DOUBLE"
 
 
-def behaviour_sql(config: SynthConfig, rows: str = OTHER_ROWS, table: str = BEHAVIOUR_TABLE) -> str:
-    """One row per (scene, frame, track) of `rows` (non-ego entities, or ego's): is it accelerating, braking,
-    stopping there?
-    A track's earlier frames are those of the same scene whose timestamp is within the window before (RANGE
-    over the integer timestamps); rows without a speed take part in none. Exact: the extreme speed of the window
-    decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff some v' has `v - v' >= A`."""
-    change = (f"PARTITION BY scene, track_id ORDER BY timestamp_us RANGE BETWEEN {SPEED_CHANGE_WINDOW_US} PRECEDING "
-              "AND 1 PRECEDING")
-    stop = f"PARTITION BY scene, track_id ORDER BY timestamp_us RANGE BETWEEN {STOP_WINDOW_US} PRECEDING AND 1 PRECEDING"
-    return (
-        f"CREATE TEMP TABLE {table} AS SELECT scene, frame_id, track_id, "
-        f"bool_or(coalesce(accelerating, FALSE)) AS accelerating, bool_or(coalesce(braking, FALSE)) AS braking, "
-        f"bool_or(coalesce(stopping, FALSE)) AS stopping FROM ("
-        f"SELECT scene, frame_id, track_id, speed - min(speed) OVER ({change}) >= {_lit(SPEED_CHANGE)} AS accelerating, "
-        f"max(speed) OVER ({change}) - speed >= {_lit(SPEED_CHANGE)} AS braking, "
-        f"speed <= {_lit(config.v_stop + SPEED_EPS)} AND max(speed) OVER ({stop}) >= {_lit(MOVING_SPEED)} AS stopping "
-        f"FROM {rows}) GROUP BY scene, frame_id, track_id"
-    )
+@dataclass(frozen=True)
+class Behaviour:
+    """How a behaviour is read from a track's own rows: `aggregates`, window aggregates over the track's earlier
+    rows (alias -> SQL, over a window of WINDOWS), and `holds`, the condition on the row and those aliases. NULL
+    (no earlier row, no speed, no finite heading, no lane) counts as false."""
+
+    aggregates: tuple[tuple[str, str], ...]
+    holds: str
 
 
-def turning_sql(rows: str = OTHER_ROWS, table: str = TURNING_TABLE) -> str:
-    """One row per (scene, frame, track) of `rows` that has an earlier row within TURN_WINDOW_US: has it
-    turned left, right since one of them? Every earlier row of the track in the window is compared (a self-join
-    on the track: headings wrap, so no window extreme decides), by synth.temporal.turn_of's operations on
-    map_heading (r2s_norm is synth.geometry.normalize); rows without a finite map_heading or a timestamp take part
-    in none."""
-    rows = (f"SELECT scene, frame_id, track_id, timestamp_us, map_heading AS h FROM {rows} "
-            "WHERE isfinite(map_heading) AND timestamp_us IS NOT NULL")
-    turn = "r2s_norm(p.h - q.h + 180.0) - 180.0"
-    return (
-        f"CREATE TEMP TABLE {table} AS WITH h AS ({rows}) "
-        f"SELECT p.scene, p.frame_id, p.track_id, bool_or({turn} >= {_lit(TURN_ANGLE)}) AS turning_left, "
-        f"bool_or({turn} <= {_lit(-TURN_ANGLE)}) AS turning_right "
-        f"FROM h p JOIN h q ON p.scene = q.scene AND p.track_id = q.track_id "
-        f"AND q.timestamp_us >= p.timestamp_us - {TURN_WINDOW_US} AND q.timestamp_us < p.timestamp_us "
-        "GROUP BY p.scene, p.frame_id, p.track_id"
-    )
+def _window(width_us: int, by: str = "") -> str:
+    # A track's rows of the same scene (ego's: is_ego, its track_id nulled, one track a scene) whose timestamp is
+    # within width_us before the row's (RANGE over the integer timestamps: rows at the same timestamp are not
+    # earlier).
+    return (f"PARTITION BY scene, is_ego, track_id{by} ORDER BY timestamp_us RANGE BETWEEN {width_us} PRECEDING "
+            "AND 1 PRECEDING")
 
 
-def lane_change_sql(rows: str = OTHER_ROWS, table: str = LANE_CHANGE_TABLE) -> str:
-    """One row per (scene, frame, track) of `rows` in a lane: is it changing lanes there, its lane on the chain of
-    the left or right neighbour of its lane at one of its rows within LANE_CHANGE_WINDOW_US before, in the same map?
-    The window collects those earlier rows' relation lists (the `rel_left`, `rel_right` of pipeline.query.lanes,
-    LaneGraph.related of their lane), so the test is the list lookup of `in lane left of`; rows in no lane or
-    without a timestamp take part in none."""
-    window = (f"PARTITION BY scene, track_id, map_id ORDER BY timestamp_us RANGE BETWEEN {LANE_CHANGE_WINDOW_US} "
-              "PRECEDING AND 1 PRECEDING")
-    return (
-        f"CREATE TEMP TABLE {table} AS SELECT scene, frame_id, track_id, "
-        f"bool_or(coalesce(changing_lanes, FALSE)) AS changing_lanes FROM ("
-        f"SELECT scene, frame_id, track_id, list_contains(flatten(list(list_concat(coalesce(rel_left, []), "
-        f"coalesce(rel_right, []))) OVER ({window})), lane) AS changing_lanes "
-        f"FROM {rows} WHERE lane IS NOT NULL AND timestamp_us IS NOT NULL) GROUP BY scene, frame_id, track_id"
-    )
+WINDOWS = {"change": _window(SPEED_CHANGE_WINDOW_US), "stop": _window(STOP_WINDOW_US), "turn": _window(TURN_WINDOW_US),
+           "lane": _window(LANE_CHANGE_WINDOW_US, ", map_id")}
 
 
-# The SQL of each behaviour table, by the table it makes (rows, table) -> statement.
-BEHAVIOUR_SQL = {BEHAVIOUR_TABLE: lambda config, rows, table: behaviour_sql(config, rows, table),
-                 TURNING_TABLE: lambda config, rows, table: turning_sql(rows, table),
-                 LANE_CHANGE_TABLE: lambda config, rows, table: lane_change_sql(rows, table)}
+def behaviours(config: SynthConfig) -> dict[str, Behaviour]:
+    """Every behaviour's reading (synth.temporal.BEHAVIOURS; docs/dsl.md defines them). Exact: for the speed
+    behaviours the extreme speed of the window decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff
+    some v' has `v - v' >= A`; headings wrap, so turning compares every earlier finite heading of the window (a
+    list) by synth.temporal.turn_of's operations on map_heading (r2s_norm is synth.geometry.normalize);
+    changing lanes collects the earlier in-lane rows' relation lists of the same map (`rel_left`, `rel_right` of
+    pipeline.query.lanes, LaneGraph.related of their lane), so the test is the list lookup of `in lane left of`."""
+    turn = "r2s_norm(map_heading - q + 180.0) - 180.0"
+    headings = ("r2s_headings", "list(map_heading) FILTER (WHERE isfinite(map_heading)) OVER turn")
+
+    def turning(test: str) -> Behaviour:
+        return Behaviour((headings,), f"isfinite(map_heading) AND list_bool_or(list_transform(r2s_headings, "
+                                      f"lambda q: {test}))")
+
+    relations = ("r2s_related", "flatten(list(list_concat(coalesce(rel_left, []), coalesce(rel_right, []))) "
+                                "FILTER (WHERE lane IS NOT NULL) OVER lane)")
+    return {
+        "accelerating": Behaviour((("r2s_min_1s", "min(speed) OVER change"),),
+                                  f"speed - r2s_min_1s >= {_lit(SPEED_CHANGE)}"),
+        "braking": Behaviour((("r2s_max_1s", "max(speed) OVER change"),), f"r2s_max_1s - speed >= {_lit(SPEED_CHANGE)}"),
+        "stopping": Behaviour((("r2s_max_3s", "max(speed) OVER stop"),),
+                              f"speed <= {_lit(config.v_stop + SPEED_EPS)} AND r2s_max_3s >= {_lit(MOVING_SPEED)}"),
+        "turning left": turning(f"{turn} >= {_lit(TURN_ANGLE)}"),
+        "turning right": turning(f"{turn} <= {_lit(-TURN_ANGLE)}"),
+        "changing lanes": Behaviour((relations,), "lane IS NOT NULL AND list_contains(r2s_related, lane)"),
+    }
 
 
-def _behaviour_of(n: str, names: tuple[str, ...]) -> tuple[str, str]:
-    """(table suffix, SQL of the track) of a step's name or ego, for the behaviour join."""
-    return (EGO_SUFFIX, EGO_TRACK) if n == EGO_ID else ("", f'm.tracks."{names.index(n)}"')
+def _column(behaviour: str) -> str:
+    return '"' + behaviour.replace(" ", "_") + '"'
 
 
-def step_sql(k: int, pattern: Pattern, behaviours: tuple[tuple[str, str], ...], variables: tuple[str, ...],
-             config: SynthConfig) -> str:
-    """The frames (scene, position, timestamp) and track tuples at which step k holds (its tracks struct is keyed
-    by the step's positions, its columns by the positions of the whole pattern's `variables`)."""
-    names = pattern.names
-    cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(names))
-    joins = "".join(
-        f" JOIN {BEHAVIOUR_COLUMNS[b][0]}{_behaviour_of(n, names)[0]} b{j} ON b{j}.frame_id = m.frame_id AND "
-        f"b{j}.track_id = {_behaviour_of(n, names)[1]} AND b{j}.{BEHAVIOUR_COLUMNS[b][1]}"
-        for j, (n, b) in enumerate(behaviours))
-    return (f"CREATE TEMP TABLE r2s_step{k} AS {bindings_query(pattern, config)}\n"
-            f"SELECT DISTINCT m.scene, m.frame_pos, m.timestamp_us, {cols} FROM m{joins}")
+def watched_sql(pattern: TemporalPattern) -> str:
+    """The tracks (scene, is_ego, track_id; ego's track_id null) whose behaviours a step asks for, among those the
+    step binds (ego: in the scenes where the step holds): only their rows are read for behaviours (a track's
+    behaviour at a frame reads its own rows, whichever bindings they are in)."""
+    def track(n: str) -> str:
+        return "TRUE AS is_ego, NULL AS track_id" if n == EGO_ID else f"FALSE AS is_ego, {_var(pattern.names.index(n))} AS track_id"
+    parts = [f"SELECT DISTINCT scene, {track(n)} FROM r2s_held{k}"
+             for k, step in enumerate(pattern.steps) for n in dict.fromkeys(n for n, _ in step.behaviours)]
+    return f"CREATE TEMP TABLE {WATCHED} AS SELECT DISTINCT scene, is_ego, track_id FROM ({' UNION ALL '.join(parts)})"
+
+
+def behaviour_sql(used: list[str], config: SynthConfig) -> str:
+    """One row per row of a watched track (with a timestamp): frame_id, is_ego, track_id (null for ego) and a column
+    per used behaviour, computed in one pass of windows over the track's own rows in the scene."""
+    table = behaviours(config)
+    aggregates = dict(a for b in used for a in table[b].aggregates)
+    windows = ", ".join(f"{name} AS ({WINDOWS[name]})" for name in WINDOWS
+                        if any(f"OVER {name}" in sql for sql in aggregates.values()))
+    # Every column of the rows (DuckDB reads only those used), so a behaviour may read any of them; ego's rows are
+    # one track of the scene whatever their track_id.
+    rows = (f"SELECT * REPLACE (CASE WHEN is_ego THEN NULL ELSE track_id END AS track_id) FROM {ROWS} "
+            "WHERE timestamp_us IS NOT NULL")
+    inner = (f"SELECT r.*, {', '.join(f'{sql} AS {alias}' for alias, sql in aggregates.items())} "
+             f"FROM ({rows}) r SEMI JOIN {WATCHED} w ON w.scene = r.scene AND w.is_ego = r.is_ego "
+             f"AND w.track_id IS NOT DISTINCT FROM r.track_id WINDOW {windows}")
+    columns = ", ".join(f"coalesce({table[b].holds}, FALSE) AS {_column(b)}" for b in used)
+    return f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT frame_id, is_ego, track_id, {columns} FROM ({inner})"
+
+
+def step_sql(k: int, pattern: Pattern, with_frame: bool, variables: tuple[str, ...], config: SynthConfig) -> str:
+    """The frames (scene, position, timestamp) and track tuples at which step k's statements hold (its tracks
+    struct is keyed by the step's positions, its columns by the positions of the whole pattern's `variables`):
+    r2s_step{k}, or, when the step has behaviours to filter by, r2s_held{k} with each frame's id."""
+    cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(pattern.names))
+    table, frame = (f"r2s_held{k}", "m.frame_id, ") if with_frame else (f"r2s_step{k}", "")
+    return (f"CREATE TEMP TABLE {table} AS {bindings_query(pattern, config)}\n"
+            f"SELECT DISTINCT m.scene, {frame}m.frame_pos, m.timestamp_us, {cols} FROM m")
+
+
+def behaving_sql(k: int, step: Step, variables: tuple[str, ...]) -> str:
+    """r2s_step{k}: the rows of r2s_held{k} whose variables (and ego) show the step's behaviours in that frame (any
+    row of the track in the frame, should a frames file give a track two)."""
+    def track(n: str) -> str:
+        return "x.is_ego" if n == EGO_ID else f"NOT x.is_ego AND x.track_id = h.{_var(variables.index(n))}"
+    tests = " AND ".join(f"EXISTS (SELECT 1 FROM {BEHAVIOUR_TABLE} x WHERE x.frame_id = h.frame_id AND {track(n)} "
+                         f"AND x.{_column(b)})" for n, b in step.behaviours)
+    cols = ", ".join(f"h.{_var(variables.index(n))}" for n in step.names)
+    return (f"CREATE TEMP TABLE r2s_step{k} AS SELECT h.scene, h.frame_pos, h.timestamp_us, {cols} "
+            f"FROM r2s_held{k} h WHERE {tests}")
 
 
 def candidates_sql(pattern: TemporalPattern) -> str:
@@ -213,12 +228,17 @@ def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Cal
                 f"(PARTITION BY scene ORDER BY frame_index, ord) AS frame_pos, timestamp_us FROM {ROWS} WHERE is_ego")
     con.execute(f"CREATE TEMP TABLE {IDS} AS SELECT scene, track_id, min(entity_id) AS entity_id FROM {ROWS} "
                 "WHERE NOT is_ego GROUP BY scene, track_id")
-    used = {(BEHAVIOUR_COLUMNS[b][0], n == EGO_ID) for s in pattern.steps for n, b in s.behaviours}
-    for table, ego in sorted(used):
-        con.execute(BEHAVIOUR_SQL[table](config, EGO_ROWS if ego else OTHER_ROWS, table + (EGO_SUFFIX if ego else "")))
     for k, step in enumerate(pattern.steps):
         exact_check(step.pattern)
-        con.execute(step_sql(k, step.pattern, step.behaviours, pattern.names, config))
+        con.execute(step_sql(k, step.pattern, bool(step.behaviours), pattern.names, config))
+    # Behaviours only of the tracks the steps that ask for them bind (few, next to every track of the frames).
+    used = list(dict.fromkeys(b for s in pattern.steps for _, b in s.behaviours))
+    if used:
+        con.execute(watched_sql(pattern))
+        con.execute(behaviour_sql(used, config))
+        for k, step in enumerate(pattern.steps):
+            if step.behaviours:
+                con.execute(behaving_sql(k, step, pattern.names))
     con.execute(candidates_sql(pattern))
     for k in range(len(pattern.steps)):
         con.execute(ends_sql(k, pattern))

@@ -353,3 +353,23 @@ def test_behaviours_read_rows_where_the_step_does_not_hold(tmp_path, behaviour, 
     got = engine_temporal(path, text, tmp_path)
     assert got == {"s0/3": {("a",)}}
     assert got == brute_temporal(read_frames(path), parse_temporal(text))
+
+
+@pytest.mark.parametrize("behaviour,column,before,now", [("braking", "speed", 2.0, 1.0),
+                                                         ("accelerating", "speed", 0.0, 1.0),
+                                                         ("turning left", "map_heading", 0.0, 30.0),
+                                                         ("turning right", "map_heading", 30.0, 0.0)])
+def test_ego_behaviours_read_rows_where_the_step_does_not_hold(tmp_path, behaviour, column, before, now):
+    """Ego's behaviour reads every ego row of the scene in its window, also those of frames where the step's
+    statements do not hold (the engine reads ego's rows only in the scenes where such a step holds): here the
+    earlier frame has its track 50 m ahead, outside the step's 0..8 m, and a frame between has none."""
+    frames = turning_frames([[([("a", 0, 50, 1.0, 0.0)], 1, 0), ([("b", 0, 50, 1.0, 0.0)], 1, 0),
+                              ([("a", 0, 5, 1.0, 0.0)], 1, 0)]])
+    ego = frames.index[frames.is_ego]
+    frames.loc[ego, column] = [before, before, now]
+    path = tmp_path / "f.parquet"
+    write_frames(frames, path)
+    text = f"a = new Object ahead of ego by Range(0, 8), facing Range(0, 360) deg\nego {behaviour}\n"
+    got = engine_temporal(path, text, tmp_path)
+    assert got == {"s0/3": {("a",)}}
+    assert got == brute_temporal(read_frames(path), parse_temporal(text))
