@@ -224,7 +224,7 @@ class _Run:
         buffer = PartBuffer(self.options.part_rows, PART_MAX_AGE_S)
         self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started)
         computed = written = 0
-        stopped = True
+        stopped, refused = True, False
         try:
             tasks = self._tasks(dataset, done, todo, pool, progress_dir)
             for table in compute(pool, tasks, self.log):
@@ -245,10 +245,13 @@ class _Run:
             stopped = False
             return computed
         except ChunkUnreadable as exc:
-            stopped = False  # bad input, not a stop: the same command would meet it again (finished rows are kept)
+            # Bad input, not a stop: the same command would meet it again. The rows still in the buffer are not
+            # written, so a refusal found before any part was due leaves no output behind (as the check's refusals
+            # do); whether other chunks finished before the bad one is a race of the workers, and must not decide it.
+            stopped, refused = False, True
             raise UserError(f"{exc}{exc.hint}") from None
         finally:
-            if buffer.count:
+            if buffer.count and not refused:
                 written += _write_part(store, buffer.take())
             if stopped:
                 saved = n_frames - todo + written
