@@ -112,18 +112,24 @@ _frame = st.tuples(st.lists(_box, max_size=4, unique_by=lambda b: b[0]), st.inte
 def random_frames(scenes) -> pd.DataFrame:
     """Scenes of random tracks that come and go; frame indices step by 1 or 2, timestamps by 100 ms (sometimes
     another 100 ms or 300 ms on top: uneven gaps)."""
+    return track_frames(scenes, lambda extra: 100_000 * (1 + (extra == 3) + 2 * (extra == 2)))
+
+
+def track_frames(scenes, gap_us, world_heading: bool = False) -> pd.DataFrame:
+    """The frames of `scenes` (per frame: boxes (track, x, y, speed[, map_heading]), index step, `extra`), each
+    frame `gap_us(extra)` after the one before; with `world_heading`, every row has a map_heading (ego's 0)."""
     rows = []
     for s, frames in enumerate(scenes):
         index, t = 0, 0
         for boxes, step, extra in frames:
-            index, t = index + step, t + 100_000 * (1 + (extra == 3) + 2 * (extra == 2))
+            index, t = index + step, t + gap_us(extra)
             ego = dict(frame_id=f"s{s}/{index}", source="test", scene=f"s{s}", frame_index=index, timestamp_us=t,
                        entity_id="ego", track_id="ego", type="Car", category="Car", x=0.0, y=0.0, heading=0.0,
-                       length=None, width=None, is_ego=True, speed=3.0)
+                       length=None, width=None, is_ego=True, speed=3.0, **({"map_heading": 0.0} if world_heading else {}))
             rows.append(ego)
-            for k, (track, x, y, v) in enumerate(boxes, start=1):
+            for k, (track, x, y, v, *h) in enumerate(boxes, start=1):
                 rows.append(dict(ego, entity_id=f"car_{track}", track_id=track, x=float(x), y=float(y),
-                                 heading=float(30 * k), is_ego=False, speed=v))
+                                 heading=float(30 * k), is_ego=False, speed=v, **({"map_heading": h[0]} if h else {})))
     return pd.DataFrame(rows)
 
 
@@ -274,19 +280,7 @@ _turn_frame = st.tuples(st.lists(_turn_box, max_size=3, unique_by=lambda b: b[0]
 def turning_frames(scenes) -> pd.DataFrame:
     """Random tracks with headings in the world; timestamps step by 100 ms, sometimes 1 s or 2 s more (the 3 s
     window met exactly and passed)."""
-    rows = []
-    for s, frames in enumerate(scenes):
-        index, t = 0, 0
-        for boxes, step, extra in frames:
-            index, t = index + step, t + 100_000 * (1 + extra)
-            ego = dict(frame_id=f"s{s}/{index}", source="test", scene=f"s{s}", frame_index=index, timestamp_us=t,
-                       entity_id="ego", track_id="ego", type="Car", category="Car", x=0.0, y=0.0, heading=0.0,
-                       length=None, width=None, is_ego=True, speed=3.0, map_heading=0.0)
-            rows.append(ego)
-            for k, (track, x, y, v, h) in enumerate(boxes, start=1):
-                rows.append(dict(ego, entity_id=f"car_{track}", track_id=track, x=float(x), y=float(y),
-                                 heading=float(30 * k), is_ego=False, speed=v, map_heading=h))
-    return pd.DataFrame(rows)
+    return track_frames(scenes, lambda extra: 100_000 * (1 + extra), world_heading=True)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
