@@ -141,13 +141,29 @@ class PolygonIndex:
 
     def containing(self, xs: np.ndarray, ys: np.ndarray) -> list[list[int]]:
         """For each point, the indices (into features, ascending) of the polygons that contain it."""
-        xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
+        xs = np.asarray(xs, dtype=float).reshape(-1)
+        pi, fi = self.pairs(xs, ys)
         out: list[list[int]] = [[] for _ in range(len(xs))]
+        for p, f in zip(pi.tolist(), fi.tolist()):  # row-major: each point's polygons ascending
+            out[p].append(f)
+        return out
+
+    def covered(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """For each point, whether some polygon contains it."""
+        xs = np.asarray(xs, dtype=float).reshape(-1)
+        hit = np.zeros(len(xs), dtype=bool)
+        hit[self.pairs(xs, ys)[0]] = True
+        return hit
+
+    def pairs(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point index, polygon index) of every point and polygon that contains it, in row-major order."""
+        xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
+        none = np.zeros(0, dtype=np.int64)
         if not len(self.features) or not len(xs):
-            return out
+            return none, none
         pi, fi = self.candidates(xs, ys)
         if not len(pi):
-            return out
+            return none, none
         # The edges of the point's band of every candidate pair: pair k owns band_edges[band_start[g]:][:n].
         g = self.band_first[fi] + self.band_of(ys[pi], fi)
         n = self.band_start[g + 1] - self.band_start[g]
@@ -166,9 +182,7 @@ class PolygonIndex:
         inside = np.bincount(pair, weights=crossing & sure, minlength=len(pi)).astype(np.int64) % 2 == 1
         for k in np.flatnonzero(doubtful):
             inside[k] = contains(self.features[int(fi[k])].polygon, float(xs[pi[k]]), float(ys[pi[k]]))
-        for k in np.flatnonzero(inside):  # pairs in row-major order: each point's polygons ascending
-            out[int(pi[k])].append(int(fi[k]))
-        return out
+        return pi[inside], fi[inside]
 
 
 @dataclass(frozen=True)
@@ -215,35 +229,52 @@ class RoadIndex:
         return out
 
     def _decide(self, xs: np.ndarray, ys: np.ndarray, headings: np.ndarray) -> list[LaneFacts]:
-        in_lanes = self.lanes.containing(xs, ys)
-        on_cross = self.crosswalks.containing(xs, ys)
-        in_inter = self.intersections.containing(xs, ys)
-        in_drive = self.drivable.containing(xs, ys)
-        # the direction of every lane at every point in several (the tie rule's), in one pass
-        shared = [(i, k) for i, idx in enumerate(in_lanes) if len(idx) > 1 for k in idx]
-        near = dict(zip(shared, self.directions_near([k for _, k in shared], xs[[i for i, _ in shared]],
-                                                     ys[[i for i, _ in shared]]))) if shared else {}
-        out = []
-        nowhere: dict[tuple[bool, bool, bool], LaneFacts] = {}  # the facts of a point in no lane, by the rest
-        for i, idx in enumerate(in_lanes):
-            if not idx:
-                key = (bool(in_inter[i]), bool(on_cross[i]), not in_drive[i])
-                if key not in nowhere:
-                    nowhere[key] = LaneFacts((), None, *key)
-                out.append(nowhere[key])
+        n = len(xs)
+        pi, fi = self.lanes.pairs(xs, ys)
+        on_cross = self.crosswalks.covered(xs, ys)
+        in_inter = self.intersections.covered(xs, ys)
+        in_drive = self.drivable.covered(xs, ys)
+        count = np.bincount(pi, minlength=n)
+        first = np.cumsum(count) - count
+        feats = self.lanes.features
+        # Most points lie in one lane or none: their facts depend only on (that lane, the three flags), so they
+        # are decided once per distinct key and shared (LaneFacts is frozen). Points in several lanes take the
+        # tie rule, with the direction of every lane at every such point computed in one pass.
+        lane = np.full(n, -1, dtype=np.int64)
+        one = count == 1
+        lane[one] = fi[first[one]]
+        flags = in_inter.astype(np.int64) * 4 + on_cross * 2 + in_drive
+        code = np.where(count <= 1, (lane + 1) * 8 + flags, -1)
+        out: list[LaneFacts | None] = [None] * n
+        known: dict[int, LaneFacts] = {}
+        for i, c in enumerate(code.tolist()):
+            if c < 0:
                 continue
-            lanes = [self.lanes.features[k] for k in idx]
-            h = float(headings[i])
-            chosen = lanes[0] if len(idx) == 1 else self.lanes.features[min(
-                idx, key=lambda k: (lane_difference(h, near[i, k]), self.lanes.features[k].feature_id))]
-            out.append(LaneFacts(
-                lanes=tuple(sorted(f.feature_id for f in lanes)),
-                lane=chosen.feature_id if chosen is not None else None,
-                in_intersection=bool(in_inter[i]) or any(f.is_intersection for f in lanes),
-                on_crosswalk=bool(on_cross[i]),
-                off_road=not lanes and not in_drive[i],
-            ))
-        return out
+            if c not in known:
+                k, f = c // 8 - 1, c % 8
+                lanes = (feats[k],) if k >= 0 else ()
+                known[c] = self._facts_of(lanes, lanes[0] if lanes else None, bool(f & 4), bool(f & 2), bool(f & 1))
+            out[i] = known[c]
+        shared = np.flatnonzero(count > 1)
+        if len(shared):
+            at = np.flatnonzero(count[pi] > 1)  # the pairs of those points, row-major
+            near = self.directions_near(fi[at].tolist(), xs[pi[at]], ys[pi[at]])
+            starts = np.searchsorted(pi[at], shared).tolist()
+            for i, s, m in zip(shared.tolist(), starts, count[shared].tolist()):
+                idx, dirs, h = fi[at[s:s + m]].tolist(), near[s:s + m], float(headings[i])
+                best = min(range(m), key=lambda j: (lane_difference(h, dirs[j]), feats[idx[j]].feature_id))
+                chosen = feats[idx[best]]
+                out[i] = self._facts_of(tuple(feats[k] for k in idx), chosen, bool(in_inter[i]), bool(on_cross[i]),
+                                        bool(in_drive[i]))
+        return out  # type: ignore[return-value]
+
+    @staticmethod
+    def _facts_of(lanes: tuple[MapFeature, ...], chosen: MapFeature | None, in_inter: bool, on_cross: bool,
+                  in_drive: bool) -> LaneFacts:
+        return LaneFacts(lanes=tuple(sorted(f.feature_id for f in lanes)),
+                         lane=chosen.feature_id if chosen is not None else None,
+                         in_intersection=in_inter or any(f.is_intersection for f in lanes),
+                         on_crosswalk=on_cross, off_road=not lanes and not in_drive)
 
     def choose_lane(self, lanes: list[MapFeature], x: float, y: float, heading: float) -> MapFeature | None:
         """The tie rule: of the lanes containing a point, the one whose local direction (that of its centre-line
