@@ -30,6 +30,7 @@ from extractors.base import (
     MapSink,
     RecordedObject,
     Source,
+    gc_paused,
     prefetch_facts,
     quaternion_yaw,
     require_path,
@@ -180,7 +181,8 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
         road = None
         if maps is not None and (archive := map_file(f.parent)) is not None:
             try:
-                road = RoadIndex(read_map(archive, f.parent.name))
+                with gc_paused():
+                    road = RoadIndex(read_map(archive, f.parent.name))
             except MapError as exc:
                 raise MapError(f"{archive}: {exc}") from None
             maps(road.road)

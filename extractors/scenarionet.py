@@ -15,7 +15,8 @@ from __future__ import annotations
 import errno
 import os
 from collections.abc import Iterator
-from dataclasses import replace
+from itertools import chain
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ from extractors.base import (
     MapSink,
     RecordedObject,
     Source,
+    gc_paused,
     global_to_ego,
     prefetch_facts,
     require_path,
@@ -165,7 +167,11 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
                        f"r2s extract: skipping {f}: scenario {scene!r} was already read from {files[first[scene]]}")
             continue
         first[scene] = i
-        road = scenario_road(f, sd, scene) if maps is not None else None
+        if maps is not None:
+            with gc_paused():
+                road = scenario_road(f, sd, scene)
+        else:
+            road = None
         if road is not None:
             maps(road.road)
         n = 0
@@ -425,21 +431,20 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
         polygon = open_ring(_xy(map_id, fid, feat.get("polygon"), "polygon")) if "polygon" in feat else ()
         if kind == CROSSWALK and not polygon:
             raise MapError(f"map {map_id!r}: crosswalk {fid!r} has no polygon")
-        f = MapFeature(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type)
-        if kind == LANE:
-            left, right = _neighbour(map_id, fid, feat, "left_neighbor"), _neighbour(map_id, fid, feat,
-                                                                                   "right_neighbor")
-            any_neighbour = any_neighbour or left is not None or right is not None
-            rule = "source"
-            if not polygon:
-                # built below, for all such lanes at once
-                widths[fid], rule = _widths(map_id, fid, feat, len(line)), "centre line"
-            f = MapFeature(
-                map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
-                successors=_ids(feat.get("exit_lanes")), predecessors=_ids(feat.get("entry_lanes")),
-                is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
-                polygon_rule=rule)
-        features.append(f)
+        if kind != LANE:
+            features.append(MapFeature(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type))
+            continue
+        left, right = _neighbour(map_id, fid, feat, "left_neighbor"), _neighbour(map_id, fid, feat, "right_neighbor")
+        any_neighbour = any_neighbour or left is not None or right is not None
+        rule = "source"
+        if not polygon:
+            # built below, for all such lanes at once
+            widths[fid], rule = _widths(map_id, fid, feat, len(line)), "centre line"
+        features.append(MapFeature(
+            map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
+            successors=_ids(feat.get("exit_lanes")), predecessors=_ids(feat.get("entry_lanes")),
+            is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
+            polygon_rule=rule))
     if not features:
         return None
     if widths:
@@ -447,7 +452,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
         rings = lane_polygons([features[i].line for i in todo], [widths[features[i].feature_id][0] for i in todo],
                               [widths[features[i].feature_id][1] for i in todo])
         for i, ring in zip(todo, rings):
-            features[i] = replace(features[i], polygon=ring)
+            features[i] = features[i].with_(polygon=ring)
     features = links_within(features, neighbours=False)
     if not any_neighbour:
         lanes = neighbours(tuple(f for f in features if f.kind == LANE))
@@ -455,9 +460,24 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
     return RoadMap.of(map_id, features)
 
 
+XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)
+
+
 def _xy(map_id: str, fid: str, value: Any, what: str):
     if value is None:
         return ()
+    # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
+    # float pairs (RoadMap.of checks that they are finite). Anything else takes the general way below.
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 2 and value.shape[1] >= 2:
+        return tuple(map(tuple, value[:, :2].tolist()))
+    if type(value) is list and value:
+        try:
+            lens = set(map(len, value))
+            pts = tuple(map(XY, value)) if len(lens) == 1 and min(lens) >= 2 else None
+        except TypeError:  # an item that is not a sequence
+            pts = None
+        if pts is not None and set(map(type, chain.from_iterable(pts))) <= {float}:
+            return pts
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

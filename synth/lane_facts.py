@@ -359,7 +359,11 @@ class PackedSegments:
         count = np.bincount(line, minlength=len(lines)).astype(np.int64)
         return cls(a[keep], d[keep], length2[keep], np.cumsum(count) - count, count)
 
-    def directions_near(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> list[float | None]:
+    def nearest(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Segments.nearest of line lines[j] at (xs[j], ys[j]) for many pairs at once, with its arithmetic on the
+        same values: the row (into a, d, length2) of the first nearest segment (np.argmin's choice) and its
+        distance; row -1 (and gap inf) for a line without a segment."""
+        lines = np.asarray(lines, dtype=np.int64)
         n = self.count[lines]
         pair = np.repeat(np.arange(len(lines)), n)
         row = np.repeat(self.start[lines] - (np.cumsum(n) - n), n) + np.arange(n.sum())
@@ -378,7 +382,12 @@ class PackedSegments:
         best[pairs_at] = row[at[first_at]]
         for k in np.flatnonzero(has & (best < 0)):  # NaN gaps (coordinates near overflow): argmin itself
             mine = pair == k
-            best[k] = row[mine][int(np.argmin(gap[mine]))]
+            j = int(np.argmin(gap[mine]))
+            best[k], low[k] = row[mine][j], gap[mine][j]
+        return best, low
+
+    def directions_near(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> list[float | None]:
+        best, _ = self.nearest(lines, xs, ys)
         d = self.d
         return [None if j < 0 else math.degrees(math.atan2(d[j, 1], d[j, 0])) % 360.0 for j in best.tolist()]
 

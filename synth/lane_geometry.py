@@ -16,11 +16,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from bisect import bisect_left
+from itertools import accumulate
 
 import numpy as np
 
-from synth.lane_facts import PolygonIndex, Segments
+from synth.lane_facts import PackedSegments, PolygonIndex, Segments
 from synth.roadmap import LANE, MapFeature, Points, packed
 
 # The width of a nuScenes lane connector, which the converter gives without polygon or width: the median width
@@ -121,7 +122,8 @@ def width_at(f: MapFeature, x: float, y: float) -> float:
 
 def halfway(line: Points) -> tuple[float, float, float, float] | None:
     """(x, y, ux, uy): the point halfway along a line by arc length and the unit direction of its segment."""
-    return halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2))
+    p = np.asarray(dedup(line), dtype=float).reshape(-1, 2)
+    return halfways(p, np.array([len(p)]))[0]
 
 
 def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
@@ -138,19 +140,42 @@ def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
     return (float(p[k, 0] + t * seg[k, 0]), float(p[k, 1] + t * seg[k, 1]), float(ux), float(uy))
 
 
+def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float, float] | None]:
+    """`halfway_of` of many lines packed as dedup_packed gives them, with halfway_of's own arithmetic line by
+    line (numpy sums its terms in pairs, so each total is numpy's sum of that line's lengths; the running sum is
+    sequential, as np.cumsum's), without its dozen numpy calls per line."""
+    out: list[tuple[float, float, float, float] | None] = []
+    seg_all = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
+    len_all = np.hypot(seg_all[:, 0], seg_all[:, 1])
+    segs, lens = seg_all.tolist(), len_all.tolist()
+    end = 0
+    for n in kept.tolist():
+        start, end = end, end + n
+        if n < 2:
+            out.append(None)
+            continue
+        lengths = len_all[start:end - 1]
+        target = lengths.sum() / 2
+        k = min(bisect_left(list(accumulate(lens[start:end - 1])), target), n - 2)
+        before = float(lengths[:k].sum())
+        lk = lengths[k]  # numpy's division: a zero length gives inf / nan (RoadMap.of refuses such maps), no raise
+        t = (target - before) / lk
+        (dx, dy), (px, py) = segs[start + k], xy[start + k]
+        out.append((float(px + t * dx), float(py + t * dy), float(dx / lk), float(dy / lk)))
+    return out
+
+
 def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
     """The lanes with left / right neighbours found by the probing rule (neighbour_rule "geometric")."""
     candidates = tuple(f for f in lanes if f.kind == LANE and not f.is_intersection)
-    segments: dict[int, Segments | None] = {}  # of the lanes a probe falls in, made when first needed
     cos_limit = math.cos(math.radians(NEIGHBOUR_ANGLE))
-    # every probe point of every lane, tested in one call: (lane, side, x, y, ux, uy)
-    probes = []
     xy, kept = dedup_packed([f.line for f in candidates])
-    ends = np.cumsum(kept).tolist()
-    mids = [halfway_of(xy[end - n:end]) for end, n in zip(ends, kept.tolist())]
+    mids = halfways(xy, kept)
     at = [i for i, mid in enumerate(mids) if mid is not None]
     widths = dict(zip(at, widths_at([candidates[i] for i in at], np.array([mids[i][0] for i in at]),
                                     np.array([mids[i][1] for i in at])).tolist()))
+    # every probe point of every lane, tested at once: (lane, side, x, y, ux, uy)
+    probes = []
     for i, mid in enumerate(mids):
         w = widths.get(i, 0.0)
         if mid is None or w <= 0:
@@ -158,27 +183,32 @@ def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
         x, y, ux, uy = mid
         for side, sign in (("left", 1.0), ("right", -1.0)):
             probes.append((i, side, x - sign * w * uy, y + sign * w * ux, ux, uy))
-    found = PolygonIndex(candidates).containing(np.array([p[2] for p in probes]), np.array([p[3] for p in probes]))
-    sides: dict[tuple[int, str], str] = {}
-    for (i, side, qx, qy, ux, uy), hits in zip(probes, found):
-        best = None
-        for k in hits:
-            if k not in segments:
-                segments[k] = Segments.of(candidates[k].line)
-            if k == i or segments[k] is None:
-                continue
-            j, gap = segments[k].nearest(qx, qy)
-            dx, dy = segments[k].d[j] / math.sqrt(segments[k].length2[j])
-            if dx * ux + dy * uy < cos_limit:
-                continue
-            if best is None or (gap, candidates[k].feature_id) < best:
-                best = (gap, candidates[k].feature_id)
-        if best is not None:
-            sides[i, side] = best[1]
+    qx, qy = np.array([p[2] for p in probes]), np.array([p[3] for p in probes])
+    pi, fi = PolygonIndex(candidates).pairs(qx, qy)
+    own = np.array([p[0] for p in probes], dtype=np.int64)
+    other = fi != own[pi]
+    pi, fi = pi[other], fi[other]
+    # the nearest segment of each lane hit to its probe (Segments.nearest's arithmetic), and its direction there
+    segments = PackedSegments.of([f.line for f in candidates])
+    row, gap = segments.nearest(fi, qx[pi], qy[pi])
+    has = row >= 0
+    pi, fi, row, gap = pi[has], fi[has], row[has], gap[has]
+    d = segments.d[row] / np.sqrt(segments.length2[row])[:, None]
+    ux, uy = np.array([p[4] for p in probes])[pi], np.array([p[5] for p in probes])[pi]
+    along = ~(d[:, 0] * ux + d[:, 1] * uy < cos_limit)
+    sides: dict[tuple[int, str], tuple[float, str]] = {}
+    for p, k, g in zip(pi[along].tolist(), fi[along].tolist(), gap[along].tolist()):
+        i, side = probes[p][0], probes[p][1]
+        best = (g, candidates[k].feature_id)
+        if (i, side) not in sides or best < sides[i, side]:
+            sides[i, side] = best
     index = {f.feature_id: i for i, f in enumerate(candidates)}
     out = []
     for f in lanes:
         i = index.get(f.feature_id) if f.kind == LANE and not f.is_intersection else None
-        out.append(replace(f, left=sides.get((i, "left")), right=sides.get((i, "right")), neighbour_rule="geometric")
-                   if i is not None else replace(f, neighbour_rule="geometric"))
+        if i is None:
+            out.append(f.with_(neighbour_rule="geometric"))
+            continue
+        left, right = sides.get((i, "left")), sides.get((i, "right"))
+        out.append(f.with_(left=left and left[1], right=right and right[1], neighbour_rule="geometric"))
     return tuple(out)

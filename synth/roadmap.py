@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields
 from itertools import chain
 
 import numpy as np
@@ -61,6 +61,17 @@ class MapFeature:
     polygon_rule: str = "source"
     neighbour_rule: str = "source"
 
+    def with_(self, **changes) -> MapFeature:
+        """dataclasses.replace for a feature, without its per-field machinery (a map has thousands of features to
+        complete, and replace costs more than the work on each): a copy of every field but `changes`. MapFeature
+        has no __post_init__ nor derived field, so nothing replace would run is skipped."""
+        unknown = changes.keys() - _FIELDS
+        if unknown:
+            raise TypeError(f"MapFeature has no field {sorted(unknown)[0]!r}")
+        g = object.__new__(MapFeature)
+        g.__dict__.update(self.__dict__, **changes)  # frozen: __setattr__ refuses, the instance dict does not
+        return g
+
     @property
     def direction(self) -> float | None:
         """A lane's direction of travel: the heading (degrees CCW from +x, in the map's frame, in [0, 360)) of
@@ -71,6 +82,9 @@ class MapFeature:
         if x0 == x1 and y0 == y1:
             return None
         return math.degrees(math.atan2(y1 - y0, x1 - x0)) % 360.0
+
+
+_FIELDS = frozenset(f.name for f in fields(MapFeature))
 
 
 @dataclass(frozen=True)
@@ -123,6 +137,12 @@ class RoadMap:
 
 
 def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
+    # The common case, decided with set operations: every link names another lane of the map, none twice.
+    refs = (f.left, f.right, *f.successors, *f.predecessors)
+    if (f.feature_id not in refs and lanes.issuperset(r for r in refs if r is not None)
+            and None not in refs[2:] and len(set(f.successors)) == len(f.successors)
+            and len(set(f.predecessors)) == len(f.predecessors)):
+        return f
     def kept(ref: str | None, what: str) -> str | None:
         if ref is None:
             return None
@@ -137,24 +157,22 @@ def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
 
     links = dict(left=kept(f.left, "left neighbour"), right=kept(f.right, "right neighbour"),
                  successors=kept_all(f.successors, "successor"), predecessors=kept_all(f.predecessors, "predecessor"))
-    return f if all(getattr(f, k) == v for k, v in links.items()) else replace(f, **links)
+    return f if all(getattr(f, k) == v for k, v in links.items()) else f.with_(**links)
 
 
 def _plain_finite(seqs: Sequence[Points]) -> bool:
     """Whether every point of every sequence is a pair of finite Python floats or ints (what `points` and the
     readers make): then check_feature need not look at the coordinates one feature at a time. False for anything
     else, which check_feature then judges (and names) feature by feature."""
-    pts = list(chain.from_iterable(seqs))
     try:
-        if not set(map(len, pts)) <= {2}:
+        if not set(map(len, chain.from_iterable(seqs))) <= {2}:
             return False
     except TypeError:  # a point that is not a sequence
         return False
-    values = list(chain.from_iterable(pts))
-    if not set(map(type, values)) <= {float, int}:
+    if not set(map(type, chain.from_iterable(chain.from_iterable(seqs)))) <= {float, int}:
         return False
     try:
-        return bool(np.isfinite(np.array(values, dtype=float)).all())
+        return bool(np.isfinite(packed(seqs)[0]).all())
     except OverflowError:  # an int beyond a float
         return False
 
@@ -163,7 +181,6 @@ def check_feature(f: MapFeature, coordinates: bool = True) -> None:
     """The rules of one feature but simplicity (`check_simple` takes a map's polygons at once): a known kind,
     finite coordinates (unless `coordinates` is False: the caller checked them), a polygon of at least three
     distinct vertices where the kind is an area, a line of two points or more where the kind has one."""
-    where = f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r}"
     if f.kind not in KINDS:
         raise MapError(f"map {f.map_id!r}: feature {f.feature_id!r} has unknown kind {f.kind!r} "
                        f"(kinds: {', '.join(KINDS)})")
@@ -176,11 +193,15 @@ def check_feature(f: MapFeature, coordinates: bool = True) -> None:
             a = None
         if a is None or a.ndim != 2 or a.shape[1] != 2 or not np.isfinite(a).all():
             bad = next((p for p in pts if a is None or len(p) != 2 or not all(_finite(v) for v in p)), pts[0])
-            raise MapError(f"{where} has a {name} point that is not two finite numbers ({bad!r})")
+            raise MapError(f"{_where(f)} has a {name} point that is not two finite numbers ({bad!r})")
     if f.kind in AREA_KINDS and len(set(f.polygon)) < 3:
-        raise MapError(f"{where} has no polygon of three distinct vertices")
+        raise MapError(f"{_where(f)} has no polygon of three distinct vertices")
     if f.kind in LINE_KINDS and len(f.line) < 2:
-        raise MapError(f"{where} has no line of two points or more")
+        raise MapError(f"{_where(f)} has no line of two points or more")
+
+
+def _where(f: MapFeature) -> str:
+    return f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r}"
 
 
 def _finite(v: object) -> bool:
@@ -270,7 +291,7 @@ def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[Ma
             if neighbours:
                 links.update(left=f.left if f.left in lanes else None, right=f.right if f.right in lanes else None)
             if any(getattr(f, k) != v for k, v in links.items()):
-                f = replace(f, **links)
+                f = f.with_(**links)
         out.append(f)
     return out
 
@@ -310,7 +331,7 @@ def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: floa
         # the offset rotated by (90 deg - heading): the pose's forward axis becomes +y (extractors.base.global_to_ego)
         return points(a[:, 0] * s - a[:, 1] * c, a[:, 0] * c + a[:, 1] * s)
 
-    moved = [replace(f, polygon=move(f.polygon), line=move(f.line)) for f in kept]
+    moved = [f.with_(polygon=move(f.polygon), line=move(f.line)) for f in kept]
     return RoadMap.of(road.map_id, links_within(moved, neighbours=True))
 
 

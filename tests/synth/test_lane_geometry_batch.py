@@ -1,0 +1,58 @@
+"""The batched forms of the lane-geometry steps against their one-at-a-time definitions, bit for bit: the point
+halfway along many lines (`halfways` against `halfway_of`), the nearest segment of many (line, point) pairs
+(`PackedSegments.nearest` against `Segments.nearest`), and facts decided for many points at once against facts
+decided one point at a time, on random lines and points (hypothesis)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from synth.lane_facts import PackedSegments, RoadIndex, Segments
+from synth.lane_geometry import dedup, dedup_packed, halfway_of, halfways, lane_polygon
+from synth.roadmap import LANE, MapFeature, RoadMap
+
+coord = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+# lines with repeated points (dedup drops them) and lines too short to have a halfway point
+lines = st.lists(st.lists(st.tuples(coord, coord), min_size=0, max_size=12).map(
+    lambda pts: tuple(p for i, p in enumerate(pts) for _ in range(1 + (i % 3 == 1)))), min_size=1, max_size=8)
+
+
+@given(lines)
+@settings(max_examples=300, deadline=None)
+def test_halfways_is_halfway_of_each_line(raw):
+    xy, kept = dedup_packed(list(raw))
+    want = [halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2)) for line in raw]
+    assert halfways(xy, kept) == want
+
+
+@given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20))
+@settings(max_examples=300, deadline=None)
+def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks):
+    packed = PackedSegments.of(list(raw))
+    asks = [(k % len(raw), x, y) for k, x, y in asks]
+    row, gap = packed.nearest(np.array([k for k, _, _ in asks]), np.array([x for _, x, _ in asks]),
+                              np.array([y for _, _, y in asks]))
+    for (k, x, y), r, g in zip(asks, row.tolist(), gap.tolist()):
+        seg = Segments.of(raw[k])
+        if seg is None:
+            assert r == -1
+            continue
+        j, want_gap = seg.nearest(x, y)
+        assert g == want_gap
+        assert (packed.a[r] == seg.a[j]).all() and (packed.d[r] == seg.d[j]).all()
+
+
+@given(st.lists(st.tuples(coord, coord, st.floats(0, 360, exclude_max=True)), min_size=1, max_size=40))
+@settings(max_examples=150, deadline=None)
+def test_facts_of_many_points_are_the_facts_of_each(points):
+    # overlapping lanes along x and y through the origin, so points fall in none, one or several
+    lanes = [MapFeature("m", f"l{i}", LANE, polygon=lane_polygon(line, 200.0, 200.0), line=line)
+             for i, line in enumerate([((-900.0, 0.0), (900.0, 0.0)), ((0.0, -900.0), (0.0, 900.0)),
+                                       ((900.0, 10.0), (-900.0, 10.0))])]
+    road = RoadIndex(RoadMap.of("m", lanes))
+    xs, ys, hs = (np.array([p[k] for p in points]) for k in range(3))
+    many = road._decide(xs, ys, hs)
+    for i in range(len(points)):
+        assert many[i] == road._decide(xs[i:i + 1], ys[i:i + 1], hs[i:i + 1])[0]
