@@ -292,11 +292,20 @@ def _xy(pts: list[dict]) -> np.ndarray:
 
 def _resample(line: np.ndarray, n: int) -> np.ndarray:
     """n points evenly spaced by length along a polyline (its first and last point kept)."""
-    seg = np.hypot(*np.diff(line, axis=0).T)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] == 0:
+    d = np.diff(line, axis=0)
+    s = np.empty(len(line))
+    s[0] = 0.0
+    np.cumsum(np.hypot(d[:, 0], d[:, 1]), out=s[1:])
+    total = s[-1]
+    if total == 0:
         return np.repeat(line[:1], n, axis=0)
-    t = np.linspace(0.0, s[-1], n)
+    # np.linspace(0, total, n) without its generality (a map has hundreds of boundaries): the same arithmetic
+    step = total / (n - 1)
+    if step == 0:  # a subnormal total: linspace's own special case
+        t = np.linspace(0.0, total, n)
+    else:
+        t = np.arange(n, dtype=float) * step
+        t[-1] = total
     return np.stack([np.interp(t, s, line[:, 0]), np.interp(t, s, line[:, 1])], axis=1)
 
 

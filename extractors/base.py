@@ -317,7 +317,12 @@ def world_places(entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
 def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
     """Name the map in every entity and add the lane facts of those the source places in the map's frame."""
     placed = [(b, e) for b, e in entities if b.world is not None]
-    facts = road.facts(*_facts_args([b.world for b, _ in placed])) if placed else []
+    worlds = [b.world for b, _ in placed]
+    facts = road.known(worlds)  # prefetched (prefetch_facts), by the world place itself
+    todo = [j for j, f in enumerate(facts) if f is None]
+    if todo:
+        for j, f in zip(todo, road.facts(*_facts_args([worlds[j] for j in todo]))):
+            facts[j] = f
     for _, e in entities:
         e["map_id"] = road.road.map_id
     for (_, e), f in zip(placed, facts):
@@ -328,8 +333,9 @@ def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, A
 def prefetch_facts(road: RoadIndex, worlds: Iterable[tuple[float, float, float]]) -> None:
     """Decide at once the lane facts of every world place (x, y, yaw) a scenario's frames will ask for (its
     entities' RecordedObject.world in all its frames): road_facts then looks them up (RoadIndex.prefetch)."""
+    worlds = list(worlds)
     with gc_paused():
-        road.prefetch(*_facts_args(list(worlds)))
+        road.prefetch(*_facts_args(worlds), keys=worlds)
 
 
 @contextlib.contextmanager
@@ -350,8 +356,7 @@ def gc_paused() -> Iterator[None]:
 
 
 def _facts_args(worlds: list[tuple[float, float, float]]) -> tuple[list[float], list[float], list[float]]:
-    """RoadIndex.facts's points and headings (degrees CCW from +x) of world places, the same for prefetch_facts
-    and road_facts, so that a prefetched point is found again."""
+    """RoadIndex.facts's points and headings (degrees CCW from +x) of world places."""
     return [w[0] for w in worlds], [w[1] for w in worlds], [math.degrees(w[2]) % 360.0 for w in worlds]
 
 

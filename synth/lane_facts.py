@@ -80,9 +80,11 @@ class PolygonIndex:
     candidates in float with the error bound, and `contains` itself for a (point, polygon) pair with an edge the
     float cannot decide."""
 
-    def __init__(self, features: tuple[MapFeature, ...]) -> None:
+    def __init__(self, features: tuple[MapFeature, ...],
+                 polygons: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """`polygons`: the features' polygons packed, if the caller has them (RoadMap.packed)."""
         self.features = features
-        xy, counts = packed([f.polygon for f in features])
+        xy, counts = polygons if polygons is not None else packed([f.polygon for f in features])
         start = np.cumsum(counts) - counts
         self.start, self.count = start, counts
         if len(features):
@@ -202,39 +204,48 @@ class RoadIndex:
 
     def __init__(self, road: RoadMap) -> None:
         self.road = road
-        self.lanes = PolygonIndex(road.of_kind(LANE))
-        self.crosswalks = PolygonIndex(road.of_kind(CROSSWALK))
-        self.intersections = PolygonIndex(road.of_kind(INTERSECTION))
-        self.drivable = PolygonIndex(road.of_kind(DRIVABLE_AREA))
+        self.lanes, self.crosswalks, self.intersections, self.drivable = (
+            PolygonIndex(road.of_kind(kind), road.packed("polygon", kind))
+            for kind in (LANE, CROSSWALK, INTERSECTION, DRIVABLE_AREA))
         self._segments: dict[str, Segments | None] = {}
         self._packed_segments: PackedSegments | None = None
         self._ahead: dict[tuple[float, float, float], LaneFacts] = {}
 
-    def prefetch(self, xs, ys, headings) -> None:
+    def prefetch(self, xs, ys, headings, keys=None) -> None:
         """Decide the facts of many points at once (every entity of a scenario in every frame) and keep them, in
-        place of those kept before, for `facts` to answer by lookup: one vectorised pass instead of one per frame
-        (numpy's per-call cost dominates a frame's few dozen points). A point asked for later is looked up by its
-        exact (x, y, heading); any other is decided then, the same way, so the facts never depend on it."""
+        place of those kept before, for `facts` (or `known`, by the caller's `keys`, one per point) to answer by
+        lookup: one vectorised pass instead of one per frame (numpy's per-call cost dominates a frame's few
+        dozen points). A point asked for later is looked up by its exact (x, y, heading), or its key; any other
+        is decided then, the same way, so the facts never depend on it."""
         xs, ys, hs = (np.asarray(v, dtype=float).reshape(-1) for v in (xs, ys, headings))
-        self._ahead = dict(zip(zip(xs.tolist(), ys.tolist(), hs.tolist()), self._decide(xs, ys, hs)))
+        keys = zip(xs.tolist(), ys.tolist(), hs.tolist()) if keys is None else keys
+        self._ahead = dict(zip(keys, self._decide(xs, ys, hs)))
+
+    def known(self, keys) -> list[LaneFacts | None]:
+        """The facts prefetched under these keys; None for a key not prefetched."""
+        ahead = self._ahead
+        return [ahead.get(k) for k in keys]
 
     def facts(self, xs, ys, headings) -> list[LaneFacts]:
         """Lane facts of points (map frame) of entities with these headings (degrees CCW from +x, map frame)."""
         xs, ys, hs = (np.asarray(v, dtype=float).reshape(-1) for v in (xs, ys, headings))
-        out = [self._ahead.get(k) for k in zip(xs.tolist(), ys.tolist(), hs.tolist())]
+        out = self.known(zip(xs.tolist(), ys.tolist(), hs.tolist()))
         todo = [i for i, f in enumerate(out) if f is None]
         if todo:
             for i, f in zip(todo, self._decide(xs[todo], ys[todo], hs[todo])):
                 out[i] = f
-        return out
+        return out  # type: ignore[return-value]
 
     def _decide(self, xs: np.ndarray, ys: np.ndarray, headings: np.ndarray) -> list[LaneFacts]:
         n = len(xs)
         pi, fi = self.lanes.pairs(xs, ys)
         on_cross = self.crosswalks.covered(xs, ys)
         in_inter = self.intersections.covered(xs, ys)
-        in_drive = self.drivable.covered(xs, ys)
         count = np.bincount(pi, minlength=n)
+        # a drivable area decides only off_road, of points in no lane
+        in_drive = np.zeros(n, dtype=bool)
+        nowhere = np.flatnonzero(count == 0)
+        in_drive[nowhere] = self.drivable.covered(xs[nowhere], ys[nowhere])
         first = np.cumsum(count) - count
         feats = self.lanes.features
         # Most points lie in one lane or none: their facts depend only on (that lane, the three flags), so they
@@ -295,7 +306,8 @@ class RoadIndex:
         many pairs at once: the same float operations on the same values, the first nearest segment of each
         (np.argmin's), so the same directions; None for a lane without a segment."""
         if self._packed_segments is None:
-            self._packed_segments = PackedSegments.of([f.line for f in self.lanes.features])
+            self._packed_segments = PackedSegments.of([f.line for f in self.lanes.features],
+                                                      self.road.packed("line", LANE))
         return self._packed_segments.directions_near(np.asarray(lanes, dtype=np.int64), xs, ys)
 
 
@@ -347,8 +359,9 @@ class PackedSegments:
     count: np.ndarray
 
     @classmethod
-    def of(cls, lines: list) -> PackedSegments:
-        xy, counts = packed(lines)
+    def of(cls, lines: list, packed_lines: tuple[np.ndarray, np.ndarray] | None = None) -> PackedSegments:
+        """`packed_lines`: the lines packed, if the caller has them (RoadMap.packed)."""
+        xy, counts = packed_lines if packed_lines is not None else packed(lines)
         a, d = xy[:-1], np.diff(xy, axis=0)
         length2 = (d * d).sum(axis=1)
         line = np.repeat(np.arange(len(lines)), counts)[:-1] if len(xy) else np.zeros(0, dtype=np.int64)

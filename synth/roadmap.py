@@ -94,6 +94,7 @@ class RoadMap:
     map_id: str
     features: tuple[MapFeature, ...]
     _by_id: dict = field(default_factory=dict, repr=False, compare=False)
+    _packed: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def of(cls, map_id: str, features: Iterable[MapFeature]) -> RoadMap:
@@ -103,15 +104,18 @@ class RoadMap:
         feats = sorted(features, key=lambda f: (KINDS.index(f.kind) if f.kind in KINDS else len(KINDS),
                                                 f.feature_id))
         seen: dict[str, MapFeature] = {}
-        plain = _plain_finite([pts for f in feats for pts in (f.line, f.polygon)])
+        lines, polygons = [f.line for f in feats], [f.polygon for f in feats]
+        coords = _plain_finite(lines, polygons)  # packed, when plain and finite
         for f in feats:
             if f.map_id != map_id:
                 raise MapError(f"map {map_id!r}: feature {f.feature_id!r} belongs to map {f.map_id!r}")
             if f.feature_id in seen:
                 raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
-            check_feature(f, coordinates=not plain)
+            check_feature(f, coordinates=coords is None)
             seen[f.feature_id] = f
-        check_simple(feats)
+        if coords is None:  # every point checked above: two finite numbers
+            coords = packed(lines), packed(polygons)
+        check_simple(feats, coords[1])
         lanes = {fid for fid, f in seen.items() if f.kind == LANE}
         out = []
         for f in feats:
@@ -120,7 +124,17 @@ class RoadMap:
             out.append(f)
         road = cls(map_id, tuple(out))
         road._by_id.update((f.feature_id, f) for f in out)
+        road._packed.update(line=coords[0], polygon=coords[1])
         return road
+
+    def packed(self, what: str, *kinds: str) -> tuple[np.ndarray, np.ndarray]:
+        """The lines or polygons (`what`) of the features of these kinds, in of_kind's order, as `packed` gives
+        them: packed once when the map was validated, so that every index built on the map reuses them."""
+        if what not in self._packed:
+            self._packed[what] = packed([getattr(f, what) for f in self.features])
+        xy, counts = self._packed[what]
+        mine = np.fromiter((f.kind in kinds for f in self.features), dtype=bool, count=len(self.features))
+        return xy[np.repeat(mine, counts)], counts[mine]
 
     def __getitem__(self, feature_id: str) -> MapFeature:
         return self._by_id[feature_id]
@@ -160,21 +174,23 @@ def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
     return f if all(getattr(f, k) == v for k, v in links.items()) else f.with_(**links)
 
 
-def _plain_finite(seqs: Sequence[Points]) -> bool:
-    """Whether every point of every sequence is a pair of finite Python floats or ints (what `points` and the
-    readers make): then check_feature need not look at the coordinates one feature at a time. False for anything
-    else, which check_feature then judges (and names) feature by feature."""
+def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
+    """`packed` lines and polygons, if every point of every sequence is a pair of finite Python floats or ints
+    (what `points` and the readers make): then check_feature need not look at the coordinates one feature at a
+    time. None for anything else, which check_feature then judges (and names) feature by feature."""
+    seqs = (lines, polygons)
     try:
-        if not set(map(len, chain.from_iterable(seqs))) <= {2}:
-            return False
+        if not set(map(len, chain.from_iterable(chain.from_iterable(seqs)))) <= {2}:
+            return None
     except TypeError:  # a point that is not a sequence
-        return False
-    if not set(map(type, chain.from_iterable(chain.from_iterable(seqs)))) <= {float, int}:
-        return False
+        return None
+    if not set(map(type, chain.from_iterable(chain.from_iterable(chain.from_iterable(seqs))))) <= {float, int}:
+        return None
     try:
-        return bool(np.isfinite(packed(seqs)[0]).all())
+        out = packed(lines), packed(polygons)
     except OverflowError:  # an int beyond a float
-        return False
+        return None
+    return out if np.isfinite(out[0][0]).all() and np.isfinite(out[1][0]).all() else None
 
 
 def check_feature(f: MapFeature, coordinates: bool = True) -> None:
@@ -208,15 +224,18 @@ def _finite(v: object) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def check_simple(features: Sequence[MapFeature]) -> None:
+def check_simple(features: Sequence[MapFeature], polygons: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Every polygon of these features does not cross or touch itself (consecutive repeated vertices allowed),
-    as GEOS decides it (robust predicates), all in one call; the first that does is a MapError."""
+    as GEOS decides it (robust predicates), all in one call; the first that does is a MapError. `polygons`: the
+    features' polygons packed, if the caller has them."""
     import shapely
 
-    areas = [f for f in features if f.kind in AREA_KINDS]
-    if not areas:
+    area = np.fromiter((f.kind in AREA_KINDS for f in features), dtype=bool, count=len(features))
+    if not area.any():
         return
-    coords, index = _clean_rings([f.polygon for f in areas])
+    areas = [f for f, a in zip(features, area.tolist()) if a]
+    xy, counts = polygons if polygons is not None else packed([f.polygon for f in features])
+    coords, index = _clean_rings(xy[np.repeat(area, counts)], counts[area])
     simple = shapely.is_simple(shapely.linearrings(coords, indices=index))
     if not simple.all():
         f = areas[int(np.flatnonzero(~simple)[0])]
@@ -224,9 +243,10 @@ def check_simple(features: Sequence[MapFeature]) -> None:
                        "polygon")
 
 
-def _clean_rings(rings: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
-    """`_clean_ring` of many rings at once: their vertices concatenated and each one's ring index."""
-    xy, counts = packed(rings)
+def _clean_rings(xy: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`_clean_ring` of many rings at once (packed, each of at least one vertex): their vertices concatenated and
+    each one's ring index."""
+    rings = range(len(counts))
     ring = np.repeat(np.arange(len(rings)), counts)
     start = np.cumsum(counts) - counts
     keep = np.ones(len(xy), dtype=bool)
