@@ -45,6 +45,7 @@ from synth.roadmap import (
     CROSSWALK,
     LANE,
     ROAD_LINE,
+    FloatPairs,
     MapError,
     MapFeature,
     RoadMap,
@@ -469,7 +470,7 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
     # float pairs (RoadMap.of checks that they are finite). Anything else takes the general way below.
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 2 and value.shape[1] >= 2:
-        return tuple(map(tuple, value[:, :2].tolist()))
+        return FloatPairs(map(tuple, value[:, :2].tolist()))
     if type(value) is list and value:
         try:
             lens = set(map(len, value))
@@ -477,7 +478,7 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
         except TypeError:  # an item that is not a sequence
             pts = None
         if pts is not None and set(map(type, chain.from_iterable(pts))) <= {float}:
-            return pts
+            return FloatPairs(pts)
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

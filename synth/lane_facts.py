@@ -101,6 +101,7 @@ class PolygonIndex:
         # (its determinant, exactly 0, would otherwise send every point near it to the exact test).
         self.point_edge = (self.ax == self.bx) & (self.ay == self.by)
         self._tree = None
+        self._grid: _BoxGrid | bool | None = None
         # Horizontal bands, as Banded cuts them: a point's crossing and on-edge tests only need the edges whose
         # y-range holds its y, all filed under its band (band_of is monotonic in y), a few of a polygon's dozens.
         # band_edges lists the edges of band g (of all polygons' bands, polygon by polygon) from band_start[g].
@@ -125,8 +126,19 @@ class PolygonIndex:
 
     def candidates(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(point index, polygon index) of every pair whose polygon's box holds the point, in row-major order.
-        An R-tree over the boxes, each widened by a margin (so that it finds a superset whatever it rounds),
-        proposes; the exact float comparison with the box decides, as a full points x boxes test would."""
+        A grid over the boxes (`_grid_proposals`; an R-tree where the map's extent is too odd for one) proposes
+        a superset; the exact float comparison with the box decides, as a full points x boxes test would."""
+        proposed = self._grid_proposals(xs, ys)
+        pi, fi = proposed if proposed is not None else self._tree_proposals(xs, ys)
+        b = self.box[fi]
+        keep = (b[:, 0] <= xs[pi]) & (xs[pi] <= b[:, 2]) & (b[:, 1] <= ys[pi]) & (ys[pi] <= b[:, 3])
+        pi, fi = pi[keep], fi[keep]
+        order = np.lexsort((fi, pi))
+        return pi[order], fi[order]
+
+    def _tree_proposals(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs from an R-tree over the boxes, each widened by a margin (so that it finds a superset whatever it
+        rounds)."""
         import shapely
 
         if self._tree is None:
@@ -134,12 +146,17 @@ class PolygonIndex:
             m = 1e-9 * (1.0 + np.abs(b))
             self._tree = shapely.STRtree(shapely.box(b[:, 0] - m[:, 0], b[:, 1] - m[:, 1], b[:, 2] + m[:, 2],
                                                      b[:, 3] + m[:, 3]))
-        pi, fi = self._tree.query(shapely.points(xs, ys))
-        b = self.box[fi]
-        keep = (b[:, 0] <= xs[pi]) & (xs[pi] <= b[:, 2]) & (b[:, 1] <= ys[pi]) & (ys[pi] <= b[:, 3])
-        pi, fi = pi[keep], fi[keep]
-        order = np.lexsort((fi, pi))
-        return pi[order], fi[order]
+        return self._tree.query(shapely.points(xs, ys))
+
+    def _grid_proposals(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Pairs from a uniform grid: each box filed under every cell its extent touches, each point meets the
+        boxes of its cell. floor(v / side) is monotonic in v, so a box that holds a point is always filed under
+        the point's cell: a superset, decided by numpy alone (an R-tree's query builds a geometry per point).
+        Boxes spanning more than GRID_SPAN cells are proposed to every point. None (use the R-tree) when the
+        grid would not fit in int64 keys or too many boxes are that large."""
+        if self._grid is None:
+            self._grid = _BoxGrid.of(self.box) or False
+        return self._grid.proposals(xs, ys) if self._grid else None
 
     def containing(self, xs: np.ndarray, ys: np.ndarray) -> list[list[int]]:
         """For each point, the indices (into features, ascending) of the polygons that contain it."""
@@ -187,6 +204,70 @@ class PolygonIndex:
         return pi[inside], fi[inside]
 
 
+GRID_SPAN = 64  # cells a box may span and still be filed in the grid
+GRID_WIDE = 256  # boxes wider than that, at most, proposed to every point
+
+
+@dataclass(frozen=True)
+class _BoxGrid:
+    """PolygonIndex's grid: the filed boxes' cell keys sorted (with their box), the wide boxes, the grid's cell
+    side and extent (in cells)."""
+
+    side: float
+    x0: int
+    y0: int
+    nx: int
+    ny: int
+    keys: np.ndarray
+    boxes: np.ndarray
+    wide: np.ndarray
+
+    @classmethod
+    def of(cls, box: np.ndarray) -> _BoxGrid | None:
+        if not len(box):
+            return None
+        # a side of about the typical box (a lane's), so that most boxes span a handful of cells
+        side = max(1.0, float(np.median(np.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1]))))
+        with np.errstate(all="ignore"):
+            cells = np.floor(box / side)
+        if not np.isfinite(cells).all() or np.abs(cells).max() > 2.0 ** 40:
+            return None
+        cells = cells.astype(np.int64)
+        x0, y0 = int(cells[:, 0].min()), int(cells[:, 1].min())
+        nx, ny = int(cells[:, 2].max()) - x0 + 1, int(cells[:, 3].max()) - y0 + 1
+        if nx * ny >= 2 ** 62:
+            return None
+        w, h = cells[:, 2] - cells[:, 0] + 1, cells[:, 3] - cells[:, 1] + 1
+        filed = (w <= GRID_SPAN) & (h <= GRID_SPAN)
+        wide = np.flatnonzero(~filed)
+        if len(wide) > GRID_WIDE:
+            return None
+        j = np.flatnonzero(filed)
+        n = w[j] * h[j]
+        box_of = np.repeat(j, n)
+        k = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+        cx = cells[box_of, 0] - x0 + k % w[box_of]
+        cy = cells[box_of, 1] - y0 + k // w[box_of]
+        keys = cx * ny + cy
+        order = np.argsort(keys, kind="stable")
+        return cls(side, x0, y0, nx, ny, keys[order], box_of[order], wide)
+
+    def proposals(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        with np.errstate(all="ignore"):
+            fx, fy = np.floor(xs / self.side) - self.x0, np.floor(ys / self.side) - self.y0
+        # points off the grid (or not finite) meet no filed box; the exact test would refuse them anyway
+        on = np.flatnonzero((fx >= 0) & (fx < self.nx) & (fy >= 0) & (fy < self.ny))
+        key = fx[on].astype(np.int64) * self.ny + fy[on].astype(np.int64)
+        lo, hi = np.searchsorted(self.keys, key, "left"), np.searchsorted(self.keys, key, "right")
+        n = hi - lo
+        pi = np.repeat(on, n)
+        fi = self.boxes[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))]
+        if len(self.wide):
+            pi = np.concatenate([pi, np.repeat(np.arange(len(xs)), len(self.wide))])
+            fi = np.concatenate([fi, np.tile(self.wide, len(xs))])
+        return pi, fi
+
+
 @dataclass(frozen=True)
 class LaneFacts:
     """Where one point is: the lanes containing it (ids, sorted), the chosen lane (None when in no lane),
@@ -219,7 +300,10 @@ class RoadIndex:
         is decided then, the same way, so the facts never depend on it."""
         xs, ys, hs = (np.asarray(v, dtype=float).reshape(-1) for v in (xs, ys, headings))
         keys = zip(xs.tolist(), ys.tolist(), hs.tolist()) if keys is None else keys
-        self._ahead = dict(zip(keys, self._decide(xs, ys, hs)))
+        # each distinct key once (a parked car is the same point in every frame: a third of nuScenes' points)
+        at = dict(zip(keys, range(len(xs))))
+        rows = np.fromiter(at.values(), dtype=np.int64, count=len(at))
+        self._ahead = dict(zip(at, self._decide(xs[rows], ys[rows], hs[rows])))
 
     def known(self, keys) -> list[LaneFacts | None]:
         """The facts prefetched under these keys; None for a key not prefetched."""

@@ -32,6 +32,15 @@ LINE_KINDS = (LANE, ROAD_LINE)
 Points = tuple[tuple[float, float], ...]
 
 
+class FloatPairs(tuple):
+    """Points that are pairs of Python floats because the function that made them made them so (`points`, and the
+    readers' conversions of float arrays): RoadMap.of need not look at the type of every coordinate again (their
+    finiteness it still checks). A tuple in every other respect (equal to, and hashed as, the same plain tuple).
+    Only such functions construct it, from pairs they have just made."""
+
+    __slots__ = ()
+
+
 class MapError(InputError, ValueError):
     """A map that is not what the map format says (NaN, a self-crossing polygon, a dangling lane id). One line."""
 
@@ -178,13 +187,13 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
     """`packed` lines and polygons, if every point of every sequence is a pair of finite Python floats or ints
     (what `points` and the readers make): then check_feature need not look at the coordinates one feature at a
     time. None for anything else, which check_feature then judges (and names) feature by feature."""
-    seqs = (lines, polygons)
+    seqs = [pts for pts in chain(lines, polygons) if type(pts) is not FloatPairs]  # the others are float pairs
     try:
-        if not set(map(len, chain.from_iterable(chain.from_iterable(seqs)))) <= {2}:
+        if not set(map(len, chain.from_iterable(seqs))) <= {2}:
             return None
     except TypeError:  # a point that is not a sequence
         return None
-    if not set(map(type, chain.from_iterable(chain.from_iterable(chain.from_iterable(seqs))))) <= {float, int}:
+    if not set(map(type, chain.from_iterable(chain.from_iterable(seqs)))) <= {float, int}:
         return None
     try:
         out = packed(lines), packed(polygons)
@@ -281,7 +290,7 @@ def points(xs: Iterable[float], ys: Iterable[float]) -> Points:
     xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
     if len(xs) != len(ys):
         raise ValueError(f"{len(xs)} x coordinates but {len(ys)} y coordinates")
-    return tuple(zip(xs.tolist(), ys.tolist()))
+    return FloatPairs(zip(xs.tolist(), ys.tolist()))
 
 
 def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
@@ -295,7 +304,7 @@ def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
 
 def open_ring(pts: Points) -> Points:
     """A ring without its closing repeat of the first vertex (sources write rings both ways)."""
-    return pts[:-1] if len(pts) > 1 and pts[0] == pts[-1] else pts
+    return type(pts)(pts[:-1]) if len(pts) > 1 and pts[0] == pts[-1] else pts
 
 
 def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[MapFeature]:

@@ -56,3 +56,24 @@ def test_facts_of_many_points_are_the_facts_of_each(points):
     many = road._decide(xs, ys, hs)
     for i in range(len(points)):
         assert many[i] == road._decide(xs[i:i + 1], ys[i:i + 1], hs[i:i + 1])[0]
+
+
+@given(st.lists(st.tuples(coord, coord, st.floats(0, 300), st.floats(0, 300)), min_size=1, max_size=30),
+       st.lists(st.tuples(coord, coord), min_size=1, max_size=60), st.integers(0, 3))
+@settings(max_examples=300, deadline=None)
+def test_candidates_are_every_box_that_holds_the_point(boxes, pts, scale):
+    # boxes from a metre to a few km (some span more cells than the grid files), points on their edges too
+    from synth.lane_facts import PolygonIndex
+
+    k = 10.0 ** scale
+    feats = tuple(MapFeature("m", f"p{i}", LANE, polygon=((x, y), (x + w * k, y), (x + w * k, y + h * k),
+                                                         (x, y + h * k)))
+                  for i, (x, y, w, h) in enumerate(boxes))
+    pts = pts + [(x + w * k, y) for x, y, w, _ in boxes]
+    index = PolygonIndex(feats)
+    xs, ys = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+    pi, fi = index.candidates(xs, ys)
+    b = index.box
+    want = [(i, j) for i in range(len(pts)) for j in range(len(feats))
+            if b[j, 0] <= xs[i] <= b[j, 2] and b[j, 1] <= ys[i] <= b[j, 3]]
+    assert list(zip(pi.tolist(), fi.tolist())) == want
