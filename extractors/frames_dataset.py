@@ -10,7 +10,9 @@ once, dictionary-encoded, and refuses the whole dataset on the first bad row, wi
 as extractors.frames.validate_frames (ids are printed into generated programs, so a bad id refuses the input
 before any frame is synthesized). `runs` streams only the frame_id column and yields where each frame is.
 Workers read their own rows with read_frame_rows (a file and a row range, through the same footer checks and a
-check of every value as decoded), so frame data need not pass through the process that plans the work.
+check of every value as decoded), so frame data need not pass through the process that plans the work. A run's
+check (`check(road=...)`) decodes and checks, in the same pass, every value of every column its workers will
+read (FramesPart.read_columns), so a corrupt value refuses the run before a part of it is written.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ DICTIONARY_COLUMNS = ("frame_id", "entity_id", "type")
 # Text columns are bounded before a byte of them is decoded (storage.parquet.check_value_sizes): ids are at most
 # 256 characters (frame ids; entity ids 64), so an average of MAX_VALUE_BYTES a value is far above any real file.
 STRING_COLUMNS = tuple(f.name for f in FRAMES_SCHEMA if pa.types.is_string(f.type))
+# Every text column a frames file may have (a run's check reads them dictionary-encoded).
+TEXT_COLUMNS = STRING_COLUMNS + tuple(c for c, t in {**OPTIONAL_COLUMNS, **ROAD_COLUMNS}.items() if pa.types.is_string(t))
 MAX_VALUE_BYTES = 1024
 OPTIONAL_SCHEMA = pa.schema(list(OPTIONAL_COLUMNS.items()))
 
@@ -60,6 +64,11 @@ class FramesPart:
     @property
     def columns(self) -> tuple[str, ...]:
         return FRAMES_COLUMNS + self.optional
+
+    def read_columns(self, road: bool) -> tuple[str, ...]:
+        """What a worker of `r2s run` reads of this part: the frames and optional columns it has, and its road
+        columns when the run gives each frame its road (--lanes)."""
+        return self.columns + (self.road if road else ())
 
 
 @dataclass(frozen=True)
@@ -115,29 +124,43 @@ class FramesDataset:
     def where(self, part: FramesPart) -> str:
         return part.path if len(self.parts) > 1 else self.source
 
-    def row_groups(self, part: FramesPart, columns: tuple[str, ...]) -> Iterator[pa.Table]:
-        pf = open_file(self.url, part.path, tuple(c for c in DICTIONARY_COLUMNS if c in columns))
+    def row_groups(self, part: FramesPart, columns: tuple[str, ...],
+                   dictionary: tuple[str, ...] = DICTIONARY_COLUMNS) -> Iterator[pa.Table]:
+        pf = open_file(self.url, part.path, tuple(c for c in dictionary if c in columns))
         for i in range(len(part.row_groups)):
             yield pf.read_row_group(i, columns=list(columns))
 
-    def check(self, hasher=None) -> CheckedFrames:
+    def check(self, hasher=None, road: bool | None = None) -> CheckedFrames:
         """Validate every row (streaming); return the number of frames, the index of their ids and the rows of the
         largest frame. A `hasher`
         (extractors.frame_hash.FrameHasher) is fed the same row groups, with the columns it hashes, so the
-        content of every frame is hashed in the same pass."""
+        content of every frame is hashed in the same pass. With `road` (a run's check: whether its workers read
+        the road columns), every value of every column the run's workers read (FramesPart.read_columns) is
+        decoded and checked as they check it (_valid: UTF-8, dictionary indices, list offsets), with their message:
+        a corrupt value the rules do not read is found here, before the run writes anything, not by a worker
+        after parts of the run are written."""
         checker = FramesCheck()
         for part in self.parts:
             columns = CHECK_COLUMNS
             if hasher is not None:
                 columns += tuple(c for c in hasher.columns if c in part.columns and c not in CHECK_COLUMNS)
+            decoded = () if road is None else tuple(c for c in part.read_columns(road) if c not in columns)
+            # Their text read dictionary-encoded, as the rules' ids are: a category, a scene, a lane repeats on
+            # many rows, and a dictionary's values and indices are what a worker's plain read decodes to, so each
+            # distinct value is checked once.
+            dictionary = DICTIONARY_COLUMNS + tuple(c for c in decoded if c in TEXT_COLUMNS)
             try:
-                for table in self.row_groups(part, columns):
+                for table in self.row_groups(part, columns + decoded, dictionary):
+                    if road is not None:  # the rules' columns too: their corrupt values refused in the workers' words
+                        _valid(table, self.where(part))
                     checker.feed(table)
                     if hasher is not None:
                         hasher.feed(table, *_run_starts(_dictionary(table.column("frame_id"))))
                 checker.end_part()
                 if hasher is not None:
                     hasher.end_part()
+            except CorruptValues:
+                raise  # it names the file already, as a worker's refusal does
             except FramesError as exc:
                 raise FramesError(f"{self.where(part)}: {exc}") from None
             except (pa.ArrowException, OSError) as exc:
@@ -256,13 +279,18 @@ def read_frame_rows(url: str, path: str, start: int, stop: int, columns: tuple[s
     return _valid(rows, path)
 
 
+class CorruptValues(FramesError):
+    """Values that do not decode to their column's type; the message names the file."""
+
+
 def _valid(table: pa.Table, where: str) -> pa.Table:
     """Rows as read are what their types say: pyarrow checks neither UTF-8 nor dictionary indices on reading, and
     a corrupt page that still decompresses would reach pandas (exit 1) or a program."""
-    try:
-        table.validate(full=True)
-    except pa.ArrowException as exc:
-        raise FramesError(f"{where} holds corrupt values ({str(exc)[:100]})") from None
+    for name in table.column_names:  # column by column, to name it (a table's own message gives its position)
+        try:
+            table.column(name).validate(full=True)
+        except pa.ArrowException as exc:
+            raise CorruptValues(f"{where} holds corrupt values in column {name} ({str(exc)[:100]})") from None
     return table
 
 

@@ -7,8 +7,8 @@ again, lazily, cutting chunks of frames (a file and a row range each) for the wo
 themselves. At most `jobs` chunks are in flight and at most one part file's rows are buffered, whatever the
 input size, so the first rows come back seconds after the check and memory stays flat.
 
-Bad input (a missing or corrupt file, a wrong schema, a bad row anywhere, a frame split in two places, an output
-that is not ours) is refused before anything is written. A stop (SIGTERM, Ctrl-C) keeps every finished row and
+Bad input (a missing or corrupt file, a wrong schema, a bad row anywhere, a corrupt value in any column the workers
+will read, a frame split in two places, an output that is not ours) is refused before anything is written. A stop (SIGTERM, Ctrl-C) keeps every finished row and
 says how to resume: the same call again.
 """
 
@@ -136,7 +136,7 @@ class _Run:
         from extractors.frame_hash import FrameHasher
 
         hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
-        checked = dataset.check(hasher)
+        checked = dataset.check(hasher, road=self._maps(dataset) is not None)
         n_frames, index = checked.frames, checked.index
         return n_frames, index, hasher.keys(), self.config.hash
 
@@ -189,8 +189,14 @@ class _Run:
         jobs = min(self.options.jobs or os.cpu_count() or 1, todo)
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
 
-    def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
+    def _maps(self, dataset) -> str | None:
+        """With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only):
+        the workers then read the road columns too (FramesPart.read_columns), and the check decodes them."""
         from extractors.maps import maps_dir
+
+        return str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
+
+    def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
         from pipeline.batch.task import ChunkTask
 
         def runs():
@@ -198,15 +204,13 @@ class _Run:
                 mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
                 yield r.part, r.starts, r.lengths, r.ids, mask
 
-        # With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only)
-        maps = str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
+        maps = self._maps(dataset)
         slots = pool.slots()
         sizes = chunk_sizes(slots, chunk_size_for(todo, slots, self.options.chunk_size))
         for n, (k, frames) in enumerate(chunks(runs(), sizes, MAX_SPAN_ROWS)):
             part = dataset.parts[k]
-            columns = part.columns + (part.road if maps is not None else ())
-            yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), columns, self.config,
-                            hard_cap=pool.own_processes, synthesizer=self.options.synthesizer,
+            yield ChunkTask(f"c{n}", dataset.url, part.path, tuple(frames), part.read_columns(maps is not None),
+                            self.config, hard_cap=pool.own_processes, synthesizer=self.options.synthesizer,
                             progress_dir=progress_dir, maps=maps)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
@@ -296,7 +300,8 @@ class _WindowRun(_Run):
 
         spec = self.options.window
         hasher = FrameHasher(keep_lanes=True)
-        dataset.check(hasher)  # refuses bad input; the hasher keeps each frame's hash
+        # Refuses bad input (every value the workers will read); the hasher keeps each frame's hash
+        dataset.check(hasher, road=self._maps(dataset) is not None)
         self._windows, hashes = plan_windows(dataset, hasher, spec)
         firsts = [w.frames[0].frame_id for w in self._windows]
         hi, lo = frame_hashes(firsts)
@@ -305,13 +310,11 @@ class _WindowRun(_Run):
             spec.config_hash(self.config)
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
-        from extractors.maps import maps_dir
         from pipeline.batch.window_task import WindowTask
 
         spec = self.options.window
-        # With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only)
-        maps = str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
-        parts = tuple((p.path, p.columns + (p.road if maps is not None else ())) for p in dataset.parts)
+        maps = self._maps(dataset)
+        parts = tuple((p.path, p.read_columns(maps is not None)) for p in dataset.parts)
         windows = self._windows
         if len(done):
             windows = [w for w, kept in zip(windows, done.contains(*frame_hashes([w.frames[0].frame_id
