@@ -17,24 +17,13 @@ import argparse
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from bench_scale import replicate_frames  # noqa: E402
-from common import machine, write_results  # noqa: E402
-
-
-def best(fn, repeat: int) -> float:
-    """The least CPU time of this process over `repeat` calls: on a shared machine, wall time measures the load."""
-    times = []
-    for _ in range(repeat):
-        t = time.process_time()
-        fn()
-        times.append(time.process_time() - t)
-    return min(times)
+from common import best, machine, write_results  # noqa: E402
 
 
 def coordinator(path: Path, repeat: int) -> dict:

@@ -19,7 +19,6 @@ import argparse
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -27,19 +26,9 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 
 from bench_lanes import SOURCES, extract, replicate  # noqa: E402
-from common import machine, write_results  # noqa: E402
+from common import best, machine, write_results  # noqa: E402
 
 MODES = (("rules only", None), ("run", False), ("run --lanes", True))
-
-
-def best(fn, repeat: int) -> float:
-    """The least CPU time of this process over `repeat` calls: on a shared machine, wall time measures the load."""
-    times = []
-    for _ in range(repeat):
-        t = time.process_time()
-        fn()
-        times.append(time.process_time() - t)
-    return min(times)
 
 
 def measure(frames: Path, repeat: int) -> list[dict]:

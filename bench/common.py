@@ -37,6 +37,16 @@ def write_results(name: str, payload: dict, markdown: str) -> None:
     print(f"wrote {RESULTS / (name + '.json')} and {name}.md")
 
 
+def best(fn, repeat: int) -> float:
+    """The least CPU time of this process over `repeat` calls: on a shared machine, wall time measures the load."""
+    times = []
+    for _ in range(repeat):
+        t = time.process_time()
+        fn()
+        times.append(time.process_time() - t)
+    return min(times)
+
+
 def run_child(script: str, cmd: list[str], cwd: Path) -> dict:
     """Run a benchmark's child process (a fresh interpreter: its own peak RSS) that prints one JSON line last;
     returns that record with `wall_s`, the child's wall clock. A failure stops the benchmark with its stderr."""
