@@ -53,6 +53,10 @@ MAX_VALUE_BYTES = 1024
 OPTIONAL_SCHEMA = pa.schema(list(OPTIONAL_COLUMNS.items()))
 
 
+class CorruptValues(FramesError):
+    """Values that do not decode to their column's type; the message names the file."""
+
+
 @dataclass(frozen=True)
 class FramesPart:
     path: str  # inside the dataset's filesystem
@@ -277,10 +281,6 @@ def read_frame_rows(url: str, path: str, start: int, stop: int, columns: tuple[s
     except (pa.ArrowException, OSError) as exc:
         raise FramesError(f"{path} is not a readable Parquet file ({type(exc).__name__}: {str(exc)[:120]})") from None
     return _valid(rows, path)
-
-
-class CorruptValues(FramesError):
-    """Values that do not decode to their column's type; the message names the file."""
 
 
 def _valid(table: pa.Table, where: str) -> pa.Table:

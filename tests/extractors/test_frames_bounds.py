@@ -106,13 +106,15 @@ def _corrupt_category(tmp_path):
 
 
 def test_run_workers_read_frames_through_the_frames_checks(tmp_path):
-    """Before: the workers decoded the bad value past every check (internal error, exit 1, the bytes printed)."""
+    """Before: the workers decoded the bad value past every check (internal error, exit 1, the bytes printed). Now
+    the run's own check decodes every column its workers read, and refuses the file before they start."""
     frames = _corrupt_category(tmp_path)
     out = tmp_path / "programs"
     result = run_bounded("run", str(frames), "--out", str(out), timeout=180)
     assert result.returncode == 2 and result.killed is None, result.stderr
-    lines = result.stderr.strip().splitlines()  # the check's progress line, then the refusal
-    assert "holds corrupt values" in lines[-1] and "Traceback" not in result.stderr, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "holds corrupt values in column category" in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
     assert "resume" not in result.stderr and "\ufffd" not in result.stderr  # bad input, not a stop; no raw bytes
     assert not out.exists()
 
