@@ -4,9 +4,9 @@ written (docs/cli.md: exit 2 writes nothing). Before, the check decoded only the
 it were written.
 
 The frames are the shipped excerpt as `r2s extract` writes it (part files of the EXTRACTED_SCHEMA, zstd,
-dictionary-encoded, statistics, its maps in _maps/), the last part in several row groups; one value of the last
-row group of the last part is made invalid UTF-8 in the bytes of its dictionary page, as a damaged disk or a
-hostile writer leaves it (that column is written uncompressed so its bytes can be patched, as in
+dictionary-encoded, statistics, its maps in _maps/): the good parts as written, the last rewritten in three row
+groups, one value of its last row group made invalid UTF-8 in the bytes of its dictionary page, as a damaged disk
+or a hostile writer leaves it (that column is written uncompressed so its bytes can be patched, as in
 tests/extractors/test_frames_bounds.py, and without statistics so that the footer, which would hold the value as a
 least or greatest, stays intact)."""
 
@@ -93,8 +93,9 @@ def test_the_check_refuses_what_a_worker_refuses(excerpt_frames, tmp_path, colum
     ("track_id", ("--window", "1")),
 ], ids=["category", "lane", "window"])
 def test_a_run_refuses_a_corrupt_value_before_writing_anything(excerpt_frames, tmp_path, column, options):
-    """Small parts, one frame a task, two workers: the good parts' frames come first, and before the check read
-    every column, their parts were written before a worker met the bad value (an output folder left behind)."""
+    """Small parts, one frame a task, two workers: the good parts' frames come first. Before the check read every
+    column, the parts of the good frames whose tasks finished before the bad one's were written (with category and
+    lane: an output folder with parts, left behind by a refusal)."""
     bad = corrupted_copy(excerpt_frames, tmp_path / "frames", column)
     out = tmp_path / "programs"
     proc = run_r2s("run", str(tmp_path / "frames"), "--out", str(out), "--part-rows", "1", "--chunk-size", "1",
