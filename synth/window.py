@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from synth.config import ConfigError, SynthConfig, as_config
@@ -186,6 +186,7 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     from synth.smt.certify import certify
     from synth.statement import choose_references, write_statements
     from synth.synthesize import CertificationError
+    from synth.window_road import window_road
 
     scenes = [as_scene(s) for s in scenes]
     config = as_config(config)
@@ -196,12 +197,14 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
             require_speeds(scene)
         if config.lanes:
             require_lanes(scene)
+    road = window_road(scenes)  # refused before any work if the frames' roads cannot be brought together
     started = time.perf_counter()
     budget = Budget(config.time_limit, config.memory_limit)
     oracles = [make_oracle(scene, config) for scene in scenes]
     for oracle in oracles:
         oracle.full_table()
-    # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen.
+    # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen (in
+    # the ego frame of that frame, where its relations to ego were measured); the text's road is the window's.
     first = {e.id: e for scene in reversed(scenes) for e in scene.others}
     shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road, scenes[0].world)
     all_ids = (shown.ego.id,) + ids
@@ -254,7 +257,9 @@ def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
     t = time.perf_counter()
     header = (f"frames {scenes[0].frame_id} to {scenes[-1].frame_id} ({len(scenes)} frames): cost {program.cost} "
               f"({found.status}), r2sgen {__version__}")
-    scenic = render_scenic(program, shown, config, header=header)
+    # On the window's road: every frame's, in the first frame's ego frame (synth.window_road), so that a lane clause
+    # of an entity first seen later names a region of the text.
+    scenic = render_scenic(program, shown if road is shown.road else replace(shown, road=road), config, header=header)
     render_s = time.perf_counter() - t
     smt = [o.backend.stats for o in oracles if o.backend is not None]
     return WindowResult(

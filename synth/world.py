@@ -56,6 +56,13 @@ class WorldPose:
         c, s = math.cos(yaw), math.sin(yaw)
         return self.x + x * s + y * c, self.y - x * c + y * s
 
+    def local(self, x: float, y: float) -> tuple[float, float]:
+        """A point of the world in this pose's ego frame (extractors.base.global_to_ego; the inverse of point)."""
+        yaw = math.radians(self.heading)
+        c, s = math.cos(yaw), math.sin(yaw)
+        dx, dy = x - self.x, y - self.y
+        return dx * s - dy * c, dx * c + dy * s
+
     def yaw(self, heading: float) -> float:
         """An ego-frame heading (degrees CCW from +y) as a world yaw in radians CCW from +x, in [-pi, pi)."""
         return math.remainder(math.radians(self.heading + heading), math.tau)
