@@ -15,12 +15,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth import SynthConfig, check_window, synthesize, synthesize_window, tile
+from synth import SynthConfig, check_window, synthesize, synthesize_window
 from synth.dsl import parse_program
 from synth.parts.lane import LANE, Anywhere, InLane, LaneFact, LanesMissing
 from synth.roadmap import MapFeature, RoadMap
 from synth.scene import Scene, make_scene
 from tests.support.lanes import placed, random_road
+from tests.support.road_windows import road_windows
 from tests.support.window_bruteforce import optimal_window_cost
 
 
@@ -214,25 +215,6 @@ def test_scenic_of_a_window_program_with_lanes_compiles_on_official_scenic():
 
 
 # ------------------------------------------------------------------------------------------------ real data
-
-
-def road_windows(frames: Path, window_s: float, limit: int | None = None) -> list[list[Scene]]:
-    """The windows (tile over the timestamps) of every scene of frames extracted with their maps, each frame with
-    the road `r2s scene` gives it (extractors.maps.FrameRoads)."""
-    import pandas as pd
-
-    from extractors.frames import frame_to_scene
-    from extractors.maps import FrameRoads, maps_dir
-
-    roads = FrameRoads(maps_dir(frames))
-    out = []
-    for _, rows in pd.read_parquet(frames).groupby("scene", sort=True):
-        rows = rows.sort_values("frame_index", kind="stable")
-        frames_ = [(int(g.timestamp_us.iloc[0]), frame_to_scene(g, roads.road(g)[0]))
-                   for _, g in rows.groupby("frame_id", sort=False)]
-        for first, last in tile([t for t, _ in frames_], int(window_s * 1e6))[:limit]:
-            out.append([s for _, s in frames_[first:last + 1]])
-    return out
 
 
 def nearest(scenes: list[Scene], k: int) -> list[Scene]:
