@@ -21,7 +21,6 @@ are refused in one line. Values in and out, no I/O.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 
 from synth.roadmap import MapFeature, Points, RoadMap
 from synth.scene import Scene, SceneError
@@ -89,7 +88,7 @@ def _mover(source: WorldPose | None, target: WorldPose | None) -> Callable[[MapF
     def move(pts: Points) -> Points:
         return tuple(target.local(*source.point(x, y)) for x, y in pts)
 
-    return lambda f: replace(f, polygon=move(f.polygon), line=move(f.line))
+    return lambda f: f.with_(polygon=move(f.polygon), line=move(f.line))
 
 
 def _linked(held: MapFeature, other: MapFeature) -> MapFeature:
@@ -99,4 +98,4 @@ def _linked(held: MapFeature, other: MapFeature) -> MapFeature:
                  predecessors=tuple(dict.fromkeys(held.predecessors + other.predecessors)),
                  left=held.left if held.left is not None else other.left,
                  right=held.right if held.right is not None else other.right)
-    return held if all(getattr(held, k) == v for k, v in links.items()) else replace(held, **links)
+    return held if all(getattr(held, k) == v for k, v in links.items()) else held.with_(**links)
