@@ -290,7 +290,7 @@ def _valid(table: pa.Table, where: str) -> pa.Table:
         try:
             table.column(name).validate(full=True)
         except pa.ArrowException as exc:
-            raise CorruptValues(f"{where} holds corrupt values in column {name} ({str(exc)[:100]})") from None
+            raise CorruptValues(f"{where} holds corrupt values in column {name} ({str(exc)[:160]})") from None
     return table
 
 
