@@ -454,11 +454,10 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
                               [widths[features[i].feature_id][1] for i in todo])
         for i, ring in zip(todo, rings):
             features[i] = features[i].with_(polygon=ring)
-    features = links_within(features, neighbours=False)
-    if not any_neighbour:
-        lanes = neighbours(tuple(f for f in features if f.kind == LANE))
-        features = [f for f in features if f.kind != LANE] + list(lanes)
-    return RoadMap.of(map_id, features)
+    road = RoadMap.of(map_id, links_within(features, neighbours=False))
+    if not any_neighbour:  # the geometric rule, on the validated map and its packed coordinates
+        road = road.with_features(neighbours(road.lanes, road.packed("line", LANE), road.packed("polygon", LANE)))
+    return road
 
 
 XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)

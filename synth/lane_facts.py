@@ -448,12 +448,12 @@ class PackedSegments:
         xy, counts = packed_lines if packed_lines is not None else packed(lines)
         a, d = xy[:-1], np.diff(xy, axis=0)
         length2 = (d * d).sum(axis=1)
-        line = np.repeat(np.arange(len(lines)), counts)[:-1] if len(xy) else np.zeros(0, dtype=np.int64)
+        line = np.repeat(np.arange(len(counts)), counts)[:-1] if len(xy) else np.zeros(0, dtype=np.int64)
         ends = np.cumsum(counts)
         # a segment runs from a point to the next of the same line, and has a length (Segments.of's `keep`)
         keep = (np.arange(len(a)) + 1 < ends[line]) & (length2 > 0) if len(a) else np.zeros(0, dtype=bool)
         line = line[keep]
-        count = np.bincount(line, minlength=len(lines)).astype(np.int64)
+        count = np.bincount(line, minlength=len(counts)).astype(np.int64)
         return cls(a[keep], d[keep], length2[keep], np.cumsum(count) - count, count)
 
     def nearest(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from itertools import accumulate
 import numpy as np
 
 from synth.lane_facts import PackedSegments, PolygonIndex, Segments
-from synth.roadmap import LANE, FloatPairs, MapFeature, Points, packed
+from synth.roadmap import LANE, FloatPairs, MapFeature, Points, packed, packed_subset
 
 # The width of a nuScenes lane connector, which the converter gives without polygon or width: the median width
 # (twice the distance from the centre line's halfway point to the polygon's boundary) of the nuScenes lanes that
@@ -35,15 +35,16 @@ def dedup(line: Points) -> Points:
     return tuple(p for i, p in enumerate(line) if i == 0 or p != line[i - 1])
 
 
-def dedup_packed(lines: list[Points]) -> tuple[np.ndarray, np.ndarray]:
+def dedup_packed(lines: list[Points], lines_packed: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """`dedup` of many lines at once: their points without consecutive repeats, concatenated (N, 2), and how many
-    each line keeps."""
-    xy, counts = packed(lines)
-    line = np.repeat(np.arange(len(lines)), counts)
+    each line keeps. `lines_packed`: the lines packed, if the caller has them."""
+    xy, counts = lines_packed if lines_packed is not None else packed(lines)
+    line = np.repeat(np.arange(len(counts)), counts)
     keep = np.ones(len(xy), dtype=bool)
     keep[1:] = (xy[1:] != xy[:-1]).any(axis=1)
     keep[(np.cumsum(counts) - counts)[counts > 0]] = True  # a line's first point
-    return xy[keep], np.bincount(line[keep], minlength=len(lines)).astype(np.int64)
+    return xy[keep], np.bincount(line[keep], minlength=len(counts)).astype(np.int64)
 
 
 def lane_polygon(line: Points, left: float | None = None, right: float | None = None) -> Points:
@@ -88,14 +89,18 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
     return out
 
 
-def widths_at(lanes: list[MapFeature], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+def widths_at(lanes: list[MapFeature], xs: np.ndarray, ys: np.ndarray,
+              polygons: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """`width_at` of many lanes, each at its point, in one pass: each ring's segments as Segments.of makes them
-    (closed, those of length 0 left out), Segments.nearest's arithmetic on the same values, the least gap."""
+    (closed, those of length 0 left out), Segments.nearest's arithmetic on the same values, the least gap.
+    `polygons`: the lanes' polygons packed, if the caller has them."""
     out = np.zeros(len(lanes))
-    ok = [k for k, f in enumerate(lanes) if len(f.polygon) >= 3]
+    polygons = polygons if polygons is not None else packed([f.polygon for f in lanes])
+    mine = polygons[1] >= 3
+    ok = np.flatnonzero(mine).tolist()
     if not ok:
         return out
-    xy, counts = packed([lanes[k].polygon for k in ok])
+    xy, counts = packed_subset(polygons, mine)
     start = np.cumsum(counts) - counts
     nxt = np.arange(1, len(xy) + 1)
     nxt[start + counts - 1] = start  # the closing segment
@@ -165,15 +170,22 @@ def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float
     return out
 
 
-def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
-    """The lanes with left / right neighbours found by the probing rule (neighbour_rule "geometric")."""
-    candidates = tuple(f for f in lanes if f.kind == LANE and not f.is_intersection)
+def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarray] | None = None,
+               polygons: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[MapFeature, ...]:
+    """The lanes with left / right neighbours found by the probing rule (neighbour_rule "geometric"). `lines`,
+    `polygons`: the lanes' lines and polygons packed, if the caller has them (RoadMap.packed)."""
+    mine = np.fromiter((f.kind == LANE and not f.is_intersection for f in lanes), dtype=bool, count=len(lanes))
+    candidates = tuple(f for f, m in zip(lanes, mine.tolist()) if m)
+    lines = packed_subset(lines, mine) if lines is not None else packed([f.line for f in candidates])
+    polygons = packed_subset(polygons, mine) if polygons is not None else packed([f.polygon for f in candidates])
     cos_limit = math.cos(math.radians(NEIGHBOUR_ANGLE))
-    xy, kept = dedup_packed([f.line for f in candidates])
+    xy, kept = dedup_packed([], lines)
     mids = halfways(xy, kept)
-    at = [i for i, mid in enumerate(mids) if mid is not None]
+    has_mid = np.fromiter((mid is not None for mid in mids), dtype=bool, count=len(mids))
+    at = np.flatnonzero(has_mid).tolist()
     widths = dict(zip(at, widths_at([candidates[i] for i in at], np.array([mids[i][0] for i in at]),
-                                    np.array([mids[i][1] for i in at])).tolist()))
+                                    np.array([mids[i][1] for i in at]),
+                                    packed_subset(polygons, has_mid)).tolist()))
     # every probe point of every lane, tested at once: (lane, side, x, y, ux, uy)
     probes = []
     for i, mid in enumerate(mids):
@@ -184,12 +196,12 @@ def neighbours(lanes: tuple[MapFeature, ...]) -> tuple[MapFeature, ...]:
         for side, sign in (("left", 1.0), ("right", -1.0)):
             probes.append((i, side, x - sign * w * uy, y + sign * w * ux, ux, uy))
     qx, qy = np.array([p[2] for p in probes]), np.array([p[3] for p in probes])
-    pi, fi = PolygonIndex(candidates).pairs(qx, qy)
+    pi, fi = PolygonIndex(candidates, polygons).pairs(qx, qy)
     own = np.array([p[0] for p in probes], dtype=np.int64)
     other = fi != own[pi]
     pi, fi = pi[other], fi[other]
     # the nearest segment of each lane hit to its probe (Segments.nearest's arithmetic), and its direction there
-    segments = PackedSegments.of([f.line for f in candidates])
+    segments = PackedSegments.of([], lines)
     row, gap = segments.nearest(fi, qx[pi], qy[pi])
     has = row >= 0
     pi, fi, row, gap = pi[has], fi[has], row[has], gap[has]

@@ -141,9 +141,30 @@ class RoadMap:
         them: packed once when the map was validated, so that every index built on the map reuses them."""
         if what not in self._packed:
             self._packed[what] = packed([getattr(f, what) for f in self.features])
-        xy, counts = self._packed[what]
         mine = np.fromiter((f.kind in kinds for f in self.features), dtype=bool, count=len(self.features))
-        return xy[np.repeat(mine, counts)], counts[mine]
+        return packed_subset(self._packed[what], mine)
+
+    def with_features(self, changed: Iterable[MapFeature]) -> RoadMap:
+        """This map with some of its features replaced by new versions of themselves (same id, kind, line and
+        polygon objects: a source's completion of its lane graph, synth.lane_geometry.neighbours), their links
+        validated as RoadMap.of validates them; order and packed coordinates kept."""
+        new = {f.feature_id: f for f in changed}
+        lanes = {f.feature_id for f in self.features if f.kind == LANE}
+        out = []
+        for f in self.features:
+            g = new.pop(f.feature_id, None)
+            if g is None:
+                out.append(f)
+                continue
+            if g.kind != f.kind or g.line is not f.line or g.polygon is not f.polygon or g.map_id != f.map_id:
+                raise ValueError(f"with_features: feature {f.feature_id!r} changed more than its links")
+            out.append(_resolve_links(self.map_id, g, lanes) if g.kind == LANE else g)
+        if new:
+            raise ValueError(f"with_features: feature {next(iter(new))!r} is not in map {self.map_id!r}")
+        road = RoadMap(self.map_id, tuple(out))
+        road._by_id.update((f.feature_id, f) for f in out)
+        road._packed.update(self._packed)
+        return road
 
     def __getitem__(self, feature_id: str) -> MapFeature:
         return self._by_id[feature_id]
@@ -300,6 +321,12 @@ def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
     total = int(counts.sum())
     flat = np.fromiter(chain.from_iterable(chain.from_iterable(seqs)), dtype=float, count=2 * total)
     return flat.reshape(total, 2), counts
+
+
+def packed_subset(seqs: tuple[np.ndarray, np.ndarray], mine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The sequences of `packed`'s output where the boolean mask `mine` is true, packed."""
+    xy, counts = seqs
+    return xy[np.repeat(mine, counts)], counts[mine]
 
 
 def open_ring(pts: Points) -> Points:

@@ -72,3 +72,18 @@ def test_geometric_neighbours_are_the_same_direction_lanes_beside_never_the_onco
     got = {f.feature_id: (f.left, f.right) for f in neighbours(lanes)}
     assert got == {"r": ("m", None), "m": ("l", "r"), "l": (None, "m"), "o": (None, None), "i": (None, None)}
     assert all(f.neighbour_rule == "geometric" for f in neighbours(lanes))
+
+
+def test_with_features_validates_the_new_links_and_keeps_coordinates_and_packing():
+    road = RoadMap.of("m", [lane("a", RING, LINE), lane("b", RING, LINE), MapFeature("m", "l", ROAD_LINE, line=LINE)])
+    linked = road.with_features([road["a"].with_(left="b", neighbour_rule="geometric")])
+    assert linked["a"].left == "b" and linked["b"] == road["b"] and linked.features[1:] == road.features[1:]
+    assert [len(x) for x in linked.packed("line", LANE)] == [len(x) for x in road.packed("line", LANE)]
+    with pytest.raises(MapError, match="not a lane of the map"):
+        road.with_features([road["a"].with_(left="l")])
+    with pytest.raises(MapError, match="names itself"):
+        road.with_features([road["a"].with_(right="a")])
+    with pytest.raises(ValueError, match="changed more than its links"):
+        road.with_features([road["a"].with_(line=((0.0, 0.0), (1.0, 0.0)))])
+    with pytest.raises(ValueError, match="not in map"):
+        road.with_features([road["a"].with_(feature_id="ghost")])
