@@ -115,12 +115,13 @@ class RoadMap:
         seen: dict[str, MapFeature] = {}
         lines, polygons = [f.line for f in feats], [f.polygon for f in feats]
         coords = _plain_finite(lines, polygons)  # packed, when plain and finite
-        for f in feats:
+        distinct = _three_distinct(*coords[1]).tolist() if coords is not None else [None] * len(feats)
+        for f, three in zip(feats, distinct):
             if f.map_id != map_id:
                 raise MapError(f"map {map_id!r}: feature {f.feature_id!r} belongs to map {f.map_id!r}")
             if f.feature_id in seen:
                 raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
-            check_feature(f, coordinates=coords is None)
+            check_feature(f, coordinates=coords is None, three_distinct=three)
             seen[f.feature_id] = f
         if coords is None:  # every point checked above: two finite numbers
             coords = packed(lines), packed(polygons)
@@ -182,10 +183,14 @@ class RoadMap:
 
 def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
     # The common case, decided with set operations: every link names another lane of the map, none twice.
-    refs = (f.left, f.right, *f.successors, *f.predecessors)
-    if (f.feature_id not in refs and lanes.issuperset(r for r in refs if r is not None)
-            and None not in refs[2:] and len(set(f.successors)) == len(f.successors)
-            and len(set(f.predecessors)) == len(f.predecessors)):
+    succ, pred = f.successors, f.predecessors
+    refs = [*succ, *pred]
+    if f.left is not None:
+        refs.append(f.left)
+    if f.right is not None:
+        refs.append(f.right)
+    if (f.feature_id not in refs and lanes.issuperset(refs) and len(set(succ)) == len(succ)
+            and len(set(pred)) == len(pred)):
         return f
     def kept(ref: str | None, what: str) -> str | None:
         if ref is None:
@@ -223,10 +228,33 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
     return out if np.isfinite(out[0][0]).all() and np.isfinite(out[1][0]).all() else None
 
 
-def check_feature(f: MapFeature, coordinates: bool = True) -> None:
+def _three_distinct(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """For each of many packed rings, whether it has three distinct vertices (len(set(ring)) >= 3, in one pass):
+    a vertex unlike the first, then one unlike both."""
+    if not len(counts):
+        return np.zeros(0, dtype=bool)
+    ring = np.repeat(np.arange(len(counts)), counts)
+    start = np.cumsum(counts) - counts
+    has = counts > 0
+    first = np.zeros((len(counts), 2))
+    first[has] = xy[start[has]]
+    unlike_first = (xy != first[ring]).any(axis=1)
+    # each ring's first vertex unlike its first (its own first where there is none, matching nothing new)
+    at = np.where(unlike_first, np.arange(len(xy)), len(xy))
+    second_at = np.full(len(counts), len(xy))
+    np.minimum.at(second_at, ring, at)
+    second = first.copy()
+    found = second_at < len(xy)
+    second[found] = xy[second_at[found]]
+    third = unlike_first & (xy != second[ring]).any(axis=1)
+    return np.bincount(ring, weights=third, minlength=len(counts)) > 0
+
+
+def check_feature(f: MapFeature, coordinates: bool = True, three_distinct: bool | None = None) -> None:
     """The rules of one feature but simplicity (`check_simple` takes a map's polygons at once): a known kind,
     finite coordinates (unless `coordinates` is False: the caller checked them), a polygon of at least three
-    distinct vertices where the kind is an area, a line of two points or more where the kind has one."""
+    distinct vertices where the kind is an area (`three_distinct`: the caller's answer, if it has one), a line of
+    two points or more where the kind has one."""
     if f.kind not in KINDS:
         raise MapError(f"map {f.map_id!r}: feature {f.feature_id!r} has unknown kind {f.kind!r} "
                        f"(kinds: {', '.join(KINDS)})")
@@ -240,7 +268,7 @@ def check_feature(f: MapFeature, coordinates: bool = True) -> None:
         if a is None or a.ndim != 2 or a.shape[1] != 2 or not np.isfinite(a).all():
             bad = next((p for p in pts if a is None or len(p) != 2 or not all(_finite(v) for v in p)), pts[0])
             raise MapError(f"{_where(f)} has a {name} point that is not two finite numbers ({bad!r})")
-    if f.kind in AREA_KINDS and len(set(f.polygon)) < 3:
+    if f.kind in AREA_KINDS and not (len(set(f.polygon)) >= 3 if three_distinct is None else three_distinct):
         raise MapError(f"{_where(f)} has no polygon of three distinct vertices")
     if f.kind in LINE_KINDS and len(f.line) < 2:
         raise MapError(f"{_where(f)} has no line of two points or more")
@@ -341,7 +369,8 @@ def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[Ma
     lanes = {f.feature_id for f in features if f.kind == LANE}
     out = []
     for f in features:
-        if f.kind == LANE:
+        if f.kind == LANE and not (lanes.issuperset(f.successors) and lanes.issuperset(f.predecessors) and (
+                not neighbours or ((f.left is None or f.left in lanes) and (f.right is None or f.right in lanes)))):
             links = dict(successors=tuple(s for s in f.successors if s in lanes),
                          predecessors=tuple(s for s in f.predecessors if s in lanes))
             if neighbours:

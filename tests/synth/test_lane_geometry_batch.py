@@ -77,3 +77,13 @@ def test_candidates_are_every_box_that_holds_the_point(boxes, pts, scale):
     want = [(i, j) for i in range(len(pts)) for j in range(len(feats))
             if b[j, 0] <= xs[i] <= b[j, 2] and b[j, 1] <= ys[i] <= b[j, 3]]
     assert list(zip(pi.tolist(), fi.tolist())) == want
+
+
+@given(st.lists(st.lists(st.tuples(st.sampled_from([0.0, -0.0, 1.0, 2.5]), st.sampled_from([0.0, 1.0, -3.0])),
+                         max_size=7), max_size=8))
+@settings(max_examples=400, deadline=None)
+def test_three_distinct_is_len_of_set_of_each_ring(rings):
+    from synth.roadmap import _three_distinct, packed
+
+    got = _three_distinct(*packed([tuple(r) for r in rings])).tolist()
+    assert got == [len(set(r)) >= 3 for r in rings]
