@@ -142,8 +142,10 @@ class RoadMap:
         them: packed once when the map was validated, so that every index built on the map reuses them."""
         if what not in self._packed:
             self._packed[what] = packed([getattr(f, what) for f in self.features])
-        mine = np.fromiter((f.kind in kinds for f in self.features), dtype=bool, count=len(self.features))
-        return packed_subset(self._packed[what], mine)
+        if "kind" not in self._packed:  # each feature's kind as its index in KINDS, for the masks below
+            self._packed["kind"] = np.fromiter((KINDS.index(f.kind) for f in self.features), dtype=np.int64,
+                                               count=len(self.features))
+        return packed_subset(self._packed[what], np.isin(self._packed["kind"], [KINDS.index(k) for k in kinds]))
 
     def with_features(self, changed: Iterable[MapFeature]) -> RoadMap:
         """This map with some of its features replaced by new versions of themselves (same id, kind, line and
