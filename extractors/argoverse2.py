@@ -41,7 +41,18 @@ from extractors.sniff import Look
 from extractors.speed import speeds_by_track, track_speeds
 from storage.regular_files import open_regular
 from synth.lane_facts import RoadIndex
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, LANE, MapError, MapFeature, RoadMap, links_within, open_ring, points
+from synth.roadmap import (
+    CROSSWALK,
+    DRIVABLE_AREA,
+    LANE,
+    FloatPairs,
+    MapError,
+    MapFeature,
+    RoadMap,
+    links_within,
+    open_ring,
+    points,
+)
 
 DESCRIPTION = "Argoverse 2 log directory (annotations.feather), or a directory of logs"
 # Argoverse 2 sensor-dataset annotation categories (30 classes).
@@ -313,16 +324,21 @@ def _id(v: Any) -> str:
     return str(int(v))
 
 
+def _pairs(pts: list[dict]) -> list[tuple[float, float]]:
+    return [(float(p["x"]), float(p["y"])) for p in pts]
+
+
 def _lane(map_id: str, v: dict) -> MapFeature:
-    left, right = _xy(v["left_lane_boundary"]), _xy(v["right_lane_boundary"])
+    left_pts, right_pts = _pairs(v["left_lane_boundary"]), _pairs(v["right_lane_boundary"])
     fid = _id(v["id"])
-    if len(left) < 2 or len(right) < 2:
+    if len(left_pts) < 2 or len(right_pts) < 2:
         raise MapError(f"map {map_id!r}: lane {fid!r} has a boundary of fewer than two points")
+    left, right = np.array(left_pts, dtype=float), np.array(right_pts, dtype=float)
     n = max(len(left), len(right))
     centre = (_resample(left, n) + _resample(right, n)) / 2
-    ring = np.concatenate([right, left[::-1]])
+    ring = FloatPairs(right_pts + left_pts[::-1])  # the floats themselves: no round trip through numpy
     return MapFeature(
-        map_id, fid, LANE, polygon=open_ring(points(ring[:, 0], ring[:, 1])), line=points(centre[:, 0], centre[:, 1]),
+        map_id, fid, LANE, polygon=open_ring(ring), line=FloatPairs(map(tuple, centre.tolist())),
         source_type=str(v.get("lane_type", "")),
         left=None if v.get("left_neighbor_id") is None else _id(v["left_neighbor_id"]),
         right=None if v.get("right_neighbor_id") is None else _id(v["right_neighbor_id"]),

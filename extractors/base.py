@@ -316,18 +316,18 @@ def world_places(entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
 
 def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, Any]]]) -> None:
     """Name the map in every entity and add the lane facts of those the source places in the map's frame."""
-    placed = [(b, e) for b, e in entities if b.world is not None]
-    worlds = [b.world for b, _ in placed]
+    map_id = road.road.map_id
+    worlds = [b.world for b, _ in entities]
     facts = road.known(worlds)  # prefetched (prefetch_facts), by the world place itself
-    todo = [j for j, f in enumerate(facts) if f is None]
+    todo = [j for j, f in enumerate(facts) if f is None and worlds[j] is not None]
     if todo:
         for j, f in zip(todo, road.facts(*_facts_args([worlds[j] for j in todo]))):
             facts[j] = f
-    for _, e in entities:
-        e["map_id"] = road.road.map_id
-    for (_, e), f in zip(placed, facts):
-        e.update(lanes=list(f.lanes), lane=f.lane, in_intersection=f.in_intersection, on_crosswalk=f.on_crosswalk,
-                 off_road=f.off_road)
+    for (_, e), f in zip(entities, facts):
+        e["map_id"] = map_id
+        if f is not None:
+            e["lanes"], e["lane"] = list(f.lanes), f.lane
+            e["in_intersection"], e["on_crosswalk"], e["off_road"] = f.in_intersection, f.on_crosswalk, f.off_road
 
 
 def prefetch_facts(road: RoadIndex, worlds: Iterable[tuple[float, float, float]]) -> None:
