@@ -282,7 +282,7 @@ def read_map(path: Path, map_id: str) -> RoadMap:
     if not isinstance(data, dict) or not isinstance(data.get("lane_segments"), dict):
         raise MapError(f"{path} is not an Argoverse 2 map archive (no lane_segments)")
     try:
-        features = [_lane(map_id, v) for v in data["lane_segments"].values()]
+        features = _lanes(map_id, list(data["lane_segments"].values()))
         features += [_crossing(map_id, v) for v in (data.get("pedestrian_crossings") or {}).values()]
         features += [_area(map_id, v) for v in (data.get("drivable_areas") or {}).values()]
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -328,23 +328,100 @@ def _pairs(pts: list[dict]) -> list[tuple[float, float]]:
     return [(float(p["x"]), float(p["y"])) for p in pts]
 
 
-def _lane(map_id: str, v: dict) -> MapFeature:
-    left_pts, right_pts = _pairs(v["left_lane_boundary"]), _pairs(v["right_lane_boundary"])
-    fid = _id(v["id"])
-    if len(left_pts) < 2 or len(right_pts) < 2:
-        raise MapError(f"map {map_id!r}: lane {fid!r} has a boundary of fewer than two points")
-    left, right = np.array(left_pts, dtype=float), np.array(right_pts, dtype=float)
-    n = max(len(left), len(right))
-    centre = (_resample(left, n) + _resample(right, n)) / 2
-    ring = FloatPairs(right_pts + left_pts[::-1])  # the floats themselves: no round trip through numpy
-    return MapFeature(
-        map_id, fid, LANE, polygon=open_ring(ring), line=FloatPairs(map(tuple, centre.tolist())),
+def _lanes(map_id: str, segments: list[dict]) -> list[MapFeature]:
+    """The lanes of a map's lane segments, their centre lines computed for all lanes at once (_centres)."""
+    bounds = []
+    for v in segments:
+        left, right = _pairs(v["left_lane_boundary"]), _pairs(v["right_lane_boundary"])
+        if len(left) < 2 or len(right) < 2:
+            raise MapError(f"map {map_id!r}: lane {_id(v['id'])!r} has a boundary of fewer than two points")
+        bounds.append((left, right))
+    centres = _centres([b[0] for b in bounds], [b[1] for b in bounds])
+    return [MapFeature(
+        map_id, _id(v["id"]), LANE, polygon=open_ring(FloatPairs(right + left[::-1])), line=centre,
         source_type=str(v.get("lane_type", "")),
         left=None if v.get("left_neighbor_id") is None else _id(v["left_neighbor_id"]),
         right=None if v.get("right_neighbor_id") is None else _id(v["right_neighbor_id"]),
         successors=tuple(_id(s) for s in v.get("successors") or ()),
         predecessors=tuple(_id(s) for s in v.get("predecessors") or ()),
         is_intersection=bool(v.get("is_intersection", False)))
+        for v, (left, right), centre in zip(segments, bounds, centres)]
+
+
+def _centres(lefts: list[list[tuple[float, float]]], rights: list[list[tuple[float, float]]]) -> list[FloatPairs]:
+    """Each lane's centre line: (_resample(left, n) + _resample(right, n)) / 2, n the larger point count, for all
+    lanes at once, with the same arithmetic (the polygon keeps the boundaries' own floats)."""
+    if not lefts:
+        return []
+    lines = lefts + rights
+    counts = np.array([len(line) for line in lines], dtype=np.int64)
+    xy = np.array([p for line in lines for p in line], dtype=float).reshape(-1, 2)
+    n = np.maximum(counts[:len(lefts)], counts[len(lefts):])
+    ns = np.concatenate([n, n])
+    both = _resample_many(xy, counts, ns)
+    half = int(n.sum())
+    centre = ((both[:half] + both[half:]) / 2).tolist()
+    ends = np.cumsum(n).tolist()
+    return [FloatPairs(map(tuple, centre[end - k:end])) for end, k in zip(ends, n.tolist())]
+
+
+def _resample_many(xy: np.ndarray, counts: np.ndarray, ns: np.ndarray) -> np.ndarray:
+    """`_resample` of many lines (packed: points xy, each line's count) to ns[b] points each, packed, bit for bit:
+    each line's running length as np.cumsum sums it (along a row, in order), np.linspace's points, and
+    np.interp's interpolation (compiled_base.c's arr_interp: the knot at or below the point, the knot's own value
+    where the point is on one or beyond the last, else slope * (x - x0) + y0). A line that takes np.linspace's
+    or np.interp's rarer paths (no length, a subnormal step, overflow) is resampled by _resample itself."""
+    b_count, width = len(counts), int(counts.max())
+    start = np.cumsum(counts) - counts
+    row, col = np.repeat(np.arange(b_count), counts), np.arange(len(xy)) - np.repeat(start, counts)
+    d = np.diff(xy, axis=0)
+    lengths = np.hypot(d[:, 0], d[:, 1])
+    grid = np.zeros((b_count, width))
+    later = np.flatnonzero(col > 0)  # point k > 0 of its line ends the segment from point k - 1
+    grid[row[later], col[later]] = lengths[later - 1]
+    s = np.cumsum(grid, axis=1)
+    total = s[np.arange(b_count), counts - 1]
+    with np.errstate(all="ignore"):
+        step = total / (ns - 1)
+    odd = ~np.isfinite(s).all(axis=1) | (total == 0) | (step == 0)
+    out_start = np.cumsum(ns) - ns
+    out = np.empty((int(ns.sum()), 2))
+    r = np.repeat(np.arange(b_count), ns)
+    k = np.arange(len(out)) - np.repeat(out_start, ns)
+    x = k * step[r]
+    last = k == ns[r] - 1
+    x[last] = total[r[last]]
+    j = np.empty(len(out), dtype=np.int64)
+    for b in np.flatnonzero(~odd).tolist():  # the knot at or below each point: np.interp's binary search
+        m, o, n = int(counts[b]), int(out_start[b]), int(ns[b])
+        j[o:o + n] = np.searchsorted(s[b, :m], x[o:o + n], "right") - 1
+    ok = ~odd[r]
+    jo, ro, xo = j[ok], r[ok], x[ok]
+    at = start[ro] + np.clip(jo, 0, None)
+    f0 = xy[at]
+    res = f0.copy()
+    inner = (jo >= 0) & (jo < counts[ro] - 1)
+    s0 = s[ro, np.clip(jo, 0, None)]
+    between = inner & (s0 != xo)
+    bi = np.flatnonzero(between)
+    s1 = s[ro[bi], jo[bi] + 1]
+    f1 = xy[at[bi] + 1]
+    with np.errstate(all="ignore"):
+        slope = (f1 - f0[bi]) / (s1 - s0[bi])[:, None]
+        val = slope * (xo[bi] - s0[bi])[:, None] + f0[bi]
+        again = np.isnan(val)
+        if again.any():  # "if we get nan in one direction, try the other", then the knot's value
+            other = slope * (xo[bi] - s1)[:, None] + f1
+            val = np.where(again, other, val)
+            val = np.where(np.isnan(val) & (f0[bi] == f1), f0[bi], val)
+    res[bi] = val
+    beyond = jo >= counts[ro] - 1
+    res[beyond] = xy[start[ro[beyond]] + counts[ro[beyond]] - 1]
+    out[ok] = res
+    for b in np.flatnonzero(odd).tolist():
+        o, n = int(out_start[b]), int(ns[b])
+        out[o:o + n] = _resample(xy[start[b]:start[b] + counts[b]], n)
+    return out
 
 
 def _crossing(map_id: str, v: dict) -> MapFeature:

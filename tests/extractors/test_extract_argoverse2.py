@@ -11,6 +11,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.ipc as ipc
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from extractors.argoverse2 import extract
 from extractors.categories import ALL, CategorySelection
@@ -106,3 +108,28 @@ def test_unknown_category_is_typed_object_and_counted_and_foreign_files_exit_2(t
     with ipc.new_file(str(bad), foreign.schema) as w:
         w.write_table(foreign)
     assert_refused(r2s(capsys, "extract", "argoverse2", str(bad.parent), "--out", str(out)), out, "lacks")
+
+
+def _boundary(values):
+    return [(float(x), float(y)) for x, y in values]
+
+
+_coord = st.one_of(st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False), st.sampled_from([0.0, 1.0, 5e-324]))
+
+
+@given(st.lists(st.tuples(st.lists(st.tuples(_coord, _coord), min_size=2, max_size=9),
+                          st.lists(st.tuples(_coord, _coord), min_size=2, max_size=9)), min_size=1, max_size=6))
+@settings(max_examples=300, deadline=None)
+def test_centres_of_many_lanes_are_each_lane_s_resampled_midpoints_bit_for_bit(lanes):
+    # repeated points (zero-length segments), lines of no length and subnormal steps take np.interp's and
+    # np.linspace's rarer paths: the batched centres must equal the one-lane-at-a-time definition exactly
+    from extractors.argoverse2 import _centres, _resample
+
+    lanes = [(left + left[-1:], right) if i % 2 else (left, right) for i, (left, right) in enumerate(lanes)]
+    got = _centres([_boundary(left) for left, _ in lanes], [_boundary(right) for _, right in lanes])
+    for (left, right), centre in zip(lanes, got):
+        a, b = np.array(_boundary(left)), np.array(_boundary(right))
+        n = max(len(a), len(b))
+        want = (_resample(a, n) + _resample(b, n)) / 2
+        assert np.array_equal(np.array(centre), want) or (np.isnan(want).any() and np.array_equal(
+            np.array(centre), want, equal_nan=True))
