@@ -218,9 +218,9 @@ def log_frames(path: Path, cols: dict[str, np.ndarray], builder: FrameBuilder,
         with np.errstate(invalid="ignore"):
             boxes = np.isfinite(places.x) & (np.hypot(x, y) <= reach)
         egos = np.isfinite(places.ego_x)
-        prefetch_facts(road, zip([*places.x[boxes].tolist(), *places.ego_x[egos].tolist()],
-                                 [*places.y[boxes].tolist(), *places.ego_y[egos].tolist()],
-                                 [*places.yaw[boxes].tolist(), *places.ego_yaw[egos].tolist()]))
+        prefetch_facts(road, np.concatenate([places.x[boxes], places.ego_x[egos]]),
+                       np.concatenate([places.y[boxes], places.ego_y[egos]]),
+                       np.concatenate([places.yaw[boxes], places.ego_yaw[egos]]))
     for index, stamp in enumerate(stamps):
         if index % builder.options.every:
             continue

@@ -330,12 +330,15 @@ def road_facts(road: RoadIndex, entities: list[tuple[RecordedObject, dict[str, A
             e["in_intersection"], e["on_crosswalk"], e["off_road"] = f.in_intersection, f.on_crosswalk, f.off_road
 
 
-def prefetch_facts(road: RoadIndex, worlds: Iterable[tuple[float, float, float]]) -> None:
-    """Decide at once the lane facts of every world place (x, y, yaw) a scenario's frames will ask for (its
-    entities' RecordedObject.world in all its frames): road_facts then looks them up (RoadIndex.prefetch)."""
-    worlds = list(worlds)
+def prefetch_facts(road: RoadIndex, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray) -> None:
+    """Decide at once the lane facts of every world place (x, y, yaw: arrays) a scenario's frames will ask for
+    (its entities' RecordedObject.world in all its frames, whose floats these are): road_facts then looks them up
+    by the world place (RoadIndex.prefetch)."""
     with gc_paused():
-        road.prefetch(*_facts_args(worlds), keys=worlds)
+        yaw_list = np.asarray(yaws, dtype=float).tolist()
+        headings = [math.degrees(h) % 360.0 for h in yaw_list]  # as _facts_args turns a yaw into a heading
+        road.prefetch(xs, ys, headings, keys=zip(np.asarray(xs, dtype=float).tolist(),
+                                                 np.asarray(ys, dtype=float).tolist(), yaw_list))
 
 
 @contextlib.contextmanager

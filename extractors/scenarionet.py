@@ -340,8 +340,7 @@ def scenario_frames(
     if road is not None and kept:
         tracks_at, steps_at = np.nonzero(valid[:, kept])
         at = np.asarray(kept)[steps_at]
-        prefetch_facts(road, zip(pos[tracks_at, at, 0].tolist(), pos[tracks_at, at, 1].tolist(),
-                                 yaw[tracks_at, at].tolist()))
+        prefetch_facts(road, pos[tracks_at, at, 0], pos[tracks_at, at, 1], yaw[tracks_at, at])
     for step in kept:
         index = step // stride
         ex, ey = pos[ego_i, step]
