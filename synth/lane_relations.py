@@ -150,6 +150,9 @@ class LaneGraph:
 
     def neighbour(self, lane_id: str | None, side: str) -> str | None:
         """The map's left / right neighbour of a lane when it runs the same way, else None."""
+        return self._memo(("neighbour", lane_id, side), lambda: self._neighbour(lane_id, side))
+
+    def _neighbour(self, lane_id: str | None, side: str) -> str | None:
         f = self.lane(lane_id) if lane_id is not None else None
         other = getattr(f, side) if f is not None else None
         if other is None or self.lane(other) is None:
@@ -165,7 +168,7 @@ class LaneGraph:
         return lane_id
 
     def _lane_index(self) -> PolygonIndex:
-        return self._memo(("index",), lambda: PolygonIndex(self.road.lanes))
+        return self._memo(("index",), lambda: PolygonIndex(self.road.lanes, self.road.packed("polygon", LANE)))
 
     def oncoming(self, lane_id: str | None) -> str | None:
         """The oncoming lane of a lane (see the module's rule), or None."""
