@@ -337,10 +337,14 @@ def scenario_frames(
 
     stride = NUSCENES_KEYFRAME_STEP if nuscenes else 1
     kept = [step for step in range(0, steps, stride) if not (step // stride) % options.every and valid[ego_i, step]]
-    if road is not None and kept:
+    if road is not None and kept:  # every place a frame below will ask for: the tracks' within the radius of the
+        # ego (and a hair beyond: FrameBuilder decides it again, in the ego frame; any other is decided then)
         tracks_at, steps_at = np.nonzero(valid[:, kept])
         at = np.asarray(kept)[steps_at]
-        prefetch_facts(road, pos[tracks_at, at, 0], pos[tracks_at, at, 1], yaw[tracks_at, at])
+        px, py = pos[tracks_at, at, 0], pos[tracks_at, at, 1]
+        with np.errstate(invalid="ignore"):
+            near = np.hypot(px - pos[ego_i, at, 0], py - pos[ego_i, at, 1]) <= options.radius * (1 + 1e-9) + 1e-9
+        prefetch_facts(road, px[near], py[near], yaw[tracks_at, at][near])
     for step in kept:
         index = step // stride
         ex, ey = pos[ego_i, step]
