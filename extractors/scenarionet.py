@@ -470,20 +470,20 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     if value is None:
         return ()
     # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
-    # float pairs (RoadMap.of checks that they are finite). Anything else takes the general way below.
+    # (or [x, y, z]) float points (RoadMap.of checks that they are finite). Anything else takes the general way.
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 2 and value.shape[1] >= 2:
         return FloatPairs(map(tuple, value[:, :2].tolist()))
     if type(value) is list and value:
         try:
             lens = set(map(len, value))
-            pts = tuple(map(XY, value)) if len(lens) == 1 and min(lens) >= 2 else None
+            pts = FloatPairs(map(XY, value)) if len(lens) == 1 and min(lens) >= 2 else None
         except TypeError:  # an item that is not a sequence
             pts = None
         if pts is not None and set(map(type, chain.from_iterable(pts))) <= {float}:
-            return FloatPairs(pts)
+            return pts
     try:
         a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond a float
         raise MapError(f"map {map_id!r}: feature {fid!r} has a {what} that is not an array of numbers") from None
     if a.ndim != 2 or a.shape[1] < 2:
         raise MapError(f"map {map_id!r}: feature {fid!r} has a {what} of shape {a.shape}, not (N, 2) or (N, 3)")

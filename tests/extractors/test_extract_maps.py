@@ -162,6 +162,21 @@ def test_a_malformed_map_is_one_line_exit_2_and_nothing_written(tmp_path, capsys
         assert f"lane {fid!r}" in res.stderr
 
 
+@pytest.mark.parametrize("polygon", [
+    [[0.0, 0.0], [10 ** 400, 0.0], [4.0, 4.0]],  # an int beyond a float (was a traceback)
+    [[0.0, 0.0], [4.0, 0.0, 1.0], [4.0, 4.0]],  # points of different lengths
+    [[0.0, 0.0], ["four", 0.0], [4.0, 4.0]],
+])
+def test_a_polygon_not_of_numbers_is_one_line_exit_2(tmp_path, capsys, polygon):
+    sd = load_pickle(sorted(SCENARIONET.glob("sd_*.pkl"))[0])
+    fid, feature = _a_lane(sd)
+    sd["map_features"][fid] = {**feature, "polygon": polygon}
+    path = _write_scenario(sd, tmp_path / "in")
+    out = tmp_path / "out" / "frames.parquet"
+    res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out))
+    assert_refused(res, out, f"feature {fid!r} has a polygon that is not an array of numbers")
+
+
 def test_a_source_without_a_map_works_as_before(tmp_path, capsys):
     out = tmp_path / "frames"
     res = r2s(capsys, "extract", "nuscenes", str(EXCERPT), "--out", str(out))
