@@ -183,21 +183,19 @@ def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarra
     mids = halfways(xy, kept)
     has_mid = np.fromiter((mid is not None for mid in mids), dtype=bool, count=len(mids))
     at = np.flatnonzero(has_mid).tolist()
-    widths = dict(zip(at, widths_at([candidates[i] for i in at], np.array([mids[i][0] for i in at]),
-                                    np.array([mids[i][1] for i in at]),
-                                    packed_subset(polygons, has_mid)).tolist()))
-    # every probe point of every lane, tested at once: (lane, side, x, y, ux, uy)
-    probes = []
-    for i, mid in enumerate(mids):
-        w = widths.get(i, 0.0)
-        if mid is None or w <= 0:
-            continue
-        x, y, ux, uy = mid
-        for side, sign in (("left", 1.0), ("right", -1.0)):
-            probes.append((i, side, x - sign * w * uy, y + sign * w * ux, ux, uy))
-    qx, qy = np.array([p[2] for p in probes]), np.array([p[3] for p in probes])
+    mid = np.array([m if m is not None else (np.nan,) * 4 for m in mids], dtype=float).reshape(-1, 4)
+    w = np.zeros(len(mids))
+    w[at] = widths_at([candidates[i] for i in at], mid[at, 0], mid[at, 1], packed_subset(polygons, has_mid))
+    # every probe point of every lane, tested at once: lane i's left probe, then its right one
+    probing = np.flatnonzero(has_mid & ~(w <= 0))
+    x, y, ux, uy = (mid[probing, c] for c in range(4))
+    wp = w[probing]
+    qx = np.stack([x - 1.0 * wp * uy, x - -1.0 * wp * uy], axis=1).reshape(-1)
+    qy = np.stack([y + 1.0 * wp * ux, y + -1.0 * wp * ux], axis=1).reshape(-1)
+    own = np.repeat(probing, 2)
+    side_of = np.tile([0, 1], len(probing))
+    pux, puy = np.repeat(ux, 2), np.repeat(uy, 2)
     pi, fi = PolygonIndex(candidates, polygons).pairs(qx, qy)
-    own = np.array([p[0] for p in probes], dtype=np.int64)
     other = fi != own[pi]
     pi, fi = pi[other], fi[other]
     # the nearest segment of each lane hit to its probe (Segments.nearest's arithmetic), and its direction there
@@ -206,11 +204,10 @@ def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarra
     has = row >= 0
     pi, fi, row, gap = pi[has], fi[has], row[has], gap[has]
     d = segments.d[row] / np.sqrt(segments.length2[row])[:, None]
-    ux, uy = np.array([p[4] for p in probes])[pi], np.array([p[5] for p in probes])[pi]
-    along = ~(d[:, 0] * ux + d[:, 1] * uy < cos_limit)
+    along = ~(d[:, 0] * pux[pi] + d[:, 1] * puy[pi] < cos_limit)
     sides: dict[tuple[int, str], tuple[float, str]] = {}
     for p, k, g in zip(pi[along].tolist(), fi[along].tolist(), gap[along].tolist()):
-        i, side = probes[p][0], probes[p][1]
+        i, side = int(own[p]), ("left", "right")[side_of[p]]
         best = (g, candidates[k].feature_id)
         if (i, side) not in sides or best < sides[i, side]:
             sides[i, side] = best

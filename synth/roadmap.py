@@ -244,7 +244,7 @@ def _three_distinct(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:
     # each ring's first vertex unlike its first (its own first where there is none, matching nothing new)
     at = np.where(unlike_first, np.arange(len(xy)), len(xy))
     second_at = np.full(len(counts), len(xy))
-    np.minimum.at(second_at, ring, at)
+    second_at[has] = np.minimum.reduceat(at, start[has])
     second = first.copy()
     found = second_at < len(xy)
     second[found] = xy[second_at[found]]
