@@ -355,12 +355,15 @@ class RoadIndex:
             at = np.flatnonzero(count[pi] > 1)  # the pairs of those points, row-major
             near = self.directions_near(fi[at].tolist(), xs[pi[at]], ys[pi[at]])
             starts = np.searchsorted(pi[at], shared).tolist()
-            for i, s, m in zip(shared.tolist(), starts, count[shared].tolist()):
+            both: dict[tuple, LaneFacts] = {}  # facts by (lanes, chosen, flags): many points share them
+            for i, s, m, f in zip(shared.tolist(), starts, count[shared].tolist(), flags[shared].tolist()):
                 idx, dirs, h = fi[at[s:s + m]].tolist(), near[s:s + m], float(headings[i])
                 best = min(range(m), key=lambda j: (lane_difference(h, dirs[j]), feats[idx[j]].feature_id))
-                chosen = feats[idx[best]]
-                out[i] = self._facts_of(tuple(feats[k] for k in idx), chosen, bool(in_inter[i]), bool(on_cross[i]),
-                                        bool(in_drive[i]))
+                key = (tuple(idx), idx[best], f)
+                if key not in both:
+                    both[key] = self._facts_of(tuple(feats[k] for k in idx), feats[idx[best]], bool(f & 4),
+                                               bool(f & 2), bool(f & 1))
+                out[i] = both[key]
         return out  # type: ignore[return-value]
 
     @staticmethod

@@ -152,7 +152,7 @@ def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float
     out: list[tuple[float, float, float, float] | None] = []
     seg_all = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
     len_all = np.hypot(seg_all[:, 0], seg_all[:, 1])
-    segs, lens = seg_all.tolist(), len_all.tolist()
+    segs, lens, pts = seg_all.tolist(), len_all.tolist(), xy.tolist()
     end = 0
     for n in kept.tolist():
         start, end = end, end + n
@@ -160,12 +160,14 @@ def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float
             out.append(None)
             continue
         lengths = len_all[start:end - 1]
-        target = lengths.sum() / 2
+        target = float(lengths.sum()) / 2  # numpy's sum (pairwise), then Python floats: the same IEEE operations
         k = min(bisect_left(list(accumulate(lens[start:end - 1])), target), n - 2)
-        before = float(lengths[:k].sum())
-        lk = lengths[k]  # numpy's division: a zero length gives inf / nan (RoadMap.of refuses such maps), no raise
+        before = float(lengths[:k].sum()) if k else 0.0
+        lk = lens[start + k]  # > 0 or NaN after dedup; numpy scalars keep the old rule (inf / nan, no raise)
+        if lk == 0:
+            lk = len_all[start + k]
         t = (target - before) / lk
-        (dx, dy), (px, py) = segs[start + k], xy[start + k]
+        (dx, dy), (px, py) = segs[start + k], pts[start + k]
         out.append((float(px + t * dx), float(py + t * dy), float(dx / lk), float(dy / lk)))
     return out
 
