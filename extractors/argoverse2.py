@@ -337,7 +337,7 @@ def _lanes(map_id: str, segments: list[dict]) -> list[MapFeature]:
             raise MapError(f"map {map_id!r}: lane {_id(v['id'])!r} has a boundary of fewer than two points")
         bounds.append((left, right))
     centres = _centres([b[0] for b in bounds], [b[1] for b in bounds])
-    return [MapFeature(
+    return [MapFeature.fast(
         map_id, _id(v["id"]), LANE, polygon=open_ring(FloatPairs(right + left[::-1])), line=centre,
         source_type=str(v.get("lane_type", "")),
         left=None if v.get("left_neighbor_id") is None else _id(v["left_neighbor_id"]),

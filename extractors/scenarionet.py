@@ -436,7 +436,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
         if kind == CROSSWALK and not polygon:
             raise MapError(f"map {map_id!r}: crosswalk {fid!r} has no polygon")
         if kind != LANE:
-            features.append(MapFeature(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type))
+            features.append(MapFeature.fast(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type))
             continue
         left, right = _neighbour(map_id, fid, feat, "left_neighbor"), _neighbour(map_id, fid, feat, "right_neighbor")
         any_neighbour = any_neighbour or left is not None or right is not None
@@ -444,7 +444,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None
         if not polygon:
             # built below, for all such lanes at once
             widths[fid], rule = _widths(map_id, fid, feat, len(line)), "centre line"
-        features.append(MapFeature(
+        features.append(MapFeature.fast(
             map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
             successors=_ids(feat.get("exit_lanes")), predecessors=_ids(feat.get("entry_lanes")),
             is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),

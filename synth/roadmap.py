@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Iterable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from itertools import chain
 
 import numpy as np
@@ -70,6 +70,18 @@ class MapFeature:
     polygon_rule: str = "source"
     neighbour_rule: str = "source"
 
+    @classmethod
+    def fast(cls, map_id: str, feature_id: str, kind: str, **fields) -> MapFeature:
+        """MapFeature(map_id, feature_id, kind, **fields), built without the frozen __init__'s one setattr per
+        field (a reader builds thousands of features a map): the same fields and defaults, nothing else skipped
+        (MapFeature has no __post_init__); unknown fields are a TypeError as for the constructor."""
+        unknown = fields.keys() - _FIELDS
+        if unknown:
+            raise TypeError(f"MapFeature has no field {sorted(unknown)[0]!r}")
+        g = object.__new__(cls)
+        g.__dict__.update(_DEFAULTS, map_id=map_id, feature_id=feature_id, kind=kind, **fields)
+        return g
+
     def with_(self, **changes) -> MapFeature:
         """dataclasses.replace for a feature, without its per-field machinery (a map has thousands of features to
         complete, and replace costs more than the work on each): a copy of every field but `changes`. MapFeature
@@ -94,6 +106,7 @@ class MapFeature:
 
 
 _FIELDS = frozenset(f.name for f in fields(MapFeature))
+_DEFAULTS = {f.name: f.default for f in fields(MapFeature) if f.default is not MISSING}
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@ source's lanes (a polygon from a centre line, neighbours by probing), checked ag
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -87,3 +88,16 @@ def test_with_features_validates_the_new_links_and_keeps_coordinates_and_packing
         road.with_features([road["a"].with_(line=((0.0, 0.0), (1.0, 0.0)))])
     with pytest.raises(ValueError, match="not in map"):
         road.with_features([road["a"].with_(feature_id="ghost")])
+
+
+@pytest.mark.parametrize("fields", [{}, {"polygon": RING, "line": LINE, "left": "b", "successors": ("c",)},
+                                    {"is_intersection": True, "polygon_rule": "centre line", "source_type": "X"}])
+def test_fast_construction_and_with_are_the_dataclass_s_own(fields):
+    fast = MapFeature.fast("m", "a", LANE, **fields)
+    slow = MapFeature("m", "a", LANE, **fields)
+    assert fast == slow and hash(fast) == hash(slow) and repr(fast) == repr(slow)
+    assert fast.with_(left="z") == dataclasses.replace(slow, left="z")
+    with pytest.raises(TypeError, match="no field 'colour'"):
+        MapFeature.fast("m", "a", LANE, colour="red")
+    with pytest.raises(TypeError, match="no field 'colour'"):
+        slow.with_(colour="red")
