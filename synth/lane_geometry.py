@@ -127,49 +127,41 @@ def width_at(f: MapFeature, x: float, y: float) -> float:
 
 def halfway(line: Points) -> tuple[float, float, float, float] | None:
     """(x, y, ux, uy): the point halfway along a line by arc length and the unit direction of its segment."""
-    p = np.asarray(dedup(line), dtype=float).reshape(-1, 2)
-    return halfways(p, np.array([len(p)]))[0]
+    return halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2))
 
 
 def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
     """`halfway` of a line given as an (N, 2) array without consecutive repeats."""
-    if len(p) < 2:
-        return None
-    seg = np.diff(p, axis=0)
-    lengths = np.hypot(seg[:, 0], seg[:, 1])
-    target = lengths.sum() / 2
-    k = int(min(np.searchsorted(np.cumsum(lengths), target), len(seg) - 1))
-    before = float(lengths[:k].sum())
-    t = (target - before) / lengths[k]
-    ux, uy = seg[k] / lengths[k]
-    return (float(p[k, 0] + t * seg[k, 0]), float(p[k, 1] + t * seg[k, 1]), float(ux), float(uy))
+    return halfways(p, np.array([len(p)]))[0]
 
 
 def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float, float] | None]:
-    """`halfway_of` of many lines packed as dedup_packed gives them, with halfway_of's own arithmetic line by
-    line (numpy sums its terms in pairs, so each total is numpy's sum of that line's lengths; the running sum is
-    sequential, as np.cumsum's), without its dozen numpy calls per line."""
-    out: list[tuple[float, float, float, float] | None] = []
+    """`halfway_of` of many lines packed as dedup_packed gives them, with its arithmetic line by line."""
     seg_all = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
-    len_all = np.hypot(seg_all[:, 0], seg_all[:, 1])
-    segs, lens, pts = seg_all.tolist(), len_all.tolist(), xy.tolist()
+    lengths = np.hypot(seg_all[:, 0], seg_all[:, 1]).tolist()
+    segs, pts = seg_all.tolist(), xy.tolist()
+    out: list[tuple[float, float, float, float] | None] = []
     end = 0
     for n in kept.tolist():
         start, end = end, end + n
-        if n < 2:
-            out.append(None)
-            continue
-        lengths = len_all[start:end - 1]
-        target = float(lengths.sum()) / 2  # numpy's sum (pairwise), then Python floats: the same IEEE operations
-        k = min(bisect_left(list(accumulate(lens[start:end - 1])), target), n - 2)
-        before = float(lengths[:k].sum()) if k else 0.0
-        lk = lens[start + k]  # > 0 or NaN after dedup; numpy scalars keep the old rule (inf / nan, no raise)
-        if lk == 0:
-            lk = len_all[start + k]
-        t = (target - before) / lk
-        (dx, dy), (px, py) = segs[start + k], pts[start + k]
-        out.append((float(px + t * dx), float(py + t * dy), float(dx / lk), float(dy / lk)))
+        out.append(_halfway(pts, segs, lengths, start, n) if n >= 2 else None)
     return out
+
+
+def _halfway(pts: list, segs: list, lengths: list, start: int, n: int) -> tuple[float, float, float, float]:
+    """The point halfway along the line of points pts[start:start + n] (no consecutive repeats; segs and lengths
+    its segments' vectors and np.hypot lengths): the running length summed in order, the first segment where it
+    reaches half the total, the point that far along it, and that segment's unit direction."""
+    run = list(accumulate(lengths[start:start + n - 1]))
+    target = run[-1] / 2
+    k = min(bisect_left(run, target), n - 2)
+    before = run[k - 1] if k else 0.0
+    length = lengths[start + k]
+    if not length > 0:  # a NaN coordinate (RoadMap.of refuses the map): no raise meanwhile
+        return (math.nan,) * 4
+    t = (target - before) / length
+    (dx, dy), (px, py) = segs[start + k], pts[start + k]
+    return (px + t * dx, py + t * dy, dx / length, dy / length)
 
 
 def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarray] | None = None,

@@ -245,23 +245,25 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
 
 def _three_distinct(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """For each of many packed rings, whether it has three distinct vertices (len(set(ring)) >= 3, in one pass):
-    a vertex unlike the first, then one unlike both."""
+    a vertex unlike the first, then one unlike both. Points compared as complex numbers (x + iy, a view of the
+    same floats): equal exactly when both coordinates are, -0.0 equal to 0.0, as tuples compare."""
     if not len(counts):
         return np.zeros(0, dtype=bool)
+    z = np.ascontiguousarray(xy, dtype=float).view(np.complex128).reshape(-1)
     ring = np.repeat(np.arange(len(counts)), counts)
     start = np.cumsum(counts) - counts
     has = counts > 0
-    first = np.zeros((len(counts), 2))
-    first[has] = xy[start[has]]
-    unlike_first = (xy != first[ring]).any(axis=1)
+    first = np.zeros(len(counts), dtype=np.complex128)
+    first[has] = z[start[has]]
+    unlike_first = z != first[ring]
     # each ring's first vertex unlike its first (its own first where there is none, matching nothing new)
-    at = np.where(unlike_first, np.arange(len(xy)), len(xy))
-    second_at = np.full(len(counts), len(xy))
+    at = np.where(unlike_first, np.arange(len(z)), len(z))
+    second_at = np.full(len(counts), len(z))
     second_at[has] = np.minimum.reduceat(at, start[has])
     second = first.copy()
-    found = second_at < len(xy)
-    second[found] = xy[second_at[found]]
-    third = unlike_first & (xy != second[ring]).any(axis=1)
+    found = second_at < len(z)
+    second[found] = z[second_at[found]]
+    third = unlike_first & (z != second[ring])
     return np.bincount(ring, weights=third, minlength=len(counts)) > 0
 
 

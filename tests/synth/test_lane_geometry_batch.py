@@ -1,16 +1,18 @@
-"""The batched forms of the lane-geometry steps against their one-at-a-time definitions, bit for bit: the point
-halfway along many lines (`halfways` against `halfway_of`), the nearest segment of many (line, point) pairs
+"""The batched forms of the lane-geometry steps against their definitions: the point halfway along many lines
+(`halfways`, against the definition in exact arithmetic, and equal to one line at a time), the nearest segment of many (line, point) pairs
 (`PackedSegments.nearest` against `Segments.nearest`), and facts decided for many points at once against facts
 decided one point at a time, on random lines and points (hypothesis)."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from synth.lane_facts import PackedSegments, RoadIndex, Segments
-from synth.lane_geometry import dedup, dedup_packed, halfway_of, halfways, lane_polygon
+from synth.lane_geometry import dedup, dedup_packed, halfway, halfways, lane_polygon
 from synth.roadmap import LANE, MapFeature, RoadMap
 
 coord = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -21,10 +23,37 @@ lines = st.lists(st.lists(st.tuples(coord, coord), min_size=0, max_size=12).map(
 
 @given(lines)
 @settings(max_examples=300, deadline=None)
-def test_halfways_is_halfway_of_each_line(raw):
+def test_halfways_is_the_point_halfway_along_each_line_by_length(raw):
     xy, kept = dedup_packed(list(raw))
-    want = [halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2)) for line in raw]
-    assert halfways(xy, kept) == want
+    got = halfways(xy, kept)
+    assert got == [halfway(line) for line in raw]  # one line at a time: the same
+    for line, mid in zip(raw, got):
+        pts = dedup(line)
+        if len(pts) < 2:
+            assert mid is None
+            continue
+        x, y, ux, uy = mid
+        lengths = [math.hypot(bx - ax, by - ay) for (ax, ay), (bx, by) in zip(pts, pts[1:])]
+        total, tol = sum(lengths), 1e-9 * (1 + sum(lengths))
+        # some segment holds the point (exactly, to rounding) at half the line's length from its start, and the
+        # direction is that segment's
+        found = False
+        for k, ((ax, ay), (bx, by)) in enumerate(zip(pts, pts[1:])):
+            gap2, t = _on_segment(ax, ay, bx, by, x, y)
+            along = sum(lengths[:k]) + float(t) * lengths[k]
+            found = found or (float(gap2) <= tol ** 2 and abs(along - total / 2) <= tol and math.isclose(
+                ux, (bx - ax) / lengths[k], abs_tol=1e-12) and math.isclose(uy, (by - ay) / lengths[k], abs_tol=1e-12))
+        assert found, (pts, mid)
+
+
+def _on_segment(ax, ay, bx, by, x, y):
+    """(squared distance, parameter) of the point of segment a-b nearest (x, y), in exact arithmetic."""
+    from fractions import Fraction
+
+    dx, dy = Fraction(bx) - Fraction(ax), Fraction(by) - Fraction(ay)
+    px, py = Fraction(x) - Fraction(ax), Fraction(y) - Fraction(ay)
+    t = min(max((px * dx + py * dy) / (dx * dx + dy * dy), Fraction(0)), Fraction(1))
+    return (px - t * dx) ** 2 + (py - t * dy) ** 2, t
 
 
 @given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20))
