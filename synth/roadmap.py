@@ -75,22 +75,22 @@ class MapFeature:
         """MapFeature(map_id, feature_id, kind, **fields), built without the frozen __init__'s one setattr per
         field (a reader builds thousands of features a map): the same fields and defaults, nothing else skipped
         (MapFeature has no __post_init__); unknown fields are a TypeError as for the constructor."""
-        unknown = fields.keys() - _FIELDS
-        if unknown:
-            raise TypeError(f"MapFeature has no field {sorted(unknown)[0]!r}")
+        if not _FIELDS.issuperset(fields):
+            raise TypeError(f"MapFeature has no field {sorted(fields.keys() - _FIELDS)[0]!r}")
         g = object.__new__(cls)
-        g.__dict__.update(_DEFAULTS, map_id=map_id, feature_id=feature_id, kind=kind, **fields)
+        # the instance dict in one piece (frozen: __setattr__ refuses, setting __dict__ itself does not)
+        object.__setattr__(g, "__dict__", {"map_id": map_id, "feature_id": feature_id, "kind": kind, **_DEFAULTS,
+                                           **fields})
         return g
 
     def with_(self, **changes) -> MapFeature:
         """dataclasses.replace for a feature, without its per-field machinery (a map has thousands of features to
         complete, and replace costs more than the work on each): a copy of every field but `changes`. MapFeature
         has no __post_init__ nor derived field, so nothing replace would run is skipped."""
-        unknown = changes.keys() - _FIELDS
-        if unknown:
-            raise TypeError(f"MapFeature has no field {sorted(unknown)[0]!r}")
+        if not _FIELDS.issuperset(changes):
+            raise TypeError(f"MapFeature has no field {sorted(changes.keys() - _FIELDS)[0]!r}")
         g = object.__new__(MapFeature)
-        g.__dict__.update(self.__dict__, **changes)  # frozen: __setattr__ refuses, the instance dict does not
+        object.__setattr__(g, "__dict__", {**self.__dict__, **changes})  # frozen: as in `fast`
         return g
 
     @property
