@@ -135,33 +135,56 @@ def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
     return halfways(p, np.array([len(p)]))[0]
 
 
+ROW_SPAN = 512  # segments: lines up to this long have their running lengths summed as rows of one matrix
+
+
 def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float, float] | None]:
-    """`halfway_of` of many lines packed as dedup_packed gives them, with its arithmetic line by line."""
-    seg_all = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
-    lengths = np.hypot(seg_all[:, 0], seg_all[:, 1]).tolist()
-    segs, pts = seg_all.tolist(), xy.tolist()
-    out: list[tuple[float, float, float, float] | None] = []
-    end = 0
-    for n in kept.tolist():
-        start, end = end, end + n
-        out.append(_halfway(pts, segs, lengths, start, n) if n >= 2 else None)
+    """The point halfway along each of many lines (packed as dedup_packed gives them: no consecutive repeats)
+    and the unit direction of its segment: each line's running length summed in order (np.cumsum along a row,
+    or itertools.accumulate for a line longer than ROW_SPAN: the same additions), the first segment where it
+    reaches half the total, the point that far along it. None for a line of fewer than two points; NaN for a
+    line with a NaN coordinate (RoadMap.of refuses such maps)."""
+    kept = np.asarray(kept, dtype=np.int64).reshape(-1)
+    lines = len(kept)
+    seg = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    start = np.cumsum(kept) - kept
+    nseg = np.maximum(kept - 1, 0)
+    total, before, k = np.zeros(lines), np.zeros(lines), np.zeros(lines, dtype=np.int64)
+    short = np.flatnonzero((nseg > 0) & (nseg <= ROW_SPAN))
+    if len(short):
+        width = int(nseg[short].max())
+        row = np.repeat(np.arange(len(short)), nseg[short])
+        col = np.arange(len(row)) - np.repeat(np.cumsum(nseg[short]) - nseg[short], nseg[short])
+        grid = np.zeros((len(short), width))
+        grid[row, col] = length[np.repeat(start[short], nseg[short]) + col]
+        run = np.cumsum(grid, axis=1)
+        total[short] = run[np.arange(len(short)), nseg[short] - 1]
+        with np.errstate(invalid="ignore"):
+            below = (run < (total[short] / 2)[:, None]) & (np.arange(width) < nseg[short][:, None])
+        k[short] = np.minimum(below.sum(axis=1), nseg[short] - 1)
+        has = k[short] > 0
+        before[short[has]] = run[np.flatnonzero(has), k[short[has]] - 1]
+    for i in np.flatnonzero(nseg > ROW_SPAN).tolist():  # long lines: the same sums, one line at a time
+        lengths = length[start[i]:start[i] + nseg[i]].tolist()
+        run_i = list(accumulate(lengths))
+        total[i] = run_i[-1]
+        k[i] = min(bisect_left(run_i, run_i[-1] / 2), nseg[i] - 1)
+        before[i] = run_i[k[i] - 1] if k[i] else 0.0
+    out: list[tuple[float, float, float, float] | None] = [None] * lines
+    some = np.flatnonzero(nseg > 0)
+    if not len(some):
+        return out
+    at = start[some] + k[some]  # the segment (and its first point) holding the halfway point
+    with np.errstate(all="ignore"):
+        lk = length[at]
+        t = (total[some] / 2 - before[some]) / lk
+        d, p = seg[at], xy[at]
+        mid = np.stack([p[:, 0] + t * d[:, 0], p[:, 1] + t * d[:, 1], d[:, 0] / lk, d[:, 1] / lk], axis=1)
+    mid[~(lk > 0)] = np.nan
+    for i, m in zip(some.tolist(), mid.tolist()):
+        out[i] = tuple(m)
     return out
-
-
-def _halfway(pts: list, segs: list, lengths: list, start: int, n: int) -> tuple[float, float, float, float]:
-    """The point halfway along the line of points pts[start:start + n] (no consecutive repeats; segs and lengths
-    its segments' vectors and np.hypot lengths): the running length summed in order, the first segment where it
-    reaches half the total, the point that far along it, and that segment's unit direction."""
-    run = list(accumulate(lengths[start:start + n - 1]))
-    target = run[-1] / 2
-    k = min(bisect_left(run, target), n - 2)
-    before = run[k - 1] if k else 0.0
-    length = lengths[start + k]
-    if not length > 0:  # a NaN coordinate (RoadMap.of refuses the map): no raise meanwhile
-        return (math.nan,) * 4
-    t = (target - before) / length
-    (dx, dy), (px, py) = segs[start + k], pts[start + k]
-    return (px + t * dx, py + t * dy, dx / length, dy / length)
 
 
 def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarray] | None = None,

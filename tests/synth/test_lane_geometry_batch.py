@@ -116,3 +116,18 @@ def test_three_distinct_is_len_of_set_of_each_ring(rings):
 
     got = _three_distinct(*packed([tuple(r) for r in rings])).tolist()
     assert got == [len(set(r)) >= 3 for r in rings]
+
+
+@given(lines)
+@settings(max_examples=200, deadline=None)
+def test_halfways_of_long_lines_one_at_a_time_are_the_matrix_s(raw):
+    # lines beyond ROW_SPAN segments are summed one at a time; the same additions in the same order
+    import synth.lane_geometry as lg
+
+    xy, kept = dedup_packed(list(raw))
+    rows = lg.halfways(xy, kept)
+    span, lg.ROW_SPAN = lg.ROW_SPAN, 0
+    try:
+        assert lg.halfways(xy, kept) == rows
+    finally:
+        lg.ROW_SPAN = span
