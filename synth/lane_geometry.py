@@ -22,7 +22,7 @@ from itertools import accumulate
 import numpy as np
 
 from synth.lane_facts import PackedSegments, PolygonIndex, Segments
-from synth.roadmap import LANE, FloatPairs, MapFeature, Points, packed, packed_subset
+from synth.roadmap import LANE, MapFeature, Points, ShellRing, packed, packed_subset
 
 # The width of a nuScenes lane connector, which the converter gives without polygon or width: the median width
 # (twice the distance from the centre line's halfway point to the polygon's boundary) of the nuScenes lanes that
@@ -85,7 +85,7 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
     ring, which = shapely.get_coordinates(shapely.get_exterior_ring(areas), return_index=True)
     starts = np.searchsorted(which, np.arange(len(todo) + 1))
     for k, i in enumerate(todo):
-        out[i] = FloatPairs(map(tuple, ring[starts[k]:starts[k + 1] - 1].tolist()))  # closing repeat dropped
+        out[i] = ShellRing(map(tuple, ring[starts[k]:starts[k + 1] - 1].tolist()))  # closing repeat dropped
     return out
 
 

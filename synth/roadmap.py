@@ -41,6 +41,14 @@ class FloatPairs(tuple):
     __slots__ = ()
 
 
+class ShellRing(FloatPairs):
+    """The outer ring of a polygon GEOS made (synth.lane_geometry.lane_polygons: a buffer, which GEOS returns
+    valid), without its closing repeat: simple by construction, so check_simple need not ask GEOS again. Only
+    that function constructs it."""
+
+    __slots__ = ()
+
+
 class MapError(InputError, ValueError):
     """A map that is not what the map format says (NaN, a self-crossing polygon, a dangling lane id). One line."""
 
@@ -228,7 +236,7 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
     """`packed` lines and polygons, if every point of every sequence is a pair of finite Python floats or ints
     (what `points` and the readers make): then check_feature need not look at the coordinates one feature at a
     time. None for anything else, which check_feature then judges (and names) feature by feature."""
-    seqs = [pts for pts in chain(lines, polygons) if type(pts) is not FloatPairs]  # the others are float pairs
+    seqs = [pts for pts in chain(lines, polygons) if not isinstance(pts, FloatPairs)]  # the others are float pairs
     try:
         if not set(map(len, chain.from_iterable(seqs))) <= {2}:
             return None
@@ -305,7 +313,9 @@ def check_simple(features: Sequence[MapFeature], polygons: tuple[np.ndarray, np.
     features' polygons packed, if the caller has them."""
     import shapely
 
-    area = np.fromiter((f.kind in AREA_KINDS for f in features), dtype=bool, count=len(features))
+    # the polygons to ask GEOS about: of the area kinds, but those GEOS itself made a valid polygon's shell
+    area = np.fromiter((f.kind in AREA_KINDS and type(f.polygon) is not ShellRing for f in features), dtype=bool,
+                       count=len(features))
     if not area.any():
         return
     areas = [f for f, a in zip(features, area.tolist()) if a]

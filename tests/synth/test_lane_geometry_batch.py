@@ -131,3 +131,16 @@ def test_halfways_of_long_lines_one_at_a_time_are_the_matrix_s(raw):
         assert lg.halfways(xy, kept) == rows
     finally:
         lg.ROW_SPAN = span
+
+
+@given(st.lists(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=12), min_size=1,
+                max_size=5), st.floats(0.1, 8.0), st.floats(0.1, 8.0))
+@settings(max_examples=300, deadline=None)
+def test_lane_polygons_are_simple_rings_as_check_simple_trusts(raw, left, right):
+    # check_simple does not ask GEOS again about a ShellRing (the shell GEOS's buffer made): it must be simple,
+    # however tightly the centre line turns or doubles back
+    from synth.lane_geometry import lane_polygons
+    from synth.roadmap import ShellRing, ring_is_simple
+
+    for ring in lane_polygons([tuple(r) for r in raw], [left] * len(raw), [right] * len(raw)):
+        assert ring == () or (type(ring) is ShellRing and ring_is_simple(ring))
