@@ -340,16 +340,14 @@ class RoadIndex:
         lane[one] = fi[first[one]]
         flags = in_inter.astype(np.int64) * 4 + on_cross * 2 + in_drive
         code = np.where(count <= 1, (lane + 1) * 8 + flags, -1)
-        out: list[LaneFacts | None] = [None] * n
-        known: dict[int, LaneFacts] = {}
-        for i, c in enumerate(code.tolist()):
-            if c < 0:
-                continue
-            if c not in known:
-                k, f = c // 8 - 1, c % 8
-                lanes = (feats[k],) if k >= 0 else ()
-                known[c] = self._facts_of(lanes, lanes[0] if lanes else None, bool(f & 4), bool(f & 2), bool(f & 1))
-            out[i] = known[c]
+        distinct, which = np.unique(code, return_inverse=True)  # code -1 (several lanes) sorts first
+        facts: list[LaneFacts | None] = []
+        for c in distinct.tolist():
+            k, f = c // 8 - 1, c % 8
+            lanes = (feats[k],) if k >= 0 else ()
+            facts.append(None if c < 0 else self._facts_of(lanes, lanes[0] if lanes else None, bool(f & 4),
+                                                             bool(f & 2), bool(f & 1)))
+        out: list[LaneFacts | None] = [facts[j] for j in which.tolist()]
         shared = np.flatnonzero(count > 1)
         if len(shared):
             at = np.flatnonzero(count[pi] > 1)  # the pairs of those points, row-major
