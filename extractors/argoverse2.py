@@ -360,9 +360,9 @@ def _centres(lefts: list[list[tuple[float, float]]], rights: list[list[tuple[flo
     ns = np.concatenate([n, n])
     both = _resample_many(xy, counts, ns)
     half = int(n.sum())
-    centre = ((both[:half] + both[half:]) / 2).tolist()
-    ends = np.cumsum(n).tolist()
-    return [FloatPairs(map(tuple, centre[end - k:end])) for end, k in zip(ends, n.tolist())]
+    centre = (both[:half] + both[half:]) / 2
+    xs, ys, ends = centre[:, 0].tolist(), centre[:, 1].tolist(), np.cumsum(n).tolist()
+    return [FloatPairs(zip(xs[end - k:end], ys[end - k:end])) for end, k in zip(ends, n.tolist())]
 
 
 def _resample_many(xy: np.ndarray, counts: np.ndarray, ns: np.ndarray) -> np.ndarray:

@@ -472,7 +472,7 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
     # (or [x, y, z]) float points (RoadMap.of checks that they are finite). Anything else takes the general way.
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 2 and value.shape[1] >= 2:
-        return FloatPairs(map(tuple, value[:, :2].tolist()))
+        return FloatPairs(zip(value[:, 0].tolist(), value[:, 1].tolist()))
     if type(value) is list and value:
         try:
             lens = set(map(len, value))

@@ -84,8 +84,9 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
         areas[k] = max(areas[k].geoms, key=lambda g: g.area)
     ring, which = shapely.get_coordinates(shapely.get_exterior_ring(areas), return_index=True)
     starts = np.searchsorted(which, np.arange(len(todo) + 1))
-    for k, i in enumerate(todo):
-        out[i] = ShellRing(map(tuple, ring[starts[k]:starts[k + 1] - 1].tolist()))  # closing repeat dropped
+    xs, ys, starts = ring[:, 0].tolist(), ring[:, 1].tolist(), starts.tolist()
+    for k, i in enumerate(todo):  # each ring's closing repeat dropped
+        out[i] = ShellRing(zip(xs[starts[k]:starts[k + 1] - 1], ys[starts[k]:starts[k + 1] - 1]))
     return out
 
 
