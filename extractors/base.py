@@ -335,10 +335,17 @@ def prefetch_facts(road: RoadIndex, xs: np.ndarray, ys: np.ndarray, yaws: np.nda
     (its entities' RecordedObject.world in all its frames, whose floats these are): road_facts then looks them up
     by the world place (RoadIndex.prefetch)."""
     with gc_paused():
-        yaw_list = np.asarray(yaws, dtype=float).tolist()
-        headings = [math.degrees(h) % 360.0 for h in yaw_list]  # as _facts_args turns a yaw into a heading
-        road.prefetch(xs, ys, headings, keys=zip(np.asarray(xs, dtype=float).tolist(),
-                                                 np.asarray(ys, dtype=float).tolist(), yaw_list))
+        yaws = np.asarray(yaws, dtype=float)
+        road.prefetch(xs, ys, headings_of(yaws), keys=zip(np.asarray(xs, dtype=float).tolist(),
+                                                 np.asarray(ys, dtype=float).tolist(), yaws.tolist()))
+
+
+def headings_of(yaws: np.ndarray) -> np.ndarray:
+    """math.degrees(h) % 360.0 of each yaw, as _facts_args turns one into a heading, for many at once: CPython's
+    degrees multiplies by 180 / pi and its float % is fmod taking the divisor's sign, as numpy's product and
+    remainder do (the same floats, so a fact never depends on which path decided it)."""
+    with np.errstate(all="ignore"):  # a yaw beyond a float's degrees: NaN, as math.degrees(h) % 360.0 gives
+        return (np.asarray(yaws, dtype=float) * (180.0 / math.pi)) % 360.0
 
 
 @contextlib.contextmanager

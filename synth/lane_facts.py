@@ -133,6 +133,8 @@ class PolygonIndex:
         b = self.box[fi]
         keep = (b[:, 0] <= xs[pi]) & (xs[pi] <= b[:, 2]) & (b[:, 1] <= ys[pi]) & (ys[pi] <= b[:, 3])
         pi, fi = pi[keep], fi[keep]
+        if proposed is not None and not len(self._grid.wide):  # the grid's own order: points, then boxes, ascending
+            return pi, fi
         order = np.lexsort((fi, pi))
         return pi[order], fi[order]
 
@@ -253,6 +255,8 @@ class _BoxGrid:
         return cls(side, x0, y0, nx, ny, keys[order], box_of[order], wide)
 
     def proposals(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs in row-major order (points ascending, each point's filed boxes ascending: the keys were sorted
+        stably over boxes in order), then the wide boxes' pairs."""
         with np.errstate(all="ignore"):
             fx, fy = np.floor(xs / self.side) - self.x0, np.floor(ys / self.side) - self.y0
         # points off the grid (or not finite) meet no filed box; the exact test would refuse them anyway
