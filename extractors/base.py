@@ -341,9 +341,9 @@ def prefetch_facts(road: RoadIndex, xs: np.ndarray, ys: np.ndarray, yaws: np.nda
 
 
 def headings_of(yaws: np.ndarray) -> np.ndarray:
-    """math.degrees(h) % 360.0 of each yaw, as _facts_args turns one into a heading, for many at once: CPython's
-    degrees multiplies by 180 / pi and its float % is fmod taking the divisor's sign, as numpy's product and
-    remainder do (the same floats, so a fact never depends on which path decided it)."""
+    """math.degrees(h) % 360.0 of each yaw (radians CCW from +x) for many at once, the heading RoadIndex takes:
+    CPython's degrees multiplies by 180 / pi and its float % is fmod taking the divisor's sign, as numpy's product
+    and remainder do. prefetch_facts and a frame's own lookup (_facts_args) both use it."""
     with np.errstate(all="ignore"):  # a yaw beyond a float's degrees: NaN, as math.degrees(h) % 360.0 gives
         return (np.asarray(yaws, dtype=float) * (180.0 / math.pi)) % 360.0
 
@@ -367,7 +367,7 @@ def gc_paused() -> Iterator[None]:
 
 def _facts_args(worlds: list[tuple[float, float, float]]) -> tuple[list[float], list[float], list[float]]:
     """RoadIndex.facts's points and headings (degrees CCW from +x) of world places."""
-    return [w[0] for w in worlds], [w[1] for w in worlds], [math.degrees(w[2]) % 360.0 for w in worlds]
+    return [w[0] for w in worlds], [w[1] for w in worlds], headings_of(np.array([w[2] for w in worlds])).tolist()
 
 
 def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:

@@ -395,8 +395,7 @@ class RoadIndex:
         many pairs at once: the same float operations on the same values, the first nearest segment of each
         (np.argmin's), so the same directions; None for a lane without a segment."""
         if self._packed_segments is None:
-            self._packed_segments = PackedSegments.of([f.line for f in self.lanes.features],
-                                                      self.road.packed("line", LANE))
+            self._packed_segments = PackedSegments.of_packed(*self.road.packed("line", LANE))
         return self._packed_segments.directions_near(np.asarray(lanes, dtype=np.int64), xs, ys)
 
 
@@ -448,9 +447,12 @@ class PackedSegments:
     count: np.ndarray
 
     @classmethod
-    def of(cls, lines: list, packed_lines: tuple[np.ndarray, np.ndarray] | None = None) -> PackedSegments:
-        """`packed_lines`: the lines packed, if the caller has them (RoadMap.packed)."""
-        xy, counts = packed_lines if packed_lines is not None else packed(lines)
+    def of(cls, lines: list) -> PackedSegments:
+        return cls.of_packed(*packed(lines))
+
+    @classmethod
+    def of_packed(cls, xy: np.ndarray, counts: np.ndarray) -> PackedSegments:
+        """`of` lines already packed (`packed`'s output, e.g. RoadMap.packed)."""
         a, d = xy[:-1], np.diff(xy, axis=0)
         length2 = (d * d).sum(axis=1)
         line = np.repeat(np.arange(len(counts)), counts)[:-1] if len(xy) else np.zeros(0, dtype=np.int64)

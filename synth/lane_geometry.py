@@ -35,11 +35,14 @@ def dedup(line: Points) -> Points:
     return tuple(p for i, p in enumerate(line) if i == 0 or p != line[i - 1])
 
 
-def dedup_packed(lines: list[Points], lines_packed: tuple[np.ndarray, np.ndarray] | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def dedup_packed(lines: list[Points]) -> tuple[np.ndarray, np.ndarray]:
     """`dedup` of many lines at once: their points without consecutive repeats, concatenated (N, 2), and how many
-    each line keeps. `lines_packed`: the lines packed, if the caller has them."""
-    xy, counts = lines_packed if lines_packed is not None else packed(lines)
+    each line keeps."""
+    return dedup_arrays(*packed(lines))
+
+
+def dedup_arrays(xy: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`dedup_packed` of lines already packed (`packed`'s output)."""
     line = np.repeat(np.arange(len(counts)), counts)
     keep = np.ones(len(xy), dtype=bool)
     keep[1:] = (xy[1:] != xy[:-1]).any(axis=1)
@@ -128,11 +131,7 @@ def width_at(f: MapFeature, x: float, y: float) -> float:
 
 def halfway(line: Points) -> tuple[float, float, float, float] | None:
     """(x, y, ux, uy): the point halfway along a line by arc length and the unit direction of its segment."""
-    return halfway_of(np.asarray(dedup(line), dtype=float).reshape(-1, 2))
-
-
-def halfway_of(p: np.ndarray) -> tuple[float, float, float, float] | None:
-    """`halfway` of a line given as an (N, 2) array without consecutive repeats."""
+    p = np.asarray(dedup(line), dtype=float).reshape(-1, 2)
     return halfways(p, np.array([len(p)]))[0]
 
 
@@ -140,11 +139,17 @@ ROW_SPAN = 512  # segments: lines up to this long have their running lengths sum
 
 
 def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float, float] | None]:
+    """`halfway_rows` as one tuple per line, None for a line of fewer than two points."""
+    rows = halfway_rows(xy, kept)
+    return [tuple(r) if n >= 2 else None for r, n in zip(rows.tolist(), np.asarray(kept).reshape(-1).tolist())]
+
+
+def halfway_rows(xy: np.ndarray, kept: np.ndarray) -> np.ndarray:
     """The point halfway along each of many lines (packed as dedup_packed gives them: no consecutive repeats)
-    and the unit direction of its segment: each line's running length summed in order (np.cumsum along a row,
-    or itertools.accumulate for a line longer than ROW_SPAN: the same additions), the first segment where it
-    reaches half the total, the point that far along it. None for a line of fewer than two points; NaN for a
-    line with a NaN coordinate (RoadMap.of refuses such maps)."""
+    and the unit direction of its segment, one row (x, y, ux, uy) a line: each line's running length summed in
+    order (np.cumsum along a row, or itertools.accumulate for a line longer than ROW_SPAN: the same additions),
+    the first segment where it reaches half the total, the point that far along it. NaN for a line of fewer
+    than two points or with a NaN coordinate (RoadMap.of refuses such maps)."""
     kept = np.asarray(kept, dtype=np.int64).reshape(-1)
     lines = len(kept)
     seg = np.diff(xy, axis=0) if len(xy) else np.zeros((0, 2))
@@ -172,10 +177,8 @@ def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float
         total[i] = run_i[-1]
         k[i] = min(bisect_left(run_i, run_i[-1] / 2), nseg[i] - 1)
         before[i] = run_i[k[i] - 1] if k[i] else 0.0
-    out: list[tuple[float, float, float, float] | None] = [None] * lines
+    out = np.full((lines, 4), np.nan)
     some = np.flatnonzero(nseg > 0)
-    if not len(some):
-        return out
     at = start[some] + k[some]  # the segment (and its first point) holding the halfway point
     with np.errstate(all="ignore"):
         lk = length[at]
@@ -183,8 +186,7 @@ def halfways(xy: np.ndarray, kept: np.ndarray) -> list[tuple[float, float, float
         d, p = seg[at], xy[at]
         mid = np.stack([p[:, 0] + t * d[:, 0], p[:, 1] + t * d[:, 1], d[:, 0] / lk, d[:, 1] / lk], axis=1)
     mid[~(lk > 0)] = np.nan
-    for i, m in zip(some.tolist(), mid.tolist()):
-        out[i] = tuple(m)
+    out[some] = mid
     return out
 
 
@@ -197,12 +199,11 @@ def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarra
     lines = packed_subset(lines, mine) if lines is not None else packed([f.line for f in candidates])
     polygons = packed_subset(polygons, mine) if polygons is not None else packed([f.polygon for f in candidates])
     cos_limit = math.cos(math.radians(NEIGHBOUR_ANGLE))
-    xy, kept = dedup_packed([], lines)
-    mids = halfways(xy, kept)
-    has_mid = np.fromiter((mid is not None for mid in mids), dtype=bool, count=len(mids))
+    xy, kept = dedup_arrays(*lines)
+    mid = halfway_rows(xy, kept)
+    has_mid = kept >= 2
     at = np.flatnonzero(has_mid).tolist()
-    mid = np.array([m if m is not None else (np.nan,) * 4 for m in mids], dtype=float).reshape(-1, 4)
-    w = np.zeros(len(mids))
+    w = np.zeros(len(mid))
     w[at] = widths_at([candidates[i] for i in at], mid[at, 0], mid[at, 1], packed_subset(polygons, has_mid))
     # every probe point of every lane, tested at once: lane i's left probe, then its right one
     probing = np.flatnonzero(has_mid & ~(w <= 0))
@@ -217,7 +218,7 @@ def neighbours(lanes: tuple[MapFeature, ...], lines: tuple[np.ndarray, np.ndarra
     other = fi != own[pi]
     pi, fi = pi[other], fi[other]
     # the nearest segment of each lane hit to its probe (Segments.nearest's arithmetic), and its direction there
-    segments = PackedSegments.of([], lines)
+    segments = PackedSegments.of_packed(*lines)
     row, gap = segments.nearest(fi, qx[pi], qy[pi])
     has = row >= 0
     pi, fi, row, gap = pi[has], fi[has], row[has], gap[has]

@@ -179,11 +179,14 @@ def test_directions_in_one_pass_are_those_of_each_line_s_segments(lines, data):
 
 @given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=50))
 @settings(max_examples=200, deadline=None)
-def test_prefetched_headings_are_those_of_a_frame_s_own_lookup(yaws):
-    # prefetch_facts turns yaws into headings with numpy; a frame's lookup of a place not prefetched (road_facts,
-    # _facts_args) with math.degrees: the same floats, so a fact never depends on which path decided it
+def test_headings_of_both_lookups_are_math_degrees_mod_360(yaws):
+    # prefetch_facts and a frame's own lookup (_facts_args) turn yaws into headings with numpy: the floats of
+    # math.degrees(h) % 360.0, the heading's definition
+    import math
+
     from extractors.base import _facts_args, headings_of
 
     got = headings_of(np.array(yaws))
-    want = np.array(_facts_args([(0.0, 0.0, y) for y in yaws])[2])
+    want = np.array([math.degrees(y) % 360.0 for y in yaws])
+    assert np.array_equal(np.array(_facts_args([(0.0, 0.0, y) for y in yaws])[2]), got, equal_nan=True)
     assert np.array_equal(got, want, equal_nan=True) and (np.signbit(got) == np.signbit(want)).all()
