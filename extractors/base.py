@@ -60,6 +60,7 @@ class ExtractOptions:
     categories: CategorySelection = ALL
     every: int = 1
     max_entities: int = DEFAULT_MAX_ENTITIES
+    strict_maps: bool = False  # refuse a map that breaks a rule instead of repairing or dropping (docs/formats.md)
 
     def __post_init__(self) -> None:
         if not (self.radius > 0):
@@ -163,6 +164,8 @@ class ExtractTally:
     unknown_kept: Counter = field(default_factory=Counter)  # raw -> objects typed UNKNOWN_CLASS
     unknown_left_out: Counter = field(default_factory=Counter)  # raw -> objects left out
     categories_left_out: Counter = field(default_factory=Counter)  # Scenic class -> boxes --categories left out
+    map_repairs: Counter = field(default_factory=Counter)  # repair kind (synth.roadmap.MapRepairs) -> how many
+    maps_unusable: int = 0  # scenarios whose map could not be used: their frames have no road columns
     _scene: str | None = field(default=None, repr=False, compare=False)
 
     def frame_of(self, scene: str) -> None:
@@ -175,6 +178,10 @@ class ExtractTally:
         self.skipped[why] += 1
         if warning:
             self.warn(warning)
+
+    def map_unusable(self, warning: str) -> None:
+        self.maps_unusable += 1
+        self.warn(warning)
 
     @staticmethod
     def count(counter: Counter, name: str) -> None:
@@ -199,6 +206,11 @@ class ExtractTally:
         if any(c for c, _ in unknown):
             parts.append("objects of unknown type: " + ", ".join(
                 f"{sum(c.values())} {what} ({_listing(c)})" for c, what in unknown if c))
+        if self.map_repairs:
+            parts.append("map repairs: " + ", ".join(f"{n:,} {kind}" for kind, n in sorted(
+                self.map_repairs.items(), key=lambda kv: (-kv[1], kv[0]))))
+        if self.maps_unusable:
+            parts.append(f"{self.maps_unusable} maps unusable (their frames have no road columns)")
         return "; ".join(parts)
 
 

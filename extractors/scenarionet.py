@@ -40,14 +40,17 @@ from extractors.categories import Taxonomy
 from extractors.safe_pickle import load_pickle
 from extractors.sniff import Look
 from synth.lane_facts import RoadIndex
-from synth.lane_geometry import lane_polygons, neighbours
+from synth.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH, lane_polygons, neighbours
 from synth.roadmap import (
     CROSSWALK,
+    DROPPED_BROKEN,
+    DROPPED_LINKS,
     LANE,
     ROAD_LINE,
     FloatPairs,
     MapError,
     MapFeature,
+    MapRepairs,
     RoadMap,
     links_within,
     open_ring,
@@ -170,7 +173,7 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
         first[scene] = i
         if maps is not None:
             with gc_paused():
-                road = scenario_road(f, sd, scene)
+                road = scenario_road(f, sd, scene, options.strict_maps, tally)
         else:
             road = None
         if road is not None:
@@ -264,16 +267,30 @@ def _series(state: dict, key: str, steps: int, path: Path, tid: str, width: int 
     return a
 
 
-def scenario_road(path: Path, sd: Any, scene: str) -> RoadIndex | None:
-    """The scenario's map, indexed for lane facts; None when it has none (no or empty map_features)."""
+def scenario_road(path: Path, sd: Any, scene: str, strict: bool = True,
+                  tally: ExtractTally | None = None) -> RoadIndex | None:
+    """The scenario's map, indexed for lane facts; None when it has none (no or empty map_features). What the
+    reading repaired or dropped is counted in the tally. A map that cannot be used at all (map_features not a
+    dict of features) is a MapError when `strict` (--strict-maps), else None, with a line that says so: a map
+    never costs the tracks."""
     features = sd.get("map_features") if isinstance(sd, dict) else None
-    if not features:
+    if features is None or (isinstance(features, (dict, list, tuple)) and not features):
         return None
-    dataset = str((sd.get("metadata") or {}).get("dataset", "")).lower()
+    meta = sd.get("metadata")
+    dataset = meta.get("dataset") if isinstance(meta, dict) else None
+    dataset = dataset.lower() if isinstance(dataset, str) else ""
+    repairs = MapRepairs(strict)
     try:
-        road = scenario_map(scene, features, dataset)
+        road = scenario_map(scene, features, dataset, repairs)
     except MapError as exc:
-        raise MapError(f"{path}: {exc}") from None
+        if strict:
+            raise MapError(f"{path}: {exc}") from None
+        if tally is not None:
+            tally.map_unusable(f"r2s extract: {path}: its map cannot be used ({exc}); its frames are extracted "
+                               "without road columns (--strict-maps refuses such a scenario)")
+        return None
+    if tally is not None:
+        tally.map_repairs.update(repairs.counts)
     return RoadIndex(road) if road is not None else None
 
 
@@ -391,79 +408,138 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
 
 
 # ------------------------------------------------------------------------------------------------- the map
-# The map of a ScenarioNet scenario (`map_features`: a dict feature id -> feature with a `type`) as a RoadMap.
+# The map of a ScenarioNet scenario (`map_features`: a dict feature id -> feature with a `type`) as a RoadMap, read
+# as ScenarioNet's converters write it (converter/{waymo,nuscenes,nuplan,argoverse2}/utils.py and type.py; MetaDrive's
+# type.py); docs/formats.md ("What the sources give") states each rule.
 #
-# Kinds: LANE_* features are lanes (centre line = `polyline`, polygon = `polygon` where given), ROAD_LINE_* and
-# ROAD_EDGE_* are road lines (`polyline`), CROSSWALK a crosswalk (`polygon`); other types (stop signs, speed bumps,
-# driveways, sidewalks) are not kept. A lane without a polygon gets one from its centre line and the per-vertex
-# `width` (N, 2: left, right; their means) where the converter gives it, else the default width (synth.lane_geometry). A lane is
-# an intersection lane if its type is LANE_SURFACE_UNSTRUCTURE, or, in nuScenes-derived scenarios, if it has no
-# polygon: ScenarioNet's nuScenes converter writes polygons for nuScenes lanes and none for lane connectors, the
-# lanes through intersections. Successors / predecessors are `exit_lanes` / `entry_lanes` (links that leave the
-# converter's crop of the map are dropped); neighbours are the first `feature_id` of `left_neighbor` /
-# `right_neighbor` (a neighbour the map does not hold is a MapError); a map in which no lane has one gets them by
-# the geometric rule.
+# Kinds: LANE_* features are lanes (centre line = `polyline`, polygon = `polygon` where given); so is a feature of
+# type UNKNOWN that has a lane's keys (older Waymo conversions wrote Waymo's undefined lane type as UNKNOWN, and
+# other lanes name such lanes as neighbours); ROAD_LINE_*, UNKNOWN_LINE, ROAD_EDGE_BOUNDARY / _MEDIAN and a
+# polyline of type UNKNOWN (MetaDrive's unknown boundary) are road lines; CROSSWALK a crosswalk; other types (stop
+# signs, speed bumps, driveways, sidewalks: ROAD_EDGE_SIDEWALK is a polygon) are not kept. A lane without a
+# polygon gets one from its centre line and its per-vertex `width` (N, 2: left, right; a value of 0 or out of
+# [MIN_HALF_WIDTH, MAX_HALF_WIDTH] is unknown: the other side's there, else the default; the means of each side)
+# (synth.lane_geometry). A lane is an intersection lane if its type is LANE_SURFACE_UNSTRUCTURE, or, in
+# nuScenes-derived scenarios, if it has no polygon: ScenarioNet's nuScenes converter writes polygons for nuScenes
+# lanes and none for lane connectors, the lanes through intersections. Successors / predecessors are `exit_lanes` /
+# `entry_lanes` (links that leave the converter's crop of the map are dropped); neighbours are the first
+# `feature_id` of `left_neighbor` / `right_neighbor`; a map in which no lane has one gets them by the geometric
+# rule. A lane or line of fewer than two distinct points is dropped (the Waymo converter writes one-point lanes and
+# road edges), with the links to it. Whatever else breaks a rule of the map format is dropped and counted in the
+# MapRepairs (or refused with --strict-maps).
+
+UNKNOWN = "UNKNOWN"
+LANE_KEYS = ("entry_lanes", "exit_lanes", "left_neighbor", "right_neighbor", "left_boundaries", "right_boundaries")
+# the repairs this reader counts (RoadMap.of counts its own)
+ONE_POINT = "one-point features dropped"
+WIDTHS_DEFAULT = "lane widths from the default"
+WIDTHS_OTHER_SIDE = "lane widths from the other side"
+NOT_WIDENED = "lanes whose centre line cannot be widened dropped"
 
 
-def kind_of(source_type: str) -> str | None:
+def kind_of(source_type: str, feat: dict | None = None) -> str | None:
     if source_type.startswith("LANE_"):
         return LANE
-    if source_type.startswith(("ROAD_LINE_", "ROAD_EDGE_")):
+    if source_type == UNKNOWN and feat is not None:
+        return LANE if any(k in feat for k in LANE_KEYS) else ROAD_LINE if "polyline" in feat else None
+    if source_type.startswith("ROAD_LINE_") or source_type in ("UNKNOWN_LINE", "ROAD_EDGE_BOUNDARY",
+                                                               "ROAD_EDGE_MEDIAN"):
         return ROAD_LINE
     if source_type == CROSSWALK.upper():
         return CROSSWALK
     return None
 
 
-def scenario_map(map_id: str, map_features: Any, dataset: str) -> RoadMap | None:
-    """The RoadMap of a scenario's map_features; None when it has no feature of a kept kind."""
+def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepairs | None = None) -> RoadMap | None:
+    """The RoadMap of a scenario's map_features; None when it has no feature of a kept kind. `repairs` counts what
+    was repaired or dropped (default: a strict one, which refuses a feature that breaks a rule)."""
+    repairs = repairs if repairs is not None else MapRepairs(strict=True)
     if not isinstance(map_features, dict):
-        raise MapError(f"map {map_id!r}: map_features is not a dict of features")
+        raise MapError(f"map {map_id!r}: map_features is {_kind(map_features)}, not a dict of features")
     nuscenes = dataset == "nuscenes"
     features = []
     widths: dict[str, tuple[float | None, float | None]] = {}  # lanes without polygon: their widths
+    dropped: set[str] = set()  # lanes of one point: links to them go with them
     any_neighbour = False
     for raw_id, feat in map_features.items():
-        fid = str(raw_id)
-        if not isinstance(feat, dict):
-            raise MapError(f"map {map_id!r}: feature {fid!r} is not a dict")
-        source_type = str(feat.get("type", ""))
-        kind = kind_of(source_type)
+        fid = _text(raw_id)
+        if fid is None:
+            repairs.broken(DROPPED_BROKEN, f"map {map_id!r}: a feature id is {_kind(raw_id)}, not a name")
+            continue
+        if not isinstance(feat, dict) or _text(feat.get("type", "")) is None:
+            repairs.broken(DROPPED_BROKEN, f"map {map_id!r}: feature {fid!r} is not a dict with a type (a name)")
+            continue
+        source_type = _text(feat.get("type", ""))
+        kind = kind_of(source_type, feat)
         if kind is None:
             continue
-        line = _xy(map_id, fid, feat.get("polyline"), "polyline") if kind in (LANE, ROAD_LINE) else ()
-        polygon = open_ring(_xy(map_id, fid, feat.get("polygon"), "polygon")) if "polygon" in feat else ()
-        if kind == CROSSWALK and not polygon:
-            raise MapError(f"map {map_id!r}: crosswalk {fid!r} has no polygon")
+        try:
+            line = _xy(map_id, fid, feat.get("polyline"), "polyline") if kind in (LANE, ROAD_LINE) else ()
+            polygon = open_ring(_xy(map_id, fid, feat.get("polygon"), "polygon")) if "polygon" in feat else ()
+        except MapError as exc:
+            repairs.broken(DROPPED_BROKEN, str(exc))
+            continue
+        if kind in (LANE, ROAD_LINE) and len(set(line[:3])) < 2 and len(set(line)) < 2:
+            repairs.repaired(ONE_POINT)
+            if kind == LANE:
+                dropped.add(fid)
+            continue
         if kind != LANE:
             features.append(MapFeature.fast(map_id, fid, kind, polygon=polygon, line=line, source_type=source_type))
             continue
-        left, right = _neighbour(map_id, fid, feat, "left_neighbor"), _neighbour(map_id, fid, feat, "right_neighbor")
+        left = _neighbour(map_id, fid, feat, "left_neighbor", repairs)
+        right = _neighbour(map_id, fid, feat, "right_neighbor", repairs)
         any_neighbour = any_neighbour or left is not None or right is not None
         rule = "source"
         if not polygon:
             # built below, for all such lanes at once
-            widths[fid], rule = _widths(map_id, fid, feat, len(line)), "centre line"
+            widths[fid], rule = _widths(map_id, fid, feat, len(line), repairs), "centre line"
         features.append(MapFeature.fast(
             map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
-            successors=_ids(feat.get("exit_lanes")), predecessors=_ids(feat.get("entry_lanes")),
+            successors=_ids(map_id, fid, feat, "exit_lanes", repairs),
+            predecessors=_ids(map_id, fid, feat, "entry_lanes", repairs),
             is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
             polygon_rule=rule))
-    if not features:
-        return None
     if widths:
         todo = [i for i, f in enumerate(features) if f.feature_id in widths and f.kind == LANE]
         rings = lane_polygons([features[i].line for i in todo], [widths[features[i].feature_id][0] for i in todo],
                               [widths[features[i].feature_id][1] for i in todo])
+        gone = set()
         for i, ring in zip(todo, rings):
+            if not ring:  # RoadMap.of would refuse it for want of a polygon: say why
+                f = features[i]
+                repairs.broken(NOT_WIDENED, f"map {map_id!r}: lane {f.feature_id!r} has a centre line that cannot be "
+                               "widened into a polygon (not finite, or folding back on itself more than its size "
+                               "allows)")
+                gone.add(f.feature_id)
             features[i] = features[i].with_(polygon=ring)
-    road = RoadMap.of(map_id, links_within(features, neighbours=False))
+        if gone:
+            features = [f for f in features if f.feature_id not in gone]
+            dropped |= gone
+    if dropped:  # links to the lanes dropped above go with them
+        features = [f.with_(left=None if f.left in dropped else f.left, right=None if f.right in dropped else f.right)
+                    if f.kind == LANE and (f.left in dropped or f.right in dropped) else f for f in features]
+    if not features:
+        return None
+    road = RoadMap.of(map_id, links_within(features, neighbours=False), repairs)
     if not any_neighbour:  # the geometric rule, on the validated map and its packed coordinates
         road = road.with_features(neighbours(road.lanes, road.packed("line", LANE), road.packed("polygon", LANE)))
     return road
 
 
 XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)
+
+
+def _text(value: Any) -> str | None:
+    """A map feature's id, type or link as text: a string (that UTF-8 can write: no lone surrogate) or an int
+    (numpy's too; converters write both); None for anything else."""
+    if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            return None
+        return value
+    return _as_id(value) if not isinstance(value, (bool, np.bool_)) else None
 
 
 def _xy(map_id: str, fid: str, value: Any, what: str):
@@ -490,33 +566,56 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     return points(a[:, 0], a[:, 1])
 
 
-def _ids(value: Any) -> tuple[str, ...]:
+LINKS = (list, tuple, np.ndarray)  # what converters write for a lane's links: lists (Waymo, nuScenes), arrays
+
+
+def _ids(map_id: str, fid: str, feat: dict, key: str, repairs: MapRepairs) -> tuple[str, ...]:
+    """A lane's successors or predecessors: the names in `key` (a list of ids); what is not a name is dropped."""
+    value = feat.get(key)
     if value is None:
         return ()
-    return tuple(str(v) for v in np.asarray(value, dtype=object).reshape(-1))
+    items = value.reshape(-1).tolist() if isinstance(value, np.ndarray) else value if isinstance(value, LINKS) else None
+    ids = None if items is None else [_text(v) for v in items]
+    if ids is None or None in ids:
+        repairs.broken(DROPPED_LINKS, f"map {map_id!r}: lane {fid!r} has {key} that are not a list of names")
+        return tuple(i for i in ids or () if i is not None)
+    return tuple(ids)
 
 
-def _neighbour(map_id: str, fid: str, feat: dict, key: str) -> str | None:
-    """The first neighbour of a lane on one side (Waymo converters: a list of dicts with feature_id)."""
+def _neighbour(map_id: str, fid: str, feat: dict, key: str, repairs: MapRepairs) -> str | None:
+    """The first neighbour of a lane on one side (Waymo: a list of dicts with feature_id; nuPlan: a list of ids)."""
     value = feat.get(key)
-    if value is None or len(value) == 0:
+    if value is None or (isinstance(value, LINKS) and len(value) == 0):
         return None
-    first = value[0]
-    ref = first.get("feature_id", first.get("id")) if isinstance(first, dict) else first
-    if ref is None or isinstance(ref, (dict, list, tuple)):
-        raise MapError(f"map {map_id!r}: lane {fid!r} has a {key} that names no feature ({first!r})")
-    return str(ref)
+    first = value[0] if isinstance(value, LINKS) else None
+    ref = _text(first.get("feature_id", first.get("id")) if isinstance(first, dict) else first)
+    if ref is None:
+        repairs.broken(DROPPED_LINKS, f"map {map_id!r}: lane {fid!r} has a {key} that names no feature "
+                       f"({_shown(first if first is not None else value)})")
+    return ref
 
 
-def _widths(map_id: str, fid: str, feat: dict, n: int) -> tuple[float | None, float | None]:
+def _widths(map_id: str, fid: str, feat: dict, n: int, repairs: MapRepairs) -> tuple[float | None, float | None]:
     """The widths to the left and to the right of the centre line: the means of `width` (N, 2: per vertex, the
-    distances to the left and right boundaries), or (None, None) for the default."""
+    distances to the left and right boundaries), where a value of 0 or out of [MIN_HALF_WIDTH, MAX_HALF_WIDTH] is
+    unknown: the other side's there (as the Waymo converter's compute_width does), else half the default width.
+    (None, None) for the default (no width, or one that is not an (N, 2) array of finite numbers)."""
     if "width" not in feat:
         return None, None
-    w = np.asarray(feat["width"], dtype=float)
-    if w.ndim != 2 or w.shape != (n, 2) or not np.isfinite(w).all() or (w <= 0).any():
-        raise MapError(f"map {map_id!r}: lane {fid!r} has a width of shape {w.shape} or value out of range "
-                       f"(need ({n}, 2), positive)")
+    try:
+        w = np.asarray(feat["width"], dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        w = None
+    if w is None or w.shape != (n, 2) or not np.isfinite(w).all():
+        repairs.broken(WIDTHS_DEFAULT, f"map {map_id!r}: lane {fid!r} has a width that is not an ({n}, 2) array of "
+                       "finite numbers")
+        return None, None
+    known = (w >= MIN_HALF_WIDTH) & (w <= MAX_HALF_WIDTH)
+    if known.all():
+        return float(w[:, 0].mean()), float(w[:, 1].mean())
+    other = known[:, ::-1] & ~known  # unknown here, known on the other side
+    w = np.where(known, w, np.where(other, w[:, ::-1], DEFAULT_LANE_WIDTH / 2))
+    repairs.repaired(WIDTHS_OTHER_SIDE if (known | other).all() else WIDTHS_DEFAULT)
     return float(w[:, 0].mean()), float(w[:, 1].mean())
 
 

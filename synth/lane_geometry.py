@@ -29,6 +29,22 @@ from synth.roadmap import LANE, MapFeature, Points, ShellRing, packed, packed_su
 # have a polygon in the six nuScenes-mini scenes of ../shared/data, 3.4 m (bench/results/maps.md).
 DEFAULT_LANE_WIDTH = 3.4
 NEIGHBOUR_ANGLE = 30.0  # degrees
+# The half widths (metres, to one side of a centre line) a source's per-vertex widths may give: outside, a width
+# is unknown (the lane's other side there, else the default). Real lanes are 0.7 to 5 m wide; the Waymo converter
+# writes 0 where it found no boundary and, where it pairs a lane with the wrong end of its boundary, widths that
+# grow by twice the step to over 100 m (bench/results/maps.md). Below MIN_HALF_WIDTH a lane's polygon is thinner
+# than the rounding of moving it into an ego frame (a polygon of width 1e-300 collapses there).
+MIN_HALF_WIDTH, MAX_HALF_WIDTH = 0.1, 5.0
+# The work of widening one centre line is bounded by its size: GEOS's buffer nodes every crossing of the line's
+# offset curves, and a line that folds back on itself within its width has a number of them that grows as the
+# square of its points (a zigzag of 10^4 points took 1.5 GB, then std::bad_alloc; one of 2,000 over a minute). A
+# line is widened only if (a) the sum, over the cells of a grid of side twice its half width, of the square of
+# the number of its vertices in each cell (`widening_work`) is at most WORK_PER_POINT per vertex plus WORK_BASE,
+# and (b) it turns (`turning`) at most MAX_TURNING radians plus TURNING_PER_POINT per vertex. The real lanes of
+# ../shared (Waymo, nuScenes) use at most 21 per vertex and 5.4 pi; a line beyond either is not widened (its lane
+# is dropped, and counted).
+WORK_PER_POINT, WORK_BASE = 64, 4096
+MAX_TURNING, TURNING_PER_POINT = 16 * math.pi, 0.05
 
 
 def dedup(line: Points) -> Points:
@@ -62,20 +78,50 @@ def lane_polygon(line: Points, left: float | None = None, right: float | None = 
 
 
 def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[float | None]) -> list[Points]:
-    """`lane_polygon` of many lines, in a few vectorised GEOS calls (a map has hundreds of such lanes)."""
+    """`lane_polygon` of many lines, in a few vectorised GEOS calls (a map has hundreds of such lanes). A line
+    that cannot be widened gets an empty polygon, as one of fewer than two distinct points: a non-finite
+    coordinate, a half width outside (0, inf), more work than `widening_work` allows, or an error of GEOS's."""
     import shapely
 
     half = DEFAULT_LANE_WIDTH / 2
     out: list[Points] = [()] * len(lines)
     xy, kept = dedup_packed(lines)
-    todo = np.flatnonzero(kept >= 2).tolist()
+    left_all = np.array([half if w is None else w for w in lefts], dtype=float)
+    right_all = np.array([half if w is None else w for w in rights], dtype=float)
+    line = np.repeat(np.arange(len(lines)), kept)
+    finite = np.bincount(line, weights=~np.isfinite(xy).all(axis=1), minlength=len(lines)) == 0
+    sane = finite & (left_all > 0) & (right_all > 0) & np.isfinite(left_all) & np.isfinite(right_all)
+    ok = (kept >= 2) & sane
+    ok[ok] = widening_work(xy, kept, np.maximum(left_all, right_all), ok)[ok] <= WORK_PER_POINT * kept[ok] + WORK_BASE
+    ok &= turning(xy, kept) <= MAX_TURNING + TURNING_PER_POINT * kept
+    todo = np.flatnonzero(ok).tolist()
     if not todo:
         return out
-    line = np.repeat(np.arange(len(lines)), kept)
-    used = kept[line] >= 2
+    used = ok[line]
     geoms = shapely.linestrings(xy[used], indices=np.searchsorted(todo, line[used]))
-    left = np.array([half if lefts[i] is None else lefts[i] for i in todo], dtype=float)
-    right = np.array([half if rights[i] is None else rights[i] for i in todo], dtype=float)
+    left, right = left_all[todo], right_all[todo]
+    try:
+        areas = _widened(geoms, left, right)
+    except shapely.errors.GEOSException:  # one line at a time: those GEOS cannot widen keep no polygon
+        areas = np.array([_widened_or_none(geoms[k:k + 1], left[k:k + 1], right[k:k + 1])
+                          for k in range(len(todo))], dtype=object)
+    made = ~shapely.is_missing(areas) & ~shapely.is_empty(areas)
+    areas, todo = areas[made], [i for i, m in zip(todo, made.tolist()) if m]
+    if not todo:
+        return out
+    ring, which = shapely.get_coordinates(shapely.get_exterior_ring(areas), return_index=True)
+    starts = np.searchsorted(which, np.arange(len(todo) + 1))
+    xs, ys, starts = ring[:, 0].tolist(), ring[:, 1].tolist(), starts.tolist()
+    for k, i in enumerate(todo):  # each ring's closing repeat dropped
+        out[i] = ShellRing(zip(xs[starts[k]:starts[k + 1] - 1], ys[starts[k]:starts[k + 1] - 1]))
+    return out
+
+
+def _widened(geoms: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The buffers of lines (flat caps, bevel joins; one single-sided buffer per side where the sides differ),
+    each as one polygon: of parts that meet only at a point, the largest."""
+    import shapely
+
     areas = shapely.buffer(geoms, left, cap_style="flat", join_style="bevel")
     sided = left != right
     if sided.any():
@@ -84,13 +130,55 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
             shapely.buffer(geoms[sided], -right[sided], cap_style="flat", join_style="bevel", single_sided=True))
     multi = shapely.get_type_id(areas) != 3
     for k in np.flatnonzero(multi):  # parts that meet only at a point: keep the largest
-        areas[k] = max(areas[k].geoms, key=lambda g: g.area)
-    ring, which = shapely.get_coordinates(shapely.get_exterior_ring(areas), return_index=True)
-    starts = np.searchsorted(which, np.arange(len(todo) + 1))
-    xs, ys, starts = ring[:, 0].tolist(), ring[:, 1].tolist(), starts.tolist()
-    for k, i in enumerate(todo):  # each ring's closing repeat dropped
-        out[i] = ShellRing(zip(xs[starts[k]:starts[k + 1] - 1], ys[starts[k]:starts[k + 1] - 1]))
+        parts = getattr(areas[k], "geoms", ())
+        areas[k] = max(parts, key=lambda g: g.area) if len(parts) else None
+    return areas
+
+
+def _widened_or_none(geoms: np.ndarray, left: np.ndarray, right: np.ndarray):
+    import shapely
+
+    try:
+        return _widened(geoms, left, right)[0]
+    except shapely.errors.GEOSException:
+        return None
+
+
+def turning(xy: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """Each packed line's total turning: the sum of the absolute angles (radians) between its consecutive
+    segments (lines without consecutive repeats: dedup_packed's)."""
+    out = np.zeros(len(kept))
+    if len(xy) < 3:
+        return out
+    line = np.repeat(np.arange(len(kept)), kept)
+    d = np.diff(xy, axis=0)
+    same = line[1:] == line[:-1]  # d[i] is a segment of line[i] when same[i]
+    joint = same[:-1] & same[1:]  # d[i], d[i + 1] are consecutive segments of one line
+    a, b = d[:-1][joint], d[1:][joint]
+    with np.errstate(all="ignore"):
+        angle = np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    np.add.at(out, line[1:-1][joint], np.nan_to_num(angle, nan=np.pi))
     return out
+
+
+def widening_work(xy: np.ndarray, kept: np.ndarray, half: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """For each packed line (`which` of them; 0 for the others), the work estimate of widening it by `half`: its
+    vertices filed in the cells of a grid of side 2 * half (at least MIN_HALF_WIDTH), the sum of the squares of
+    the number in each cell. A line that runs on counts a few vertices a cell; one that folds back within its
+    width counts them all in a few cells."""
+    work = np.zeros(len(kept))
+    line = np.repeat(np.arange(len(kept)), kept)
+    mine = which[line]
+    if not mine.any():
+        return work
+    side = 2.0 * np.maximum(half, MIN_HALF_WIDTH)[line[mine]]
+    with np.errstate(all="ignore"):
+        cells = np.floor(xy[mine] / side[:, None])
+    cells = np.clip(np.nan_to_num(cells), -2**52, 2**52).astype(np.int64)
+    keys = np.stack([line[mine], cells[:, 0], cells[:, 1]], axis=1)
+    uniq, counts = np.unique(keys, axis=0, return_counts=True)
+    np.add.at(work, uniq[:, 0], counts.astype(float) ** 2)
+    return work
 
 
 def widths_at(lanes: list[MapFeature], xs: np.ndarray, ys: np.ndarray,

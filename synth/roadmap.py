@@ -8,12 +8,15 @@ and its direction of travel (the centre line runs from its first to its last poi
 
 `RoadMap.of` validates a map once, so that everything downstream may trust it: finite coordinates, polygons of
 at least three distinct vertices that do not cross themselves, lane-graph references that name lanes of the
-map. A map that breaks a rule is a MapError: one line, exit 2.
+map. A map that breaks a rule is a MapError: one line, exit 2; or, for a reader of recorded maps given a
+`MapRepairs` (r2s extract without --strict-maps), the features that break one are dropped (links to lanes that are
+not there: the links) and counted by kind.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from itertools import chain
@@ -51,6 +54,33 @@ class ShellRing(FloatPairs):
 
 class MapError(InputError, ValueError):
     """A map that is not what the map format says (NaN, a self-crossing polygon, a dangling lane id). One line."""
+
+
+class MapRepairs:
+    """What readers of recorded maps repaired or dropped, counted by kind (the `map repairs` of `r2s extract`'s
+    summary line; docs/formats.md, "Maps Parquet", names each rule). Mutable on purpose: a tally, like the
+    extraction's. `repaired` counts a rule that reads what a producer writes (a zero width, a one-point line);
+    `broken` a feature that breaks a rule of every map, which `strict` (--strict-maps) refuses instead: MapError,
+    one line, exit 2."""
+
+    def __init__(self, strict: bool = False) -> None:
+        self.strict = strict
+        self.counts: Counter = Counter()
+
+    def repaired(self, kind: str, n: int = 1) -> None:
+        if n:
+            self.counts[kind] += n
+
+    def broken(self, kind: str, message: str) -> None:
+        if self.strict:
+            raise MapError(message)
+        self.counts[kind] += 1
+
+
+# The kinds of repair RoadMap.of makes for a reader that gives it a MapRepairs.
+DROPPED_BROKEN = "features breaking a map rule dropped"
+DROPPED_TWICE = "features whose id occurs twice dropped"
+DROPPED_LINKS = "lane links to no lane dropped"
 
 
 @dataclass(frozen=True)
@@ -127,31 +157,56 @@ class RoadMap:
     _packed: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
-    def of(cls, map_id: str, features: Iterable[MapFeature]) -> RoadMap:
+    def of(cls, map_id: str, features: Iterable[MapFeature], repairs: MapRepairs | None = None) -> RoadMap:
         """Validate and order the features of one map. A lane-graph reference to a lane the map does not hold is
         a MapError (a source whose maps are crops of a larger map drops links out of the crop before: see
-        `links_within`)."""
+        `links_within`). With `repairs` (a reader of recorded maps), a feature that breaks a rule is dropped and
+        a link to no lane of the map removed, each counted there (or refused, if it is strict)."""
         feats = sorted(features, key=lambda f: (KINDS.index(f.kind) if f.kind in KINDS else len(KINDS),
                                                 f.feature_id))
         seen: dict[str, MapFeature] = {}
         lines, polygons = [f.line for f in feats], [f.polygon for f in feats]
         coords = _plain_finite(lines, polygons)  # packed, when plain and finite
         distinct = _three_distinct(*coords[1]).tolist() if coords is not None else [None] * len(feats)
+        keep = []
         for f, three in zip(feats, distinct):
             if f.map_id != map_id:
                 raise MapError(f"map {map_id!r}: feature {f.feature_id!r} belongs to map {f.map_id!r}")
-            if f.feature_id in seen:
-                raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
-            check_feature(f, coordinates=coords is None, three_distinct=three)
+            try:
+                if f.feature_id in seen:
+                    raise MapError(f"map {map_id!r}: feature id {f.feature_id!r} occurs twice")
+                check_feature(f, coordinates=coords is None, three_distinct=three)
+            except MapError as exc:
+                if repairs is None:
+                    raise
+                repairs.broken(DROPPED_TWICE if f.feature_id in seen else DROPPED_BROKEN, str(exc))
+                keep.append(False)
+                continue
             seen[f.feature_id] = f
-        if coords is None:  # every point checked above: two finite numbers
-            coords = packed(lines), packed(polygons)
-        check_simple(feats, coords[1])
+            keep.append(True)
+        if coords is None:  # every point kept was checked above: two finite numbers
+            feats = [f for f, k in zip(feats, keep) if k]
+            coords = packed([f.line for f in feats]), packed([f.polygon for f in feats])
+        elif not all(keep):
+            mask = np.array(keep, dtype=bool)
+            feats = [f for f, k in zip(feats, keep) if k]
+            coords = packed_subset(coords[0], mask), packed_subset(coords[1], mask)
+        simple = simple_polygons(feats, coords[1])
+        if not simple.all():
+            for i in np.flatnonzero(~simple).tolist():
+                f = feats[i]
+                message = f"{_where(f)} has a self-intersecting polygon"
+                if repairs is None:
+                    raise MapError(message)
+                repairs.broken(DROPPED_BROKEN, message)
+                del seen[f.feature_id]
+            feats = [f for f, ok in zip(feats, simple.tolist()) if ok]
+            coords = packed_subset(coords[0], simple), packed_subset(coords[1], simple)
         lanes = {fid for fid, f in seen.items() if f.kind == LANE}
         out = []
         for f in feats:
             if f.kind == LANE:
-                f = _resolve_links(map_id, f, lanes)
+                f = _resolve_links(map_id, f, lanes, repairs)
             out.append(f)
         road = cls(map_id, tuple(out))
         road._by_id.update((f.feature_id, f) for f in out)
@@ -204,7 +259,7 @@ class RoadMap:
         return self.of_kind(LANE)
 
 
-def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
+def _resolve_links(map_id: str, f: MapFeature, lanes: set[str], repairs: MapRepairs | None = None) -> MapFeature:
     # The common case, decided with set operations: every link names another lane of the map, none twice.
     succ, pred = f.successors, f.predecessors
     refs = [*succ, *pred]
@@ -219,10 +274,18 @@ def _resolve_links(map_id: str, f: MapFeature, lanes: set[str]) -> MapFeature:
         if ref is None:
             return None
         if ref == f.feature_id:
-            raise MapError(f"map {map_id!r}: lane {f.feature_id!r} names itself as its {what}")
+            message = f"map {map_id!r}: lane {f.feature_id!r} names itself as its {what}"
+            if repairs is None:
+                raise MapError(message)
+            repairs.broken(DROPPED_LINKS, message)
+            return None
         if ref in lanes:
             return ref
-        raise MapError(f"map {map_id!r}: lane {f.feature_id!r} has {what} {ref!r}, which is not a lane of the map")
+        message = f"map {map_id!r}: lane {f.feature_id!r} has {what} {ref!r}, which is not a lane of the map"
+        if repairs is None:
+            raise MapError(message)
+        repairs.broken(DROPPED_LINKS, message)
+        return None
 
     def kept_all(refs: Sequence[str], what: str) -> tuple[str, ...]:
         return tuple(dict.fromkeys(r for r in (kept(x, what) for x in refs) if r is not None))
@@ -311,21 +374,28 @@ def check_simple(features: Sequence[MapFeature], polygons: tuple[np.ndarray, np.
     """Every polygon of these features does not cross or touch itself (consecutive repeated vertices allowed),
     as GEOS decides it (robust predicates), all in one call; the first that does is a MapError. `polygons`: the
     features' polygons packed, if the caller has them."""
+    simple = simple_polygons(features, polygons)
+    if not simple.all():
+        f = features[int(np.flatnonzero(~simple)[0])]
+        raise MapError(f"{_where(f)} has a self-intersecting polygon")
+
+
+def simple_polygons(features: Sequence[MapFeature], polygons: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> np.ndarray:
+    """For each feature, whether its polygon (if its kind is an area) does not cross or touch itself, as
+    check_simple decides it."""
     import shapely
 
     # the polygons to ask GEOS about: of the area kinds, but those GEOS itself made a valid polygon's shell
     area = np.fromiter((f.kind in AREA_KINDS and type(f.polygon) is not ShellRing for f in features), dtype=bool,
                        count=len(features))
+    simple = np.ones(len(features), dtype=bool)
     if not area.any():
-        return
-    areas = [f for f, a in zip(features, area.tolist()) if a]
+        return simple
     xy, counts = polygons if polygons is not None else packed([f.polygon for f in features])
     coords, index = _clean_rings(xy[np.repeat(area, counts)], counts[area])
-    simple = shapely.is_simple(shapely.linearrings(coords, indices=index))
-    if not simple.all():
-        f = areas[int(np.flatnonzero(~simple)[0])]
-        raise MapError(f"map {f.map_id!r}: {f.kind.replace('_', ' ')} {f.feature_id!r} has a self-intersecting "
-                       "polygon")
+    simple[area] = shapely.is_simple(shapely.linearrings(coords, indices=index))
+    return simple
 
 
 def _clean_rings(xy: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

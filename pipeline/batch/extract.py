@@ -72,11 +72,12 @@ class ExtractSummary:
 
 def extract(source: str, input_path: str | os.PathLike, out: str | os.PathLike, *, categories: str = "all",
             radius: float = 50.0, every: int = 1, max_entities: int = 1000, jobs: int = 1,
-            warn=None, **source_options: Any) -> ExtractSummary:
+            strict_maps: bool = False, warn=None, **source_options: Any) -> ExtractSummary:
     """`r2s extract SOURCE INPUT --out OUT` in-process (docs/api.md): the source's recorded data at `input_path`
     to a frames file (`out` ends in .parquet) or dataset directory, with the maps beside it. `source_options` are
     the fields of the source's options class (nuscenes: version, scenes, min_visibility, min_lidar_pts; mcap and
-    rosbag: topics, pose_topic, fixed_frame, ego_frame, max_chunk_bytes). Bad input raises an InputError before
+    rosbag: topics, pose_topic, fixed_frame, ego_frame, max_chunk_bytes). A map that breaks a rule is repaired or
+    dropped and counted (docs/formats.md), or with `strict_maps` refused. Bad input raises an InputError before
     anything is written; `warn` receives the warnings `r2s extract` prints (default: stderr)."""
     input_path, out = str(input_path), str(out)
     check_apart(out, [("input", input_path)], directory=not out.endswith(".parquet"))
@@ -90,7 +91,7 @@ def extract(source: str, input_path: str | os.PathLike, out: str | os.PathLike, 
         raise UserError(f"source {source} has no option {unknown[0]!r} (its options: {', '.join(sorted(own)) or 'none'})")
     try:
         options = src.options(radius=radius, categories=CategorySelection.parse(categories, src.taxonomy),
-                              every=every, max_entities=max_entities, **source_options)
+                              every=every, max_entities=max_entities, strict_maps=strict_maps, **source_options)
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if jobs < 1:

@@ -31,6 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--every", type=int, default=1, metavar="K", help="keep every K-th frame")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
                    help="refuse a frame with more than N entities")
+    p.add_argument("--strict-maps", action="store_true",
+                   help="refuse (exit 2) a map that breaks a rule of the map format, instead of repairing or "
+                        "dropping the feature (counted in the summary) or extracting the frames without road "
+                        "columns when the map cannot be used at all")
     # each source's own options, one group per options class (sources that share options share the group)
     families: dict[type[ExtractOptions], list[str]] = {}
     for s in known:
@@ -55,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     source_options = {f.name: getattr(own, f.name) for f in dataclasses.fields(own) if f.name not in base}
     summary = extract(args.source, args.input, args.out, categories=args.categories, radius=args.radius,
                       every=args.every, max_entities=args.max_entities, jobs=args.jobs,
+                      strict_maps=args.strict_maps,
                       warn=lambda line: tqdm.write(line, file=sys.stderr), **source_options)
     sys.stderr.write(f"r2s extract: {summary.line()}\n")
     return 0

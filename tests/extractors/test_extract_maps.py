@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 import shapely
 
-from extractors.maps import read_maps
+from extractors.maps import maps_dir, read_maps
 from extractors.safe_pickle import load_pickle
 from extractors.scenarionet import scenario_map
 from tests.support import SHARED
@@ -149,17 +149,27 @@ def _a_lane(sd: dict) -> tuple[str, dict]:
     (lambda f: f.__setitem__("left_neighbor", [{"feature_id": "no-such-lane"}]),
      "left neighbour 'no-such-lane', which is not a lane of the map"),
 ])
-def test_a_malformed_map_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, break_it, message):
+def test_a_feature_breaking_a_map_rule_is_dropped_and_counted_or_refused_with_strict_maps(tmp_path, capsys, break_it,
+                                                                                          message):
     sd = load_pickle(sorted(SCENARIONET.glob("sd_*.pkl"))[0])
     fid, feature = _a_lane(sd)
     feature = {**feature, "polygon": np.array(feature["polygon"], dtype=float)}
     break_it(feature)
     sd["map_features"][fid] = feature
     path = _write_scenario(sd, tmp_path / "in")
-    for out in (tmp_path / "out" / "frames.parquet", tmp_path / "out" / "dataset"):
-        res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out))
+    for out in (tmp_path / "file" / "frames.parquet", tmp_path / "dataset" / "frames"):
+        res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out), "--strict-maps")
         assert_refused(res, out, message)
         assert f"lane {fid!r}" in res.stderr
+        # without --strict-maps: the frames and the rest of the map, the feature (or its link) dropped and counted
+        res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out))
+        assert res.returncode == 0, res.stderr
+        kind = "lane links to no lane dropped" if "neighbour" in message else "features breaking a map rule dropped"
+        assert f"map repairs: 1 {kind}" in res.stderr.splitlines()[-1]
+        maps = pd.read_parquet(maps_dir(out) if out.suffix else out / "_maps")
+        lane = maps[maps.feature_id == fid]
+        assert lane.left_neighbour.isna().all() if "neighbour" in message else lane.empty
+        assert len(pd.read_parquet(out)) > 0
 
 
 @pytest.mark.parametrize("polygon", [
@@ -167,13 +177,13 @@ def test_a_malformed_map_is_one_line_exit_2_and_nothing_written(tmp_path, capsys
     [[0.0, 0.0], [4.0, 0.0, 1.0], [4.0, 4.0]],  # points of different lengths
     [[0.0, 0.0], ["four", 0.0], [4.0, 4.0]],
 ])
-def test_a_polygon_not_of_numbers_is_one_line_exit_2(tmp_path, capsys, polygon):
+def test_a_polygon_not_of_numbers_is_one_line_exit_2_with_strict_maps(tmp_path, capsys, polygon):
     sd = load_pickle(sorted(SCENARIONET.glob("sd_*.pkl"))[0])
     fid, feature = _a_lane(sd)
     sd["map_features"][fid] = {**feature, "polygon": polygon}
     path = _write_scenario(sd, tmp_path / "in")
     out = tmp_path / "out" / "frames.parquet"
-    res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out))
+    res = r2s(capsys, "extract", "scenarionet", str(path), "--out", str(out), "--strict-maps")
     assert_refused(res, out, f"feature {fid!r} has a polygon that is not an array of numbers")
 
 
