@@ -188,6 +188,8 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
 
 def _kind(value: Any) -> str:
     """What a value of a pickle is, in a message: its type, never its repr (which may nest without end)."""
+    if isinstance(value, str) and not _writable(value):
+        return "text with a lone surrogate, which UTF-8 cannot write"
     name = f"{type(value).__module__}.{type(value).__qualname__}".removeprefix("builtins.")
     return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
 
@@ -199,11 +201,21 @@ def _shown(value: Any) -> str:
     return _kind(value)
 
 
+def _writable(text: str) -> bool:
+    """Whether UTF-8 (Parquet's strings, a terminal) can write a string: a pickle may hold lone surrogates."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def _as_id(value: Any) -> str | None:
     """A scenario or track id as text: converters write strings, older and hand-made files ints. None for
-    anything else (str() of a pickled structure may recurse without end or take exponential time)."""
+    anything else (str() of a pickled structure may recurse without end or take exponential time) and for a
+    string UTF-8 cannot write."""
     if isinstance(value, str):
-        return value
+        return value if _writable(value) else None
     if isinstance(value, (int, np.integer)) and (not isinstance(value, int) or value.bit_length() < 64):
         return str(value)
     return None
@@ -315,6 +327,8 @@ def scenario_frames(
     if None in track_ids:
         raise ExtractError(f"{path}: a track id is {_kind(list(tracks)[track_ids.index(None)])}, not a name")
     if _as_id(sdc) is None or track_ids.count(_as_id(sdc)) != 1:
+        if isinstance(sdc, str) and not _writable(sdc):
+            raise ExtractError(f"{path}: metadata.sdc_id is {_kind(sdc)}, not a track id")
         raise ExtractError(f"{path}: the ego track (metadata.sdc_id = {_shown(sdc)}) is not among the tracks")
     if steps < 1 or steps > MAX_STEPS:
         raise ExtractError(f"{path}: implausible scenario length {steps}")
@@ -338,6 +352,9 @@ def scenario_frames(
         # metadata.type holds the dataset's own type where the converter keeps one (nuScenes, Lyft), else
         # the MetaDrive type again; `type` is the MetaDrive type (None for the nuScenes converter's animals).
         own, kind = tmeta.get("type"), tr.get("type")
+        for where, value in (("metadata.type", own), ("type", kind)):
+            if isinstance(value, str) and not _writable(value):
+                raise ExtractError(f"{path}: track {tid!r} {where} is {_kind(value)}, not a category")
         kind = kind if isinstance(kind, str) and kind else None
         ids.append(tid)
         cats.append(str(own) if isinstance(own, str) and own else kind or "UNSET")
@@ -533,12 +550,6 @@ XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)
 def _text(value: Any) -> str | None:
     """A map feature's id, type or link as text: a string (that UTF-8 can write: no lone surrogate) or an int
     (numpy's too; converters write both); None for anything else."""
-    if isinstance(value, str):
-        try:
-            value.encode("utf-8")
-        except UnicodeEncodeError:
-            return None
-        return value
     return _as_id(value) if not isinstance(value, (bool, np.bool_)) else None
 
 
