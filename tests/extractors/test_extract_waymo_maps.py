@@ -329,3 +329,35 @@ def test_every_boxs_lane_facts_agree_with_the_lanes_centre_lines_and_widths(waym
             assert (r.lane is None) == (not want) and (r.lane is None or r.lane in want)
             assert r.off_road == (not want)
     assert checked >= len(frames) // 4, (checked, len(frames))
+
+
+@needs_waymo
+def test_the_verbs_run_on_a_waymo_clip(tmp_path):
+    """On a 20-second clip: programs with lanes and motion, window programs over time, a frame as scene JSON
+    with its road, and that frame exported both ways (and the ScenarioNet export read back)."""
+    clip = WAYMO / "sd_waymo_v1.2_1096927972b9efaa.pkl"
+    frames = tmp_path / "frames"
+    res = run_r2s("extract", "scenarionet", str(clip), "--every", "20", "--out", str(frames), "--strict-maps")
+    assert res.returncode == 0, res.stderr
+    scene = pd.read_parquet(frames).scene.iloc[0]
+    res = run_r2s("run", str(frames), "--lanes", "--motion", "--jobs", "1", "--time-limit", "20",
+                  "--out", str(tmp_path / "p.parquet"))
+    assert res.returncode == 0, res.stderr
+    programs = pd.read_parquet(tmp_path / "p.parquet")
+    assert len(programs) == 10 and programs.status.isin(["optimal", "feasible"]).all()
+    assert programs.program.str.contains("in lane").any()
+    res = run_r2s("run", str(frames), "--lanes", "--window", "4", "--jobs", "1", "--time-limit", "20",
+                  "--out", str(tmp_path / "w.parquet"))
+    assert res.returncode == 0, res.stderr
+    windows = pd.read_parquet(tmp_path / "w.parquet")
+    assert len(windows) >= 3 and (windows.n_frames > 1).all() and windows.status.isin(["optimal", "feasible"]).all()
+    res = run_r2s("scene", str(frames), f"{scene}/100", "--out", str(tmp_path / "s.json"))
+    assert res.returncode == 0, res.stderr
+    assert json.loads((tmp_path / "s.json").read_text())["road"]["features"]
+    for to in ("scenarionet", "openscenario"):
+        res = run_r2s("export", str(tmp_path / "s.json"), "--to", to, "--out", str(tmp_path / to))
+        assert res.returncode == 0, res.stderr
+    res = run_r2s("extract", "scenarionet", str(tmp_path / "scenarionet"), "--out", str(tmp_path / "back"),
+                  "--strict-maps")
+    assert res.returncode == 0, res.stderr
+    assert len(pd.read_parquet(tmp_path / "back")) == len(json.loads((tmp_path / "s.json").read_text())["entities"])

@@ -14,8 +14,9 @@ from extractors.maps import maps_dir, read_maps
 from pipeline.query import query
 from synth.pattern import matches, parse_pattern
 from synth.temporal import is_temporal
-from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support import ROOT, SHARED, assert_one_line_error, run_r2s
 
+WAYMO = SHARED / "data" / "waymo" / "sd_waymo_v1.2_7e21cb7ea347ecaa.pkl"  # 147 tracks, as ScenarioNet converts them
 AV2_LOG = Path("/work/shared/data/argoverse2/test_data/sensor_dataset_logs/adcf7d18-0510-35b0-a2fa-b4cea13a6d76")
 # The one-frame lane patterns (the temporal ones beside them: tests/pipeline/query/test_temporal_lanes.py).
 LANE_PATTERNS = [p for p in sorted((ROOT / "data" / "patterns" / "lanes").glob("*.dsl")) if not is_temporal(p.read_text())]
@@ -86,6 +87,23 @@ def test_lane_patterns_match_exactly_the_definition_on_the_argoverse2_log(av2):
         found[text] = len(got)
     # every relation and fact occurs in this log, so the comparison can fail
     assert sum(n > 0 for n in found.values()) >= len(found) - 1, found
+
+
+def test_lane_patterns_match_exactly_the_definition_on_a_waymo_scenario(tmp_path_factory):
+    if not WAYMO.exists():
+        pytest.skip("needs ../shared/data/waymo")
+    frames = tmp_path_factory.mktemp("waymo") / "frames"
+    proc = run_r2s("extract", "scenarionet", str(WAYMO), "--every", "20", "--out", str(frames))
+    assert proc.returncode == 0, proc.stderr
+    found = {}
+    for text in [p.read_text() for p in LANE_PATTERNS] + MORE:
+        pattern = parse_pattern(text)
+        got = engine(str(frames), pattern)
+        assert got == brute(str(frames), pattern), text
+        found[text] = len(got)
+    # Waymo's maps have no intersection lanes nor intersections: the relations between lanes occur, so the
+    # comparison can fail
+    assert sum(n > 0 for n in found.values()) >= 5, found
 
 
 def test_lane_patterns_need_frames_with_a_map(tmp_path):

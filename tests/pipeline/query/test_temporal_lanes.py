@@ -41,6 +41,8 @@ PATTERNS = [
     f"v = new Vehicle {NEAR}\nego stopping\nthen\nv = new Vehicle {NEAR}\nego moving Range(0, 100) m/s, accelerating\n",
 ]
 NUSCENES = SHARED / "data" / "nuscenes-mini" / "scenarionet"
+# the two 20-second Waymo scenarios (198 steps at 10 Hz), as ScenarioNet's Waymo converter wrote them
+WAYMO_CLIPS = [SHARED / "data" / "waymo" / f"sd_waymo_v1.2_{i}.pkl" for i in ("10810393add927f8", "1096927972b9efaa")]
 SHIPPED = {p.name: p.read_text() for p in sorted((ROOT / "data" / "patterns" / "lanes").glob("*.dsl"))
            if is_temporal(p.read_text())}
 # Where each shipped pattern finds what it says (docs/dsl.md lists those events with their render commands).
@@ -58,18 +60,27 @@ def engine_and_brute(frames: Path, text: str, tmp: Path) -> tuple[dict, dict]:
 @pytest.fixture(scope="module")
 def mapped(excerpt_frames, tmp_path_factory):
     """Frames extracted with their maps, as `r2s extract` writes them: the shipped excerpts (the Argoverse 2 log is
-    shipped with its map, frames.maps beside it), and /work/shared/data's nuScenes scenes when present."""
+    shipped with its map, frames.maps beside it), and /work/shared/data's nuScenes scenes and two 20-second Waymo
+    clips (every other step) when present."""
     out = {"excerpt": excerpt_frames, "av2-log": ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"}
     if NUSCENES.exists():
         target = tmp_path_factory.mktemp("nuscenes") / "frames"
         proc = run_r2s("extract", "scenarionet", str(NUSCENES), "--categories", "all", "--out", str(target))
         assert proc.returncode == 0, proc.stderr
         out["nuscenes"] = target
+    if all(p.exists() for p in WAYMO_CLIPS):
+        folder = tmp_path_factory.mktemp("waymo-in")
+        for p in WAYMO_CLIPS:
+            (folder / p.name).symlink_to(p)
+        target = tmp_path_factory.mktemp("waymo") / "frames"
+        proc = run_r2s("extract", "scenarionet", str(folder), "--every", "2", "--out", str(target))
+        assert proc.returncode == 0, proc.stderr
+        out["waymo"] = target
     return out
 
 
 @pytest.mark.parametrize("text", PATTERNS + sorted(SHIPPED.values()))
-@pytest.mark.parametrize("data", ["excerpt", "av2-log", "nuscenes"])
+@pytest.mark.parametrize("data", ["excerpt", "av2-log", "nuscenes", "waymo"])
 def test_lanes_and_ego_behaviours_on_real_scenes_are_the_brute_force(mapped, data, text, tmp_path):
     if data not in mapped:
         pytest.skip(f"{data}: /work/shared/data is not on this machine")
