@@ -38,7 +38,9 @@ SOURCES = [
     ("nuScenes-mini (ScenarioNet)", "scenarionet", SHARED / "nuscenes-mini" / "scenarionet"),
     ("Argoverse 2 test log", "argoverse2",
      SHARED / "argoverse2" / "test_data" / "sensor_dataset_logs" / "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"),
+    ("Waymo (12 scenarios, ScenarioNet; every 10th step)", "scenarionet", SHARED / "waymo"),
 ]
+EXTRACT_ARGS = {SOURCES[3][0]: ["--every", "10"]}  # Waymo: 10 Hz, 1,306 frames in all; every 10th keeps 133
 PATTERNS = sorted((ROOT / "data" / "patterns" / "lanes").glob("*.dsl"))
 SYNTH_TARGET, QUERY_TARGET_S = 2.0, 20.0
 
@@ -47,10 +49,10 @@ def load() -> str:
     return " / ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
-def extract(source: str, path: Path, out: Path) -> None:
+def extract(source: str, path: Path, out: Path, *extra: str) -> None:
     from pipeline.cli import main as r2s
 
-    code = r2s(["extract", source, str(path), "--categories", "all", "--out", str(out)])
+    code = r2s(["extract", source, str(path), "--categories", "all", "--out", str(out), *extra])
     if code:
         raise SystemExit(f"bench_lanes: r2s extract {source} {path} failed ({code})")
 
@@ -150,6 +152,9 @@ def main() -> int:
                     help="run part 1 only; the query table of bench/results/lanes.json is kept as it was measured")
     ap.add_argument("--queries-only", action="store_true",
                     help="run part 2 only; the synthesis table of bench/results/lanes.json is kept as it was measured")
+    ap.add_argument("--only", metavar="TEXT",
+                    help="with --synthesis-only: only the recordings whose name holds TEXT (e.g. Waymo); the other "
+                         "rows of the synthesis table are kept as they were measured")
     ap.add_argument("--one", nargs=2, metavar=("FRAMES", "PATTERN"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
@@ -163,11 +168,13 @@ def main() -> int:
         for name, source, path in SOURCES:
             if args.queries_only and name != SOURCES[2][0] and (name != SOURCES[0][0] or SOURCES[2][2].exists()):
                 continue  # the query log only
+            if args.only and args.synthesis_only and args.only not in name:
+                continue
             if not path.exists():
                 print(f"  {name}: not here ({path}), skipped", flush=True)
                 continue
             extracted[name] = Path(tmp) / f"{len(extracted)}-{source}" / "frames"
-            extract(source, path, extracted[name])
+            extract(source, path, extracted[name], *EXTRACT_ARGS.get(name, ()))
             if not args.queries_only:
                 synth_runs.append(synthesis(name, scenes_of(extracted[name])))
         if args.synthesis_only:
@@ -175,6 +182,8 @@ def main() -> int:
             payload = json.loads(previous.read_text()) if previous.exists() else {
                 "machine": machine(), "load_before": load_before, "load_after": load(), "queries": [],
                 "query_target_s": QUERY_TARGET_S, "query_log": ""}
+            if args.only:  # the rows not measured now, as they were
+                synth_runs = [r for r in payload.get("synthesis", []) if args.only not in r["name"]] + synth_runs
             payload.update(synth_target=SYNTH_TARGET, synthesis=synth_runs,
                            synthesis_run={"machine": machine(), "load_before": load_before, "load_after": load()})
             write_results("lanes", payload, markdown(payload))

@@ -545,6 +545,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
 
 
 XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)
+FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
 
 
 def _text(value: Any) -> str | None:
@@ -558,7 +559,8 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
         return ()
     # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
     # (or [x, y, z]) float points (RoadMap.of checks that they are finite). Anything else takes the general way.
-    if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 2 and value.shape[1] >= 2:
+    if type(value) is np.ndarray and value.dtype in FLOATS and value.ndim == 2 and value.shape[1] >= 2:
+        # float32 (the Waymo converter's) widens to a Python float exactly, as np.asarray(value, float) does
         return FloatPairs(zip(value[:, 0].tolist(), value[:, 1].tolist()))
     if type(value) is list and value:
         try:

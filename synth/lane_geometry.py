@@ -45,6 +45,8 @@ MIN_HALF_WIDTH, MAX_HALF_WIDTH = 0.1, 5.0
 # is dropped, and counted).
 WORK_PER_POINT, WORK_BASE = 64, 4096
 MAX_TURNING, TURNING_PER_POINT = 16 * math.pi, 0.05
+SHORT_WORK = int(WORK_PER_POINT / 2 + math.sqrt(WORK_PER_POINT ** 2 / 4 + WORK_BASE))  # n^2 <= 64 n + 4096
+SHORT_TURNING = int(MAX_TURNING / math.pi) + 2  # n - 2 joints of at most pi each
 
 
 def dedup(line: Points) -> Points:
@@ -92,8 +94,15 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
     finite = np.bincount(line, weights=~np.isfinite(xy).all(axis=1), minlength=len(lines)) == 0
     sane = finite & (left_all > 0) & (right_all > 0) & np.isfinite(left_all) & np.isfinite(right_all)
     ok = (kept >= 2) & sane
-    ok[ok] = widening_work(xy, kept, np.maximum(left_all, right_all), ok)[ok] <= WORK_PER_POINT * kept[ok] + WORK_BASE
-    ok &= turning(xy, kept) <= MAX_TURNING + TURNING_PER_POINT * kept
+    # a line of at most SHORT_WORK points is within the work bound whatever it is (n^2 <= 64 n + 4096), and one of
+    # at most SHORT_TURNING within the turning bound (pi a joint): only longer lines are measured
+    long = ok & (kept > SHORT_WORK)
+    if long.any():
+        ok[long] = widening_work(xy, kept, np.maximum(left_all, right_all), long)[long] <= (
+            WORK_PER_POINT * kept[long] + WORK_BASE)
+    long = ok & (kept > SHORT_TURNING)
+    if long.any():
+        ok[long] = (turning(xy, kept) <= MAX_TURNING + TURNING_PER_POINT * kept)[long]
     todo = np.flatnonzero(ok).tolist()
     if not todo:
         return out
@@ -174,10 +183,11 @@ def widening_work(xy: np.ndarray, kept: np.ndarray, half: np.ndarray, which: np.
     side = 2.0 * np.maximum(half, MIN_HALF_WIDTH)[line[mine]]
     with np.errstate(all="ignore"):
         cells = np.floor(xy[mine] / side[:, None])
-    cells = np.clip(np.nan_to_num(cells), -2**52, 2**52).astype(np.int64)
-    keys = np.stack([line[mine], cells[:, 0], cells[:, 1]], axis=1)
-    uniq, counts = np.unique(keys, axis=0, return_counts=True)
-    np.add.at(work, uniq[:, 0], counts.astype(float) ** 2)
+    cells = np.clip(np.nan_to_num(cells), -2**31, 2**31).astype(np.int64)
+    # one integer a (line, cell): lines and cells packed into disjoint bit ranges (np.unique of rows is slow)
+    keys = (line[mine] << 64 - 21) ^ ((cells[:, 0] & (2**21 - 1)) << 21) ^ (cells[:, 1] & (2**21 - 1))
+    uniq, first, counts = np.unique(keys, return_index=True, return_counts=True)
+    np.add.at(work, line[mine][first], counts.astype(float) ** 2)
     return work
 
 

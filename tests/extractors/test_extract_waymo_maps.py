@@ -19,7 +19,9 @@ import pandas as pd
 import pytest
 import shapely
 
+from extractors.scenarionet import scenario_map
 from synth.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH
+from synth.roadmap import MapRepairs
 from tests.support import SHARED, assert_one_line_error, run_r2s
 from tests.support.bounded import run_bounded
 from tests.support.waymo_maps import SCENE, waymo_scenario
@@ -361,3 +363,24 @@ def test_the_verbs_run_on_a_waymo_clip(tmp_path):
                   "--strict-maps")
     assert res.returncode == 0, res.stderr
     assert len(pd.read_parquet(tmp_path / "back")) == len(json.loads((tmp_path / "s.json").read_text())["entities"])
+
+
+def test_what_the_other_converters_write_is_read_as_they_write_it():
+    """Types and layouts of the nuScenes, nuPlan and Argoverse 2 converters beside Waymo's: a sidewalk
+    (ROAD_EDGE_SIDEWALK, a polygon) is not kept, where it used to be taken for a road line without a line;
+    UNKNOWN_LINE (Argoverse 2's unknown marks) and an UNKNOWN polyline (MetaDrive's unknown boundary) are road
+    lines; nuPlan's neighbours are lists of ids; Argoverse 2's widths are zeros throughout (the default)."""
+    features = waymo_scenario()["map_features"]
+    features["501"] = {"type": "ROAD_EDGE_SIDEWALK", "polygon": np.array([[0, 10], [5, 10], [5, 12.0]])}
+    features["502"] = {"type": "UNKNOWN_LINE", "polyline": np.array([[0, 11], [9, 11.0]])}
+    features["503"] = {"type": "UNKNOWN", "polyline": np.array([[0, 12], [9, 12.0]])}
+    features["102"]["left_neighbor"] = ["104"]  # nuPlan: ids
+    features["101"]["width"] = np.zeros_like(features["101"]["width"])  # Argoverse 2: zeros
+    repairs = MapRepairs(strict=True)
+    road = scenario_map(SCENE, features, "waymo", repairs)
+    kinds = {f.feature_id: f.kind for f in road.features}
+    assert "501" not in kinds and kinds["502"] == kinds["503"] == "road_line"
+    assert road["102"].left == "104"
+    assert repairs.counts == {"lane widths from the default": 3, "one-point features dropped": 2}
+    ring = shapely.Polygon(road["101"].polygon)
+    assert ring.area / shapely.LineString(road["101"].line).length == pytest.approx(DEFAULT_LANE_WIDTH)

@@ -12,7 +12,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from synth.lane_facts import PackedSegments, RoadIndex, Segments
-from synth.lane_geometry import dedup, dedup_packed, halfway, halfways, lane_polygon
+from synth.lane_geometry import (
+    MAX_TURNING,
+    SHORT_TURNING,
+    SHORT_WORK,
+    WORK_BASE,
+    WORK_PER_POINT,
+    dedup,
+    dedup_packed,
+    halfway,
+    halfways,
+    lane_polygon,
+    widening_work,
+)
 from synth.roadmap import LANE, MapFeature, RoadMap
 
 coord = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -144,3 +156,17 @@ def test_lane_polygons_are_simple_rings_as_check_simple_trusts(raw, left, right)
 
     for ring in lane_polygons([tuple(r) for r in raw], [left] * len(raw), [right] * len(raw)):
         assert ring == () or (type(ring) is ShellRing and ring_is_simple(ring))
+
+
+def test_the_widening_bounds_pass_every_short_line_and_measure_the_rest():
+    """Lines too short to exceed a bound are not measured (lane_polygons): that is sound only if the shortcut's
+    lengths are the largest within the bounds whatever the line, which the bounds' own arithmetic says."""
+    assert SHORT_WORK ** 2 <= WORK_PER_POINT * SHORT_WORK + WORK_BASE < (SHORT_WORK + 1) ** 2
+    assert (SHORT_TURNING - 2) * math.pi <= MAX_TURNING < (SHORT_TURNING - 1) * math.pi
+    # n vertices in one cell cost n^2; spread one a cell, n
+    n = 50
+    one_cell = np.column_stack([np.linspace(0, 0.1, n), np.zeros(n)])
+    spread = np.column_stack([np.arange(n) * 10.0, np.zeros(n)])
+    work = widening_work(np.concatenate([one_cell, spread]), np.array([n, n]), np.array([1.7, 1.7]),
+                         np.array([True, True]))
+    assert work.tolist() == [n * n, n]
