@@ -40,7 +40,7 @@ SOURCES = [
      SHARED / "argoverse2" / "test_data" / "sensor_dataset_logs" / "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"),
     ("Waymo (12 scenarios, ScenarioNet; every 10th step)", "scenarionet", SHARED / "waymo"),
 ]
-EXTRACT_ARGS = {SOURCES[3][0]: ["--every", "10"]}  # Waymo: 10 Hz, 1,306 frames in all; every 10th keeps 133
+EXTRACT_ARGS = {SOURCES[3][0]: ["--every", "10"]}  # Waymo: 10 Hz, 1,306 frames in all; every 10th keeps 140
 PATTERNS = sorted((ROOT / "data" / "patterns" / "lanes").glob("*.dsl"))
 SYNTH_TARGET, QUERY_TARGET_S = 2.0, 20.0
 
