@@ -182,8 +182,10 @@ def main() -> int:
             payload = json.loads(previous.read_text()) if previous.exists() else {
                 "machine": machine(), "load_before": load_before, "load_after": load(), "queries": [],
                 "query_target_s": QUERY_TARGET_S, "query_log": ""}
-            if args.only:  # the rows not measured now, as they were
-                synth_runs = [r for r in payload.get("synthesis", []) if args.only not in r["name"]] + synth_runs
+            if args.only:  # the rows not measured now, as they were, each with the run that measured it
+                kept = payload.get("synthesis_run") or {k: payload[k] for k in ("machine", "load_before", "load_after")}
+                synth_runs = [{"run": kept, **r} for r in payload.get("synthesis", []) if args.only not in r["name"]
+                              ] + synth_runs
             payload.update(synth_target=SYNTH_TARGET, synthesis=synth_runs,
                            synthesis_run={"machine": machine(), "load_before": load_before, "load_after": load()})
             write_results("lanes", payload, markdown(payload))
@@ -227,6 +229,10 @@ def markdown(p: dict) -> str:
                   f"{r['lanes']['median_ms']:.1f} ms | {r['ratio_median']:.2f}x | {r['plain']['max_ms']:.1f} ms | "
                   f"{r['lanes']['max_ms']:.1f} ms | {r['ratio_max']:.2f}x | {r['plain']['median_cost']:g} / "
                   f"{r['lanes']['median_cost']:g} |")
+    earlier = [r for r in p["synthesis"] if "run" in r]
+    if earlier:
+        md += ["", "Rows measured by an earlier run (`--synthesis-only --only TEXT` measured the others): " + "; ".join(
+            f"{r['name']}: {provenance(r['run'])}" for r in earlier)]
     md += ["", "## Lane patterns at scale", "", provenance(p), "",
            "The log with its map replicated as distinct scenes (four part files, one map shared by every copy); each "
            "shipped lane pattern (data/patterns/lanes) in a fresh process, wall clock including the validation of "
