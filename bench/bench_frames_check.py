@@ -39,7 +39,7 @@ def measure(frames: Path, repeat: int) -> list[dict]:
     out = []
     for name, road in MODES:
         part = dataset.parts[0]
-        columns = (CHECK_COLUMNS + tuple(c for c in FrameHasher.columns if c in part.columns and c not in CHECK_COLUMNS)
+        columns = (CHECK_COLUMNS + tuple(c for c in FrameHasher().columns if c in part.columns and c not in CHECK_COLUMNS)
                    if road is None else part.read_columns(road))
         seconds = best(lambda road=road: dataset.check(FrameHasher(), road=road), repeat)
         out.append({"mode": name, "road": road, "columns": len(columns), "cpu_s": seconds})

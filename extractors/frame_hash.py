@@ -19,21 +19,36 @@ with its position in the frame; a frame is the sum of its rows (mod 2^64) and it
 The sum lets a frame continue from one row group into the next (streaming), and vectorizes over a row group: the
 work is a few dozen numpy operations per row, no Python per row or per frame. It is a checksum against stale
 results, not a cryptographic commitment: whoever writes the frames file also chooses what is synthesized.
+
+With a road (`r2s run --lanes`, whose workers read each frame with its road columns and the map it names:
+`Coverage.with_road`), a frame is also what it reads of its road, and the chain goes on over ROAD_HASHED_COLUMNS
+after HASHED_COLUMNS: the frame's world (synth.world: the ego row's source, scene, frame_index, map_x, map_y,
+map_heading), the lane facts, and the map each row names *by its content*. There a bool is 0 or 1, an integer is
+hashed as the binary64 bits of its value, a list (`lanes`) is the finalizer of (the sum of its elements' words,
+each mixed with its position) xor mix(its length xor the second seed), and a row's `map_id` is the first 8 bytes of
+BLAKE2b over the id (UTF-8), a zero byte and the map's content digest (extractors.maps.map_digests: 16 bytes over
+the map's rows as stored beside the frames; nothing when the maps hold no such map). Moving a lane, a lane fact, or
+the map a frame names recomputes the frame; a map no frame names does not count.
 """
 
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from extractors.frames_schema import FramesError
 from storage.frame_index import FrameIndex, frame_hashes
 
 HASHED_COLUMNS = ("entity_id", "type", "x", "y", "heading", "length", "width", "speed", "pos_sigma",
                   "heading_sigma", "speed_sigma")
-STRING_COLUMNS = ("entity_id", "type")
+# What synthesis reads of a frame besides, with its road (synth.world's pose and names, the lane facts, the map).
+ROAD_HASHED_COLUMNS = ("source", "scene", "frame_index", "map_id", "map_x", "map_y", "map_heading", "lanes", "lane",
+                       "in_intersection", "on_crosswalk", "off_road")
 HASH_CHARS = 32  # two 64-bit lanes in hex
 
 _NULL = np.uint64(0x7FF8000000000000)  # the canonical quiet NaN's bits: a null, a NaN, an absent column
@@ -51,36 +66,127 @@ def _mix(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _string_values(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
-    """8 bytes of BLAKE2b per distinct string (dictionary-encoded: the work is per distinct value)."""
-    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+@dataclass(frozen=True)
+class Coverage:
+    """What a frame's hash covers: its columns, in order, and with a road each map's content digest by map id
+    (extractors.maps.map_digests; a map id the maps lack is absent or None)."""
+
+    columns: tuple[str, ...] = HASHED_COLUMNS
+    maps: Mapping[str, bytes | None] | None = field(default=None, compare=False)
+
+    @classmethod
+    def with_road(cls, maps: Mapping[str, bytes | None]) -> Coverage:
+        return cls(HASHED_COLUMNS + ROAD_HASHED_COLUMNS, maps)
+
+    def map_word(self, map_id: str) -> bytes:
+        return map_id.encode("utf-8") + b"\0" + (self.maps.get(map_id) or b"")
+
+
+PLAIN = Coverage()
+
+
+def _word(text: bytes) -> int:
+    return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")
+
+
+def _string_values(arr: pa.Array, encode=lambda s: s.encode("utf-8")) -> np.ndarray:
+    """8 bytes of BLAKE2b per distinct string (dictionary-encoded: the work is per distinct value); `encode`: the
+    bytes hashed for a string."""
     if not pa.types.is_dictionary(arr.type):
         arr = pc.dictionary_encode(arr)
-    words = np.array([int.from_bytes(hashlib.blake2b(s.encode("utf-8"), digest_size=8).digest(), "little")
-                      for s in arr.dictionary.to_pylist()] + [int(_NULL)], dtype=np.uint64)
+    words = np.array([_word(encode(s)) for s in arr.dictionary.to_pylist()] + [int(_NULL)], dtype=np.uint64)
     codes = arr.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).astype(np.int64)
     return words[codes]
 
 
-def _float_values(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
-    values = np.asarray(column.to_numpy(zero_copy_only=False), dtype=np.float64)  # nulls come as NaN
+def _float_values(arr: pa.Array) -> np.ndarray:
+    values = np.asarray(arr.to_numpy(zero_copy_only=False), dtype=np.float64)  # nulls come as NaN
     bits = values.view(np.uint64).copy()
     bits[np.isnan(values)] = _NULL
     return bits
 
 
-def row_chain(table: pa.Table) -> np.ndarray:
-    """The position-free hash of each row: the chain of its values over HASHED_COLUMNS."""
+def _bool_values(arr: pa.Array) -> np.ndarray:
+    values = pc.fill_null(arr.cast(pa.uint8()), 0).to_numpy(zero_copy_only=False).astype(np.uint64)
+    values[np.asarray(arr.is_null())] = _NULL
+    return values
+
+
+def _list_values(arr: pa.Array) -> np.ndarray:
+    """Per list: mix(sum of mix(word of element k ^ mix(k + 1)) ^ mix(length ^ seed 1)); a null list is null.
+    Vectorized over all elements at once (running sums: a list's sum is the difference of two)."""
+    lengths = pc.fill_null(pc.list_value_length(arr), 0).to_numpy(zero_copy_only=False).astype(np.int64)
+    ends = np.cumsum(lengths)
+    position = np.arange(int(ends[-1]) if len(ends) else 0, dtype=np.int64) - np.repeat(ends - lengths, lengths)
+    salted = _mix(_values(arr.flatten()) ^ _mix(position.astype(np.uint64) + np.uint64(1)))
+    running = np.concatenate((np.zeros(1, np.uint64), np.cumsum(salted, dtype=np.uint64)))  # wraps mod 2^64
+    values = _mix((running[ends] - running[ends - lengths]) ^ _mix(lengths.astype(np.uint64) ^ _SEEDS[1]))
+    values[np.asarray(arr.is_null())] = _NULL
+    return values
+
+
+def _values(arr: pa.Array, encode=None) -> np.ndarray:
+    """The 64-bit word of each value of a column, by its type (a road column's type is the file's own)."""
+    kind = arr.type.value_type if pa.types.is_dictionary(arr.type) else arr.type
+    if pa.types.is_string(kind) or pa.types.is_large_string(kind):
+        return _string_values(arr) if encode is None else _string_values(arr, encode)
+    if pa.types.is_boolean(kind):
+        return _bool_values(arr)
+    if pa.types.is_list(kind) or pa.types.is_large_list(kind):
+        return _list_values(arr)
+    if pa.types.is_integer(kind) or pa.types.is_floating(kind):
+        return _float_values(arr)
+    raise FramesError(f"a column holds values of type {kind}, which no frames column has")
+
+
+def row_chain(table: pa.Table, coverage: Coverage = PLAIN) -> np.ndarray:
+    """The position-free hash of each row: the chain of its values over coverage.columns."""
     h = np.full(table.num_rows, _SEEDS[0], dtype=np.uint64)
-    for name in HASHED_COLUMNS:
+    for name in coverage.columns:
         if name not in table.column_names:
             values = np.full(table.num_rows, _NULL, dtype=np.uint64)
-        elif name in STRING_COLUMNS:
-            values = _string_values(table.column(name))
         else:
-            values = _float_values(table.column(name))
+            column = table.column(name)
+            arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+            try:
+                values = _values(arr, coverage.map_word if name == "map_id" and coverage.maps is not None else None)
+            except FramesError as exc:
+                raise FramesError(f"column {name}: {exc}") from None
         h = _mix(h ^ values)
     return h
+
+
+def digest_rows(h, table: pa.Table) -> None:
+    """Feed a hashlib object the rows of `table` as values, column by column (name and type, validity, list
+    lengths, then the values: numbers as 8 bytes, strings as their lengths and UTF-8 bytes), however they are stored
+    (slices, chunks, encodings): the content digest of a map (extractors.maps.map_digests)."""
+    for name in table.column_names:
+        column = table.column(name)
+        h.update(f"\0{name}:{column.type}".encode("utf-8"))
+        for piece in _value_bytes(column.combine_chunks()):
+            h.update(piece)
+
+
+def _value_bytes(arr: pa.Array) -> Iterator[bytes | memoryview]:
+    if pa.types.is_dictionary(arr.type):
+        arr = arr.dictionary.take(arr.indices)
+    yield np.asarray(arr.is_valid(), dtype=np.uint8).tobytes()
+    kind = arr.type
+    if pa.types.is_list(kind) or pa.types.is_large_list(kind):
+        yield pc.fill_null(pc.list_value_length(arr), 0).to_numpy(zero_copy_only=False).astype(np.int64).tobytes()
+        yield from _value_bytes(arr.flatten())
+    elif pa.types.is_string(kind) or pa.types.is_large_string(kind):
+        text = pc.fill_null(arr, "")
+        offsets = np.frombuffer(text.buffers()[1], np.int64 if pa.types.is_large_string(kind) else np.int32)
+        offsets = offsets[text.offset: text.offset + len(text) + 1]
+        yield np.diff(offsets).astype(np.int64).tobytes()
+        data = text.buffers()[2]
+        yield b"" if data is None or len(text) == 0 else memoryview(data)[int(offsets[0]): int(offsets[-1])]
+    elif pa.types.is_boolean(kind) or pa.types.is_integer(kind) or pa.types.is_floating(kind):
+        values = pc.fill_null(arr, False if pa.types.is_boolean(kind) else 0).to_numpy(zero_copy_only=False)
+        yield np.asarray(values, dtype=np.float64 if pa.types.is_floating(kind) else np.int64).tobytes()
+    else:
+        raise FramesError(f"a column holds values of type {kind}, which no map column has")
 
 
 def _row_lanes(chain: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,14 +199,14 @@ def _finish(sum0: np.ndarray, sum1: np.ndarray, rows: np.ndarray) -> tuple[np.nd
     return _mix(sum0 ^ _mix(n ^ _SEEDS[0])), _mix(sum1 ^ _mix(n ^ _SEEDS[1]))
 
 
-def frame_hashes_of(table: pa.Table, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def frame_hashes_of(table: pa.Table, starts: np.ndarray, coverage: Coverage = PLAIN) -> tuple[np.ndarray, np.ndarray]:
     """(lane0, lane1) of each frame of a table of whole frames; frame i is rows starts[i] .. starts[i+1]."""
     n = table.num_rows
     if len(starts) == 0:
         return np.zeros(0, np.uint64), np.zeros(0, np.uint64)
     lengths = np.diff(np.append(starts, n))
     positions = np.arange(n, dtype=np.int64) - np.repeat(starts, lengths)
-    lane0, lane1 = _row_lanes(row_chain(table), positions)
+    lane0, lane1 = _row_lanes(row_chain(table, coverage), positions)
     return _finish(np.add.reduceat(lane0, starts), np.add.reduceat(lane1, starts), lengths)
 
 
@@ -137,9 +243,9 @@ class FrameHasher:
     from one table into the next. `keys()`: each frame's hash folded into its frame id's (storage.frame_index),
     as a FrameIndex: "this frame with these rows"."""
 
-    columns = HASHED_COLUMNS  # what the tables fed must hold (those a file has; the rest hash as null)
-
-    def __init__(self, keep_lanes: bool = False) -> None:
+    def __init__(self, keep_lanes: bool = False, coverage: Coverage = PLAIN) -> None:
+        self.coverage = coverage
+        self.columns = coverage.columns  # what the tables fed must hold (those a file has; the rest hash as null)
         self._keys: list[tuple[np.ndarray, np.ndarray]] = []
         self._open: tuple[str, np.uint64, np.uint64, int] | None = None  # (id, sum0, sum1, rows so far)
         # With keep_lanes, each frame's hash itself too (32 bytes a frame), for hashes over several frames
@@ -156,7 +262,7 @@ class FrameHasher:
         continues = self._open is not None and ids[0] == self._open[0]
         if continues:
             positions[: lengths[0]] += self._open[3]
-        lane0, lane1 = _row_lanes(row_chain(table), positions)
+        lane0, lane1 = _row_lanes(row_chain(table, self.coverage), positions)
         sum0, sum1 = np.add.reduceat(lane0, starts), np.add.reduceat(lane1, starts)
         ids, lengths = np.asarray(ids, dtype=object), lengths.astype(np.int64)
         if continues:

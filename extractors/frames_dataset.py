@@ -147,12 +147,12 @@ class FramesDataset:
         for part in self.parts:
             columns = CHECK_COLUMNS
             if hasher is not None:
-                columns += tuple(c for c in hasher.columns if c in part.columns and c not in CHECK_COLUMNS)
+                columns += tuple(c for c in hasher.columns if c in part.columns + part.road and c not in CHECK_COLUMNS)
             decoded = () if road is None else tuple(c for c in part.read_columns(road) if c not in columns)
             # Their text read dictionary-encoded, as the rules' ids are: a category, a scene, a lane repeats on
             # many rows, and a dictionary's values and indices are what a worker's plain read decodes to, so each
-            # distinct value is checked once.
-            dictionary = DICTIONARY_COLUMNS + tuple(c for c in decoded if c in TEXT_COLUMNS)
+            # distinct value is checked (and hashed) once.
+            dictionary = DICTIONARY_COLUMNS + tuple(c for c in columns + decoded if c in TEXT_COLUMNS)
             try:
                 for table in self.row_groups(part, columns + decoded, dictionary):
                     if road is not None:  # the rules' columns too: their corrupt values refused in the workers' words

@@ -8,15 +8,19 @@ written once, however many frames name it. Rows <-> RoadMap is one conversion ea
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from extractors.frame_hash import digest_rows
 from extractors.frames_schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
 from synth.roadmap import MapError, MapFeature, RoadMap, points
@@ -116,6 +120,12 @@ def replace_maps(staged: Path, target: Path) -> None:
 def read_maps(path: str | os.PathLike, map_ids: set[str] | None = None) -> Iterator[RoadMap]:
     """The maps of a maps directory or file (those named in map_ids, or all), validated again: a map file may
     come from anyone. With map_ids, row-group statistics skip the other maps' rows."""
+    for f, table in _map_tables(path, map_ids):
+        yield from _roads(f, table)
+
+
+def _map_tables(path: str | os.PathLike, map_ids: set[str] | None = None) -> Iterator[tuple[Path, pa.Table]]:
+    """(file, its rows of the maps named in map_ids, or all) of every maps file, in file order."""
     p = Path(path)
     files = sorted(f for f in p.rglob("*.parquet") if not f.name.startswith((".", "_"))) if p.is_dir() else [p]
     for f in files:
@@ -128,17 +138,47 @@ def read_maps(path: str | os.PathLike, map_ids: set[str] | None = None) -> Itera
                                   filters=None if map_ids is None else [("map_id", "in", sorted(map_ids))])
         except (pa.ArrowException, OSError) as exc:
             raise FramesError(f"{f} is not a readable maps Parquet file ({str(exc)[:100]})") from None
-        by_map: dict[str, list[MapFeature]] = {}
-        try:
-            for row in table.to_pylist():
-                by_map.setdefault(row["map_id"], []).append(feature_of(row))
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, MapError):
-                raise
-            raise FramesError(f"{f}: a row is not a map feature ({str(exc)[:100]})") from None
-        for map_id, features in by_map.items():
-            yield RoadMap.of(map_id, features)
+        yield f, table
 
+
+def _roads(f: Path, table: pa.Table) -> Iterator[RoadMap]:
+    by_map: dict[str, list[MapFeature]] = {}
+    try:
+        for row in table.to_pylist():
+            by_map.setdefault(row["map_id"], []).append(feature_of(row))
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, MapError):
+            raise
+        raise FramesError(f"{f}: a row is not a map feature ({str(exc)[:100]})") from None
+    for map_id, features in by_map.items():
+        yield RoadMap.of(map_id, features)
+
+
+def map_digests(path: str | os.PathLike, map_ids: set[str] | None = None) -> dict[str, bytes]:
+    """The content digest of every map of a maps directory or file (or of those named), by map id: 16 bytes of
+    BLAKE2b over the map's rows as stored (extractors.frame_hash.digest_rows), file after file, in their order. What
+    `r2s run --lanes` keys a frame's road by (extractors.frame_hash.Coverage): each map is read and hashed once per
+    run, and a worker hashes the rows it builds a road from the same way (FrameRoads.digest). No directory: no
+    maps."""
+    return _digests(_map_tables(path, map_ids)) if Path(path).exists() else {}
+
+
+def _digests(tables) -> dict[str, bytes]:
+    digests: dict[str, object] = {}
+    for f, table in tables:
+        ids = pc.dictionary_encode(table.column("map_id").combine_chunks())
+        codes = ids.indices.to_numpy(zero_copy_only=False)
+        valid = np.flatnonzero(np.asarray(ids.is_valid()))
+        order = valid[np.argsort(codes[valid], kind="stable")]  # each map's rows together, in file order
+        grouped, cuts = table.take(pa.array(order, pa.int64())), codes[order]
+        bounds = np.flatnonzero(np.r_[True, cuts[1:] != cuts[:-1], True]) if len(cuts) else np.zeros(0, np.int64)
+        try:
+            for a, b in zip(bounds[:-1], bounds[1:]):
+                h = digests.setdefault(ids.dictionary[int(cuts[a])].as_py(), hashlib.blake2b(digest_size=16))
+                digest_rows(h, grouped.slice(int(a), int(b - a)))
+        except FramesError as exc:
+            raise FramesError(f"{f}: {exc}") from None
+    return {k: h.digest() for k, h in digests.items()}
 
 
 # What a frame's road is, for every verb that builds scenes from frames (r2s scene; r2s run --lanes): the map
@@ -154,11 +194,25 @@ class FrameRoads:
         self.where = Path(where)
         self.radius = radius
         self._maps: dict[str, RoadMap | None] = {}
+        self._tables: dict[str, list[tuple[Path, pa.Table]]] = {}  # a map's rows, read once, until its road is built
+        self._digests: dict[str, bytes | None] = {}
+
+    def _read(self, map_id: str) -> list[tuple[Path, pa.Table]]:
+        if map_id not in self._tables:
+            self._tables[map_id] = list(_map_tables(self.where, {map_id})) if self.where.exists() else []
+        return self._tables[map_id]
+
+    def digest(self, map_id: str) -> bytes | None:
+        """The content digest (map_digests) of the rows this reader builds the map's road from; None: no such map."""
+        if map_id not in self._digests:
+            self._digests[map_id] = _digests(self._read(map_id)).get(map_id)
+        return self._digests[map_id]
 
     def map_named(self, map_id: str) -> RoadMap | None:
         if map_id not in self._maps:
-            found = list(read_maps(self.where, {map_id})) if self.where.exists() else []
+            found = [road for f, table in self._read(map_id) for road in _roads(f, table)]
             self._maps[map_id] = found[0] if found else None
+            self._tables.pop(map_id, None)
         return self._maps[map_id]
 
     def road(self, rows) -> tuple[RoadMap | None, str | None]:

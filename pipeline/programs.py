@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 from storage.parquet import check_column_types, dataset_files
 from synth.errors import InputError
 from synth.synthesize import RESULT_FIELDS
-from synth.version import __version__
+from synth.version import ROWS_VERSION
 
 _ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(), "float64": pa.float64(),
                 "bool": pa.bool_()}
@@ -58,7 +58,7 @@ def failure_row(frame_id: str, status: str, message: str, n_entities: int, confi
 
 def _run_fields(error: str | None, config: Any, frame_hash: str | None) -> dict[str, Any]:
     """The batch stage's own fields of a row (RESULT_FIELDS' "run" source)."""
-    return {"error": error, "config_hash": config.hash, "version": __version__, "frame_hash": frame_hash}
+    return {"error": error, "config_hash": config.hash, "version": ROWS_VERSION, "frame_hash": frame_hash}
 
 
 def programs_table(rows: list[dict[str, Any]], schema: pa.Schema = PROGRAMS_SCHEMA) -> pa.Table:

@@ -31,6 +31,7 @@ from pipeline.errors import UserError
 from pipeline.outputs import check_apart
 from storage.frame_index import frame_hashes
 from synth.config import SynthConfig, as_config
+from synth.version import ROWS_VERSION
 
 PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
 MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
@@ -118,7 +119,7 @@ class _Run:
         n_units, index, contents, config_hash = self._units(dataset)
         store.lock()
         try:
-            plan = store.plan(index, contents, config_hash)
+            plan = store.plan(index, contents, config_hash, ROWS_VERSION)
             del index, contents  # 16 + 16 bytes a frame: not kept while the frames run
             return self._locked(store, dataset, n_units, plan)
         finally:
@@ -135,10 +136,20 @@ class _Run:
         ids), their keys with what each is computed from (the rows' hash: store.plan), and the config hash."""
         from extractors.frame_hash import FrameHasher
 
-        hasher = FrameHasher()  # the rows of every frame, hashed in the checking pass (what a program is from)
+        hasher = FrameHasher(coverage=self._coverage(dataset))  # every frame hashed in the checking pass
         checked = dataset.check(hasher, road=self._maps(dataset) is not None)
         n_frames, index = checked.frames, checked.index
         return n_frames, index, hasher.keys(), self.config.hash
+
+    def _coverage(self, dataset):
+        """What a stored row must have been computed from to be kept (extractors.frame_hash.Coverage): the frame's
+        rows, and with each frame's road (--lanes) its road columns and the content of every map, each map read
+        and hashed once here."""
+        from extractors.frame_hash import Coverage
+        from extractors.maps import map_digests
+
+        maps = self._maps(dataset)
+        return Coverage() if maps is None else Coverage.with_road(map_digests(maps))
 
     def _locked(self, store, dataset, n_frames: int, plan) -> Summary:
         todo = n_frames - len(plan.done)
@@ -164,8 +175,12 @@ class _Run:
         if len(plan.done):
             self.log(f"resuming: {len(plan.done)} of {n_frames} {unit} already done from the same rows with this "
                      "config")
+        if plan.outdated:
+            self.log(f"recomputing {plan.outdated} {one} whose rows another r2s version or synthesis revision wrote "
+                     f"(e.g. {plan.outdated_example}: {plan.outdated_version}; this is {ROWS_VERSION})")
         if plan.changed:
-            self.log(f"recomputing {plan.changed} {one} whose rows changed since their program was made "
+            road = " (their road columns or the maps they name included)" if self._maps(dataset) else ""
+            self.log(f"recomputing {plan.changed} {one} whose rows changed since their program was made{road} "
                      f"(e.g. {plan.changed_example}); their rows are replaced")
         if plan.unhashed:
             self.log(f"recomputing {plan.unhashed} {one} whose rows were written without a frame_hash "
@@ -299,7 +314,7 @@ class _WindowRun(_Run):
         from storage.frame_index import FrameIndex
 
         spec = self.options.window
-        hasher = FrameHasher(keep_lanes=True)
+        hasher = FrameHasher(keep_lanes=True, coverage=self._coverage(dataset))
         # Refuses bad input (every value the workers will read); the hasher keeps each frame's hash
         dataset.check(hasher, road=self._maps(dataset) is not None)
         self._windows, hashes = plan_windows(dataset, hasher, spec)

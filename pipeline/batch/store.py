@@ -8,11 +8,12 @@ Two layouts, chosen by --out:
   into `<out>` by streaming row batches (bounded memory), after the rows of an earlier `<out>`.
 
 A kill at any moment leaves only whole files. On start, the rows already there are read a few short columns at
-a time (frame_id, config_hash, frame_hash: column projection), hashed (storage.frame_index), and sorted out:
-the last row of a frame wins (output file, then parts in order); rows of frames not in the input, computed from
-other rows of the frame (frame_hash, extractors.frame_hash) or with another config are dropped (their files
-rewritten without them, atomically), and the frames left are done. So a resumed run computes each frame once,
-reuses a program only for the same rows and config, and the output holds every frame of the input exactly once
+a time (frame_id, config_hash, version, frame_hash: column projection), hashed (storage.frame_index), and sorted
+out: the last row of a frame wins (output file, then parts in order); rows of frames not in the input, written by
+another version or synthesis revision (version, synth.version.ROWS_VERSION), computed from other rows of the frame
+or another road (frame_hash, extractors.frame_hash) or with another config are dropped (their files rewritten
+without them, atomically), and the frames left are done. So a resumed run computes each frame once, reuses a
+program only for the same rows, road, code and config, and the output holds every frame of the input exactly once
 when the run ends.
 """
 
@@ -57,6 +58,9 @@ class ResumePlan:
     done: FrameIndex  # frames whose row is kept (computed earlier from the same rows with this config)
     stale: int  # frames whose row had another config hash: recomputed, row dropped
     stale_example: str | None
+    outdated: int  # frames whose row another version or synthesis revision wrote: recomputed, row dropped
+    outdated_example: str | None
+    outdated_version: str | None  # the version that row records
     changed: int  # frames whose rows changed since their row was computed: recomputed, row dropped
     changed_example: str | None
     unhashed: int  # frames whose row has no frame_hash (an older writer): recomputed, row dropped
@@ -129,10 +133,11 @@ class RunStore:
 
     # ------------------------------------------------------------------------------------------------ resume
 
-    def plan(self, frames: FrameIndex, contents: FrameIndex, config_hash: str) -> ResumePlan:
+    def plan(self, frames: FrameIndex, contents: FrameIndex, config_hash: str, version: str) -> ResumePlan:
         """What the rows already written mean for this run (see the module docstring). `frames`: the input's
-        frame ids; `contents`: its frames with their rows (extractors.frame_hash.FrameHasher.keys)."""
-        his, los, src, rows, same, fresh, hashed = [], [], [], [], [], [], []
+        frame ids; `contents`: its frames with what they are computed from (extractors.frame_hash.FrameHasher.keys);
+        `version`: what this run's rows record (synth.version.ROWS_VERSION)."""
+        his, los, src, rows, same, current, fresh, hashed = [], [], [], [], [], [], [], []
         warnings = []
         sources = self.sources()
         for s, path in enumerate(sources):
@@ -158,6 +163,8 @@ class RunStore:
             src.append(np.full(len(hi), s, np.int32))
             rows.append(np.arange(len(hi), dtype=np.int64))
             same.append(np.asarray(pc.equal(table.column("config_hash"), config_hash).to_numpy(zero_copy_only=False)))
+            current.append(np.asarray(pc.fill_null(pc.equal(table.column("version"), version), False).to_numpy(
+                zero_copy_only=False), dtype=bool))
             lane0, lane1, valid = from_hex(table.column("frame_hash"))
             kh, kl = frame_keys(hi, lo, lane0, lane1)
             fresh.append(valid & contents.contains(kh, kl))
@@ -165,35 +172,39 @@ class RunStore:
         for p in self.part_files():
             self._next = max(self._next, _part_number(p) + 1)
         if not his:
-            return ResumePlan(FrameIndex.of([]), 0, None, 0, None, 0, 0, 0, {}, tuple(warnings))
-        hi, lo, src, rows, same, fresh, hashed = (np.concatenate(a) for a in (his, los, src, rows, same, fresh,
-                                                                                hashed))
+            return ResumePlan(FrameIndex.of([]), 0, None, 0, None, None, 0, None, 0, 0, 0, {}, tuple(warnings))
+        hi, lo, src, rows, same, current, fresh, hashed = (np.concatenate(a) for a in (his, los, src, rows, same,
+                                                                                         current, fresh, hashed))
         del his, los
         order = np.lexsort((rows, src, lo, hi))  # by frame, then oldest first
         h, lw = hi[order], lo[order]
         last = np.ones(len(order), dtype=bool)
         last[:-1] = (h[1:] != h[:-1]) | (lw[1:] != lw[:-1])
         in_input = frames.contains(h, lw)
-        ok, fresh, hashed = same[order], fresh[order], hashed[order]
-        keep = last & in_input & fresh & ok
-        changed = last & in_input & hashed & ~fresh
+        ok, current, fresh, hashed = same[order], current[order], fresh[order], hashed[order]
+        # Why a frame of the input is recomputed, one reason each, in this order: what it was computed from is
+        # unknown (no frame hash), or by another version (whose hash may cover other things), or its rows changed,
+        # or the configuration did.
+        keep = last & in_input & current & fresh & ok
         unhashed = last & in_input & ~hashed
-        stale = last & in_input & fresh & ~ok
+        outdated = last & in_input & hashed & ~current
+        changed = last & in_input & hashed & current & ~fresh
+        stale = last & in_input & current & fresh & ~ok
         foreign = last & ~in_input
         drop = order[~keep]
         drops = {}
         for s in np.unique(src[drop]):
             drops[sources[s]] = np.sort(rows[drop][src[drop] == s])
 
-        def example(mask: np.ndarray) -> str | None:
+        def example(mask: np.ndarray, column: str = "frame_id") -> str | None:
             if not mask.any():
                 return None
             first = order[int(np.argmax(mask))]
-            return str(_read_keys(sources[src[first]]).column("frame_id")[int(rows[first])])
+            return str(_read_keys(sources[src[first]]).column(column)[int(rows[first])].as_py())
 
-        return ResumePlan(FrameIndex(h[keep], lw[keep]), int(stale.sum()), example(stale), int(changed.sum()),
-                          example(changed), int(unhashed.sum()), int(foreign.sum()), int((~last).sum()), drops,
-                          tuple(warnings))
+        return ResumePlan(FrameIndex(h[keep], lw[keep]), int(stale.sum()), example(stale), int(outdated.sum()),
+                          example(outdated), example(outdated, "version"), int(changed.sum()), example(changed),
+                          int(unhashed.sum()), int(foreign.sum()), int((~last).sum()), drops, tuple(warnings))
 
     def apply(self, plan: ResumePlan) -> None:
         """Rewrite the files that hold dropped rows without them (each atomically; an emptied part goes)."""
@@ -287,12 +298,12 @@ def _ours(name: str) -> bool:
 
 
 def _read_keys(path: Path) -> pa.Table:
-    """frame_id, config_hash and frame_hash of a programs file, and status to check it: a resume reads four short
-    columns (column projection), never the programs' text. A file written before frame_hash gets nulls."""
+    """frame_id, config_hash, version and frame_hash of a programs file, and status to check it: a resume reads five
+    short columns (column projection), never the programs' text. A file written before frame_hash gets nulls."""
     try:
-        pf = pq.ParquetFile(path, read_dictionary=["status", "config_hash"])
+        pf = pq.ParquetFile(path, read_dictionary=["status", "config_hash", "version"])
         check_programs_schema(pf.schema_arrow, str(path))
-        keys = ["frame_id", "config_hash", "status", "frame_hash"]
+        keys = ["frame_id", "config_hash", "version", "status", "frame_hash"]
         table = pf.read(columns=[c for c in keys if c in pf.schema_arrow.names])
         if "frame_hash" not in table.column_names:
             table = table.append_column("frame_hash", pa.nulls(table.num_rows, pa.string()))

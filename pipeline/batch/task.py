@@ -22,8 +22,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
-from extractors.frame_hash import frame_hashes_of, to_hex
+from extractors.frame_hash import Coverage, frame_hashes_of, to_hex
 from extractors.frames import FramesError, frame_to_scene
 from extractors.frames_dataset import read_frame_rows
 from extractors.maps import FrameRoads
@@ -95,10 +96,11 @@ class ChunkTask(Units):
     def frame_ids(self) -> list[str]:
         return [f[0] for f in self.frames]
 
-    def read(self) -> tuple[pa.Table, int, list[str]]:
+    def read(self, roads: FrameRoads | None = None) -> tuple[pa.Table, int, list[str]]:
         """The rows of the chunk's span (whole frames, from its first frame's first row to its last frame's last
         row), the span's first row, and the hash of each of the chunk's frames' rows in its order
-        (extractors.frame_hash): a row records what it was computed from, as the worker read it."""
+        (extractors.frame_hash): a row records what it was computed from, as the worker read it; with `roads` (the
+        maps the frames' roads come from: --lanes), the maps they name too."""
         first = min(f[1] for f in self.frames)
         stop = max(f[1] + f[2] for f in self.frames)
         try:  # through the checks of every reader of frames: the footer as the file is now, every value decoded
@@ -110,8 +112,12 @@ class ChunkTask(Units):
         # The span cut at every start and end of the chunk's frames (rows between them are other frames': one
         # vectorized pass over the span, the pieces between are hashed and not used).
         cuts = sorted({f[1] - first for f in self.frames} | {f[1] + f[2] - first for f in self.frames} - {stop - first})
-        hashes = dict(zip(cuts, to_hex(*frame_hashes_of(rows, np.array(cuts, dtype=np.int64)))))
+        lanes = hash_rows(rows, np.array(cuts, dtype=np.int64), roads)
+        hashes = dict(zip(cuts, to_hex(*lanes)))
         return rows, first, [hashes[f[1] - first] for f in self.frames]
+
+    def roads(self) -> FrameRoads | None:
+        return FrameRoads(self.maps) if self.maps is not None else None
 
 
     def run(self) -> pa.Table:
@@ -122,7 +128,7 @@ class ChunkTask(Units):
         """The rows of frames whose worker died, with the hash of their rows (read here: a rare event, one frame
         usually) so that a resume keeps the verdict for the same rows; None if they cannot be read (recomputed)."""
         try:
-            hashes = self.read()[2]
+            hashes = self.read(self.roads())[2]
         except ChunkUnreadable:
             hashes = [None] * len(self.frames)
         return programs_table([failure_row(fid, status, reason, n - 1, self.config, frame_hash=h)
@@ -150,9 +156,9 @@ class ChunkInvalid(ChunkUnreadable):
 def run_chunk(task: ChunkTask) -> pa.Table:
     """Programs rows of every frame of the chunk, in its order. Never raises for a frame, only when the rows
     cannot be read at all (ChunkUnreadable)."""
-    table, first, hashes = task.read()
+    roads = task.roads()
+    table, first, hashes = task.read(roads)
     rows = table.to_pandas()
-    roads = FrameRoads(task.maps) if task.maps is not None else None
     marker = task.marker()
     out = []
     for i, ((frame_id, start, n), frame_hash) in enumerate(zip(task.frames, hashes)):
@@ -172,6 +178,19 @@ def run_chunk(task: ChunkTask) -> pa.Table:
         except FileNotFoundError:
             pass
     return programs_table(out)
+
+
+def hash_rows(rows: pa.Table, starts: np.ndarray, roads: FrameRoads | None) -> tuple[np.ndarray, np.ndarray]:
+    """extractors.frame_hash.frame_hashes_of of rows a worker read, covering what the run's check hashed: with roads
+    (--lanes), the content of every map the rows name as this worker reads it (FrameRoads.digest). Rows or maps that
+    the check passed and that cannot be hashed now changed since: a ChunkInvalid."""
+    try:
+        if roads is None:
+            return frame_hashes_of(rows, starts)
+        named = pc.unique(rows.column("map_id")).drop_null().to_pylist() if "map_id" in rows.column_names else []
+        return frame_hashes_of(rows, starts, Coverage.with_road({m: roads.digest(m) for m in named}))
+    except FramesError as exc:
+        raise ChunkInvalid(one_line(str(exc), 400)) from None
 
 
 def _road(roads: FrameRoads, rows):

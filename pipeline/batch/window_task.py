@@ -16,11 +16,19 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from extractors.frame_hash import frame_hashes_of
 from extractors.frames import FramesError, frame_to_scene
 from extractors.frames_dataset import read_frame_rows
 from extractors.maps import FrameRoads
-from pipeline.batch.task import ChunkInvalid, ChunkUnreadable, Units, _hard_memory_cap, _reset_peak_rss, _road, one_line
+from pipeline.batch.task import (
+    ChunkInvalid,
+    ChunkUnreadable,
+    Units,
+    _hard_memory_cap,
+    _reset_peak_rss,
+    _road,
+    hash_rows,
+    one_line,
+)
 from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
 from synth.config import SynthConfig
@@ -43,8 +51,9 @@ class WindowTask(Units):
     progress_dir: str | None = None
     maps: str | None = None  # with lanes: the maps beside the frames, each frame's road as r2s scene gives it
 
-    def read(self, unit: WindowUnit) -> tuple[list, str]:
-        """The window's frames' rows (one DataFrame each, in order) and the window's hash of them as read."""
+    def read(self, unit: WindowUnit, roads: FrameRoads | None) -> tuple[list, str]:
+        """The window's frames' rows (one DataFrame each, in order) and the window's hash of them as read (with
+        `roads`, --lanes: of the maps they name too)."""
         frames, lanes = [], []
         for k in sorted({p.part for p in unit.frames}):
             path, columns = self.parts[k]
@@ -58,13 +67,13 @@ class WindowTask(Units):
                 raise ChunkUnreadable(one_line(f"cannot read {self.url or ''}{path}: {exc}", 400)) from None
             for p in mine:
                 piece = rows.slice(p.start - first, p.rows)
-                lane0, lane1 = frame_hashes_of(piece, np.zeros(1, dtype=np.int64))
+                lane0, lane1 = hash_rows(piece, np.zeros(1, dtype=np.int64), roads)
                 frames.append((p.frame_id, piece))
                 lanes.append((lane0[0], lane1[0]))
         order = {p.frame_id: i for i, p in enumerate(unit.frames)}
         ranked = sorted(zip(frames, lanes), key=lambda fl: order[fl[0][0]])
         ids = [f[0] for f, _ in ranked]
-        digest = window_hash(ids, np.array([a for _, (a, _) in ranked], dtype=np.uint64),
+        digest = window_hash(unit, ids, np.array([a for _, (a, _) in ranked], dtype=np.uint64),
                              np.array([b for _, (_, b) in ranked], dtype=np.uint64))
         return [f[1].to_pandas() for f, _ in ranked], digest
 
@@ -87,7 +96,7 @@ class WindowTask(Units):
 
     def _run_window(self, unit: WindowUnit, roads: FrameRoads | None) -> dict:
         started = time.perf_counter()
-        frames, digest = self.read(unit)
+        frames, digest = self.read(unit, roads)
         n_entities = max(len(f) for f in frames) - 1
         try:
             scenes = [frame_to_scene(f, _road(roads, f) if roads is not None else None) for f in frames]
@@ -119,9 +128,10 @@ class WindowTask(Units):
         """The rows of windows whose worker died, with their hash (read here: a rare event) so that a resume keeps
         the verdict for the same rows; None if they cannot be read (recomputed)."""
         rows = []
+        roads = FrameRoads(self.maps) if self.maps is not None else None
         for unit in self.frames:
             try:
-                frames, digest = self.read(unit)
+                frames, digest = self.read(unit, roads)
                 n_entities = max(len(f) for f in frames) - 1
             except ChunkUnreadable:
                 digest, n_entities = None, 0

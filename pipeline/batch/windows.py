@@ -83,10 +83,12 @@ class WindowUnit(NamedTuple):
     last_timestamp_us: int
 
 
-def window_hash(frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
-    """What a window's program is computed from: its frames (ids, in order) with their rows' hashes
-    (extractors.frame_hash); 32 hex digits, as a frame's hash. (The window options are in the config hash.)"""
+def window_hash(unit: WindowUnit, frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
+    """What a window's row is computed from: its scene and first and last timestamps (the row records them), its
+    frames (ids, in order) with their rows' hashes (extractors.frame_hash); 32 hex digits, as a frame's hash. (The
+    window options are in the config hash.)"""
     h = hashlib.blake2b(digest_size=16)
+    h.update(f"{unit.scene}\0{unit.first_timestamp_us}\0{unit.last_timestamp_us}".encode())
     for fid, a, b in zip(frame_ids, lane0, lane1):
         h.update(b"\0" + str(fid).encode() + b"\0" + int(a).to_bytes(8, "little") + int(b).to_bytes(8, "little"))
     return h.hexdigest()
@@ -152,6 +154,6 @@ def plan_windows(dataset, hasher, spec: WindowSpec) -> tuple[list[WindowUnit], l
     hashes, at = [], 0
     for unit in units:
         k = len(unit.frames)
-        hashes.append(window_hash(ids[at:at + k], lane0[at:at + k], lane1[at:at + k]))
+        hashes.append(window_hash(unit, ids[at:at + k], lane0[at:at + k], lane1[at:at + k]))
         at += k
     return units, hashes

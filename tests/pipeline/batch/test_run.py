@@ -23,6 +23,7 @@ from pipeline.programs import failure_row, programs_table, read_programs
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check
+from synth.version import ROWS_VERSION
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.faults import fault, r2s_with_fault
 
@@ -568,13 +569,13 @@ def test_resume_plan_keeps_same_rows_and_hash_recomputes_the_others_and_drops_fo
                                      _row("f", rows=None), _row("g", "h0", rows=OTHER)]))
     store.write_part(programs_table([_row("c", "h1", runtime=2.0)]))
     ids = ["a", "b", "c", "d", "e", "f", "g"]
-    plan = RunStore(tmp_path / "programs").plan(*_input(ids), CONFIGS["h1"].hash)
+    plan = RunStore(tmp_path / "programs").plan(*_input(ids), CONFIGS["h1"].hash, ROWS_VERSION)
     done = plan.done.contains(*frame_hashes(ids + ["z"]))
     assert list(done) == [True, False, True, False, False, False, False, False]
     assert (plan.stale, plan.stale_example, plan.foreign, plan.superseded) == (1, "b", 1, 1)
     assert (plan.changed, plan.unhashed) == (2, 1) and plan.changed_example in ("e", "g")  # g: config changed too
     fresh = RunStore(tmp_path / "programs")
-    fresh.plan(*_input(ids), CONFIGS["h1"].hash)
+    fresh.plan(*_input(ids), CONFIGS["h1"].hash, ROWS_VERSION)
     fresh.apply(plan)
     left = read_programs(tmp_path / "programs").set_index("frame_id")
     assert sorted(left.index) == ["a", "c"]
