@@ -14,9 +14,19 @@ import pyarrow.parquet as pq
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from extractors.frame_hash import HASHED_COLUMNS, FrameHasher, frame_hashes_of, from_hex, to_hex
+from extractors.frame_hash import (
+    HASHED_COLUMNS,
+    ROAD_HASHED_COLUMNS,
+    Coverage,
+    FrameHasher,
+    frame_hashes_of,
+    from_hex,
+    to_hex,
+)
 from extractors.frames import EXTRACTED_SCHEMA, OPTIONAL_COLUMNS, frame_rows
 from extractors.frames_dataset import FramesDataset
+from extractors.frames_schema import ROAD_COLUMNS
+from extractors.maps import FrameRoads, map_digests
 from storage.frame_index import FrameIndex, frame_hashes
 
 MASK = 2**64 - 1
@@ -32,21 +42,33 @@ def _mix(x: int) -> int:
     return x ^ (x >> 31)
 
 
-def _word(name: str, value) -> int:
+def _blake(data: bytes) -> int:
+    return int.from_bytes(hashlib.blake2b(data, digest_size=8).digest(), "little")
+
+
+def _word(name: str, value, maps: dict | None = None) -> int:
+    """A value's word as the docstring of extractors/frame_hash.py says (maps: with a road, digests by map id)."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return NULL
-    if name in ("entity_id", "type"):
-        return int.from_bytes(hashlib.blake2b(value.encode(), digest_size=8).digest(), "little")
+    if name == "map_id" and maps is not None:
+        return _blake(value.encode() + b"\0" + (maps.get(value) or b""))
+    if isinstance(value, str):
+        return _blake(value.encode())
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, list):
+        total = sum(_mix(_word("", v) ^ _mix(k + 1)) for k, v in enumerate(value)) & MASK
+        return _mix(total ^ _mix(len(value) ^ SEEDS[1]))
     return struct.unpack("<Q", struct.pack("<d", float(value)))[0]
 
 
-def brute_hash(rows: list[dict]) -> str:
-    """The documented hash of one frame's rows, in their order."""
+def brute_hash(rows: list[dict], maps: dict | None = None) -> str:
+    """The documented hash of one frame's rows, in their order (with maps: with a road, maps' digests by id)."""
     sums = [0, 0]
     for pos, row in enumerate(rows):
         chain = SEEDS[0]
-        for name in HASHED_COLUMNS:
-            chain = _mix(chain ^ _word(name, row.get(name)))
+        for name in HASHED_COLUMNS + (ROAD_HASHED_COLUMNS if maps is not None else ()):
+            chain = _mix(chain ^ _word(name, row.get(name), maps))
         salted = chain ^ _mix(pos + 1)
         for k in (0, 1):
             sums[k] = (sums[k] + _mix(salted ^ SEEDS[k])) & MASK
@@ -182,3 +204,103 @@ def test_stored_hashes_read_back_and_bad_ones_are_not_valid():
     assert valid.tolist() == [True, True, True, False, False, False, True]
     assert got0[:3].tolist() == lane0.tolist() and got1[:3].tolist() == lane1.tolist()
     assert (got0[6], got1[6]) == (lane0[2], lane1[2])
+
+
+ROAD_MAPS = {"m1": bytes(range(16)), "m2": bytes(range(16, 32))}  # "m3": named by frames, absent from the maps
+maybe_text = st.one_of(st.none(), st.sampled_from(["", "lane-1", "lane-2", "é", "a\0b"]))
+maybe_bool = st.one_of(st.none(), st.booleans())
+
+
+@st.composite
+def road_frames(draw):
+    """frames() with the road columns, of every kind of value they hold (lists empty, null, with null elements)."""
+    rows = draw(frames())
+    for r in rows:
+        r.update(source=draw(maybe_text), scene=draw(maybe_text),
+                 frame_index=draw(st.one_of(st.none(), st.integers(-2**31, 2**31 - 1))),
+                 map_id=draw(st.one_of(st.none(), st.sampled_from(["m1", "m2", "m3"]))),
+                 map_x=draw(maybe), map_y=draw(maybe), map_heading=draw(maybe),
+                 lanes=draw(st.one_of(st.none(), st.lists(maybe_text, max_size=4))), lane=draw(maybe_text),
+                 in_intersection=draw(maybe_bool), on_crosswalk=draw(maybe_bool), off_road=draw(maybe_bool))
+    return rows
+
+
+def _road_table(rows: list[dict]) -> pa.Table:
+    schema = _table([]).schema
+    schema = pa.schema(list(schema) + [("source", pa.string()), ("scene", pa.string()),
+                                       ("frame_index", pa.int32())] + list(ROAD_COLUMNS.items()))
+    return pa.Table.from_pylist(rows, schema=schema)
+
+
+@settings(max_examples=60, deadline=None)
+@given(road_frames(), st.integers(1, 7))
+def test_with_a_road_the_hash_is_the_documented_one_streamed_or_not(rows, group):
+    table = _road_table(rows)
+    coverage = Coverage.with_road(ROAD_MAPS)
+    want = [brute_hash(r, ROAD_MAPS) for r in _by_frame(rows).values()]
+    assert to_hex(*frame_hashes_of(table, _starts(table), coverage)) == want
+    hasher = FrameHasher(keep_lanes=True, coverage=coverage)
+    for start in range(0, table.num_rows, group):
+        piece = table.slice(start, group)
+        hasher.feed(piece, _starts(piece), np.array([piece.column("frame_id")[int(i)].as_py()
+                                                     for i in _starts(piece)], dtype=object))
+    assert to_hex(*hasher.lanes(list(_by_frame(rows)))) == want
+
+
+def test_with_a_road_every_road_value_and_the_named_map_change_the_hash():
+    rows = [dict(r, map_id="m1", map_x=1.0 + i, map_y=2.0, map_heading=30.0, lanes=["l1"], lane="l1",
+                 in_intersection=False, on_crosswalk=False, off_road=False) for i, r in enumerate(_one_frame())]
+    table = pa.Table.from_pylist(rows, schema=EXTRACTED_SCHEMA)
+
+    def road_hash(t: pa.Table, maps=ROAD_MAPS) -> str:
+        return to_hex(*frame_hashes_of(t, np.zeros(1, np.int64), Coverage.with_road(maps)))[0]
+
+    base = road_hash(table)
+    for name, value in (("map_x", 1.5), ("map_y", 0.0), ("map_heading", 31.0), ("lanes", ["l1", "l2"]),
+                        ("lanes", []), ("lane", "l2"), ("in_intersection", True), ("on_crosswalk", True),
+                        ("off_road", True), ("map_id", "m2"), ("scene", "s2"), ("frame_index", 9), ("source", "x")):
+        changed = [dict(r) for r in rows]
+        changed[1][name] = value
+        assert road_hash(pa.Table.from_pylist(changed, schema=EXTRACTED_SCHEMA)) != base, name
+    assert road_hash(table, {**ROAD_MAPS, "m1": bytes(16)}) != base  # the map it names, changed
+    assert road_hash(table, {"m1": ROAD_MAPS["m1"]}) == base  # a map it does not name does not count
+    assert road_hash(table, {}) != base  # the map it names is gone
+
+
+def _maps_table(dx: float = 0.0) -> pa.Table:
+    from extractors.maps import MAPS_SCHEMA
+
+    rows = []
+    for m in ("a", "b"):
+        for k in range(3):
+            rows.append({"map_id": m, "feature_id": f"{m}{k}", "kind": "lane", "source_type": "t",
+                         "polygon_x": [0.0 + dx, 1.0, 1.0, 0.0] if m == "a" else [0.0, 2.0, 2.0],
+                         "polygon_y": [0.0, 0.0, 1.0, 1.0] if m == "a" else [0.0, 0.0, 2.0],
+                         "line_x": [0.5, 0.5 + k], "line_y": [0.0, 1.0],
+                         "left_neighbour": None, "right_neighbour": None, "successors": [f"{m}{k + 1}"] if k < 2 else [],
+                         "predecessors": [f"{m}{k - 1}"] if k else [], "is_intersection": k == 2,
+                         "direction": None if k else 90.0,
+                         "polygon_rule": "source", "neighbour_rule": None})
+    return pa.Table.from_pylist(rows, schema=MAPS_SCHEMA)
+
+
+def test_map_digests_are_the_maps_content_not_their_storage(tmp_path):
+    """A map read whole (the run's check) and alone (a worker) digests alike, however the file stores it; a
+    coordinate moved changes its map's digest and no other's."""
+    table = _maps_table()
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    pq.write_table(table, tmp_path / "one" / "part-0.parquet")
+    interleaved = table.take([0, 3, 1, 4, 2, 5])  # the maps' rows interleaved, each map's in its order
+    pq.write_table(interleaved, tmp_path / "two" / "part-0.parquet", row_group_size=2, use_dictionary=False,
+                   compression="zstd")
+    one, two = map_digests(tmp_path / "one"), map_digests(tmp_path / "two")
+    assert one == two and sorted(one) == ["a", "b"] and one["a"] != one["b"]
+    roads = FrameRoads(tmp_path / "two")
+    assert {m: roads.digest(m) for m in one} == one and roads.digest("c") is None
+    assert roads.map_named("a").map_id == "a"  # the rows it digested are the rows it builds the road from
+    (tmp_path / "moved").mkdir()
+    pq.write_table(_maps_table(dx=0.5), tmp_path / "moved" / "part-0.parquet")
+    moved = map_digests(tmp_path / "moved")
+    assert moved["a"] != one["a"] and moved["b"] == one["b"]
+    assert map_digests(tmp_path / "absent") == {}
