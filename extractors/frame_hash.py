@@ -66,6 +66,16 @@ def _mix(x: np.ndarray) -> np.ndarray:
     return x
 
 
+def _mix_into(h: np.ndarray, values: np.ndarray, scratch: np.ndarray) -> None:
+    """h = _mix(h ^ values), in place (one link of a row's chain: no temporary array per operation)."""
+    np.bitwise_xor(h, values, out=h)
+    for shift, factor in ((30, _M1), (27, _M2), (31, None)):
+        np.right_shift(h, np.uint64(shift), out=scratch)
+        np.bitwise_xor(h, scratch, out=h)
+        if factor is not None:
+            np.multiply(h, factor, out=h)
+
+
 @dataclass(frozen=True)
 class Coverage:
     """What a frame's hash covers: its columns, in order, and with a road each map's content digest by map id
@@ -142,6 +152,7 @@ def _values(arr: pa.Array, encode=None) -> np.ndarray:
 def row_chain(table: pa.Table, coverage: Coverage = PLAIN) -> np.ndarray:
     """The position-free hash of each row: the chain of its values over coverage.columns."""
     h = np.full(table.num_rows, _SEEDS[0], dtype=np.uint64)
+    scratch = np.empty_like(h)
     for name in coverage.columns:
         if name not in table.column_names:
             values = np.full(table.num_rows, _NULL, dtype=np.uint64)
@@ -152,7 +163,7 @@ def row_chain(table: pa.Table, coverage: Coverage = PLAIN) -> np.ndarray:
                 values = _values(arr, coverage.map_word if name == "map_id" and coverage.maps is not None else None)
             except FramesError as exc:
                 raise FramesError(f"column {name}: {exc}") from None
-        h = _mix(h ^ values)
+        _mix_into(h, values, scratch)
     return h
 
 
