@@ -173,7 +173,7 @@ def digest_rows(h, table: pa.Table) -> None:
     (slices, chunks, encodings): the content digest of a map (extractors.maps.map_digests)."""
     for name in table.column_names:
         column = table.column(name)
-        h.update(f"\0{name}:{column.type}".encode("utf-8"))
+        h.update(f"\0{name}:{column.type}".encode())
         for piece in _value_bytes(column.combine_chunks()):
             h.update(piece)
 

@@ -17,7 +17,7 @@ import pytest
 
 from extractors.maps import maps_dir
 from synth.version import SYNTHESIS_REVISION, __version__
-from tests.support import ROOT, run_r2s
+from tests.support import ROOT, assert_one_line_error, run_r2s
 
 MOVED_MAP = "scene-0061"  # its 2 frames (1 window of 1 s) read it; the other 7 frames (4 windows) do not
 FLIPPED_FRAME = "scene-0796/1"  # one entity's off_road flipped: this frame, and the window holding it
@@ -115,3 +115,15 @@ def test_resume_recomputes_what_another_revision_or_another_road_made_and_keeps_
     assert _run(frames, out, mode)[:2] == (1, n - 1)
     # Every row, the moved map's and the flipped frame's included, is the one a fresh run writes.
     _same_as_fresh(frames, out, tmp_path / "fresh", mode)
+
+
+def test_a_maps_file_that_cannot_be_read_refuses_a_lanes_run_before_anything_is_written(excerpt_frames, tmp_path):
+    """The run's check reads every map once (to key each frame by the road it reads): an unreadable one is bad
+    input, one line and exit 2, where it was an error row for each frame naming the map."""
+    frames, out = tmp_path / "frames", tmp_path / "programs"
+    shutil.copytree(excerpt_frames, frames)
+    bad = sorted(maps_dir(frames).glob("*.parquet"))[1]
+    bad.write_bytes(b"not parquet")
+    proc = run_r2s("run", str(frames), "--lanes", "--out", str(out), "--jobs", "1")
+    assert_one_line_error(proc, contains=f"{bad} is not a readable maps Parquet file")
+    assert not out.exists()
