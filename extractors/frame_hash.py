@@ -82,7 +82,7 @@ class Coverage:
     (extractors.maps.map_digests; a map id the maps lack is absent or None)."""
 
     columns: tuple[str, ...] = HASHED_COLUMNS
-    maps: Mapping[str, bytes | None] | None = field(default=None, compare=False)
+    maps: Mapping[str, bytes | None] | None = field(default=None, hash=False)
 
     @classmethod
     def with_road(cls, maps: Mapping[str, bytes | None]) -> Coverage:
