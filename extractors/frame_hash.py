@@ -124,13 +124,15 @@ def _bool_values(arr: pa.Array) -> np.ndarray:
 
 def _list_values(arr: pa.Array) -> np.ndarray:
     """Per list: mix(sum of mix(word of element k ^ mix(k + 1)) ^ mix(length ^ seed 1)); a null list is null.
-    Vectorized over all elements at once (running sums: a list's sum is the difference of two)."""
+    Vectorized over all elements at once (running sums: a list's sum is the difference of two); the mixes of
+    positions and lengths looked up in tables as long as the longest list."""
     lengths = pc.fill_null(pc.list_value_length(arr), 0).to_numpy(zero_copy_only=False).astype(np.int64)
     ends = np.cumsum(lengths)
+    counts = np.arange(int(lengths.max()) + 1 if len(lengths) else 1, dtype=np.uint64)
     position = np.arange(int(ends[-1]) if len(ends) else 0, dtype=np.int64) - np.repeat(ends - lengths, lengths)
-    salted = _mix(_values(arr.flatten()) ^ _mix(position.astype(np.uint64) + np.uint64(1)))
+    salted = _mix(_values(arr.flatten()) ^ _mix(counts + np.uint64(1))[position])
     running = np.concatenate((np.zeros(1, np.uint64), np.cumsum(salted, dtype=np.uint64)))  # wraps mod 2^64
-    values = _mix((running[ends] - running[ends - lengths]) ^ _mix(lengths.astype(np.uint64) ^ _SEEDS[1]))
+    values = _mix((running[ends] - running[ends - lengths]) ^ _mix(counts ^ _SEEDS[1])[lengths])
     values[np.asarray(arr.is_null())] = _NULL
     return values
 
