@@ -169,35 +169,54 @@ def row_chain(table: pa.Table, coverage: Coverage = PLAIN) -> np.ndarray:
     return h
 
 
-def digest_rows(h, table: pa.Table) -> None:
-    """Feed a hashlib object the rows of `table` as values, column by column (name and type, validity, list
-    lengths, then the values: numbers as 8 bytes, strings as their lengths and UTF-8 bytes), however they are stored
-    (slices, chunks, encodings): the content digest of a map (extractors.maps.map_digests)."""
-    for name in table.column_names:
-        column = table.column(name)
-        h.update(f"\0{name}:{column.type}".encode())
-        for piece in _value_bytes(column.combine_chunks()):
-            h.update(piece)
+class RowBytes:
+    """The rows of a table as bytes, column by column, to digest any run of its rows (the content digest of a map:
+    extractors.maps.map_digests): a column is its name and type, then its pieces, the bytes of each row's values in
+    each piece: validity, list lengths, then the values (numbers as 8 bytes, strings as their lengths and UTF-8
+    bytes), however the table stores them (slices, chunks, dictionaries). Built once for a table; digesting rows
+    a to b is a few buffer slices a column, so a file of many maps is digested map by map without a pass each."""
+
+    def __init__(self, table: pa.Table) -> None:
+        self.columns = []
+        for name in table.column_names:
+            column = table.column(name)
+            pieces: list[tuple[np.ndarray, np.ndarray]] = []
+            _pieces(column.combine_chunks(), np.arange(table.num_rows + 1, dtype=np.int64), pieces)
+            self.columns.append((f"\0{name}:{column.type}".encode(), pieces))
+
+    def digest(self, h, a: int, b: int) -> None:
+        """Feed a hashlib object rows a to b (not included)."""
+        for head, pieces in self.columns:
+            h.update(head)
+            for data, bounds in pieces:
+                h.update(data[bounds[a]: bounds[b]])
 
 
-def _value_bytes(arr: pa.Array) -> Iterator[bytes | memoryview]:
+def _pieces(arr: pa.Array, rows: np.ndarray, out: list) -> None:
+    """Append (data, bounds) for each piece of a column: row i of the table is data[bounds[rows[i]]:
+    bounds[rows[i + 1]]]; `rows`: where each row of the table starts among this array's items."""
     if pa.types.is_dictionary(arr.type):
         arr = arr.dictionary.take(arr.indices)
-    yield np.asarray(arr.is_valid(), dtype=np.uint8).tobytes()
+    out.append((np.asarray(arr.is_valid(), dtype=np.uint8), rows))
     kind = arr.type
     if pa.types.is_list(kind) or pa.types.is_large_list(kind):
-        yield pc.fill_null(pc.list_value_length(arr), 0).to_numpy(zero_copy_only=False).astype(np.int64).tobytes()
-        yield from _value_bytes(arr.flatten())
+        lengths = pc.fill_null(pc.list_value_length(arr), 0).to_numpy(zero_copy_only=False).astype(np.int64)
+        out.append((lengths, rows))
+        _pieces(arr.flatten(), np.concatenate(([0], np.cumsum(lengths)))[rows], out)
     elif pa.types.is_string(kind) or pa.types.is_large_string(kind):
         text = pc.fill_null(arr, "")
+        if len(text) == 0:
+            out.append((np.zeros(0, np.int64), rows))
+            out.append((np.zeros(0, np.uint8), np.zeros_like(rows)))
+            return
         offsets = np.frombuffer(text.buffers()[1], np.int64 if pa.types.is_large_string(kind) else np.int32)
-        offsets = offsets[text.offset: text.offset + len(text) + 1]
-        yield np.diff(offsets).astype(np.int64).tobytes()
+        offsets = offsets[text.offset: text.offset + len(text) + 1].astype(np.int64)
+        out.append((np.diff(offsets), rows))
         data = text.buffers()[2]
-        yield b"" if data is None or len(text) == 0 else memoryview(data)[int(offsets[0]): int(offsets[-1])]
+        out.append((np.frombuffer(data, np.uint8) if data is not None else np.zeros(0, np.uint8), offsets[rows]))
     elif pa.types.is_boolean(kind) or pa.types.is_integer(kind) or pa.types.is_floating(kind):
         values = pc.fill_null(arr, False if pa.types.is_boolean(kind) else 0).to_numpy(zero_copy_only=False)
-        yield np.asarray(values, dtype=np.float64 if pa.types.is_floating(kind) else np.int64).tobytes()
+        out.append((np.asarray(values, dtype=np.float64 if pa.types.is_floating(kind) else np.int64), rows))
     else:
         raise FramesError(f"a column holds values of type {kind}, which no map column has")
 

@@ -20,7 +20,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from extractors.frame_hash import digest_rows
+from extractors.frame_hash import RowBytes
 from extractors.frames_schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
 from synth.roadmap import MapError, MapFeature, RoadMap, points
@@ -156,7 +156,7 @@ def _roads(f: Path, table: pa.Table) -> Iterator[RoadMap]:
 
 def map_digests(path: str | os.PathLike, map_ids: set[str] | None = None) -> dict[str, bytes]:
     """The content digest of every map of a maps directory or file (or of those named), by map id: 16 bytes of
-    BLAKE2b over the map's rows as stored (extractors.frame_hash.digest_rows), file after file, in their order. What
+    BLAKE2b over the map's rows as stored (extractors.frame_hash.RowBytes), file after file, in their order. What
     `r2s run --lanes` keys a frame's road by (extractors.frame_hash.Coverage): each map is read and hashed once per
     run, and a worker hashes the rows it builds a road from the same way (FrameRoads.digest). No directory: no
     maps."""
@@ -170,14 +170,15 @@ def _digests(tables) -> dict[str, bytes]:
         codes = ids.indices.to_numpy(zero_copy_only=False)
         valid = np.flatnonzero(np.asarray(ids.is_valid()))
         order = valid[np.argsort(codes[valid], kind="stable")]  # each map's rows together, in file order
-        grouped, cuts = table.take(pa.array(order, pa.int64())), codes[order]
+        cuts = codes[order]
         bounds = np.flatnonzero(np.r_[True, cuts[1:] != cuts[:-1], True]) if len(cuts) else np.zeros(0, np.int64)
         try:
-            for a, b in zip(bounds[:-1], bounds[1:]):
-                h = digests.setdefault(ids.dictionary[int(cuts[a])].as_py(), hashlib.blake2b(digest_size=16))
-                digest_rows(h, grouped.slice(int(a), int(b - a)))
+            grouped = RowBytes(table.take(pa.array(order, pa.int64())))  # the file's bytes once, digested map by map
         except FramesError as exc:
             raise FramesError(f"{f}: {exc}") from None
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            grouped.digest(digests.setdefault(ids.dictionary[int(cuts[a])].as_py(), hashlib.blake2b(digest_size=16)),
+                           int(a), int(b))
     return {k: h.digest() for k, h in digests.items()}
 
 

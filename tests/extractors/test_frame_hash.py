@@ -18,6 +18,7 @@ from extractors.frame_hash import (
     HASHED_COLUMNS,
     ROAD_HASHED_COLUMNS,
     Coverage,
+    RowBytes,
     FrameHasher,
     frame_hashes_of,
     from_hex,
@@ -304,3 +305,31 @@ def test_map_digests_are_the_maps_content_not_their_storage(tmp_path):
     moved = map_digests(tmp_path / "moved")
     assert moved["a"] != one["a"] and moved["b"] == one["b"]
     assert map_digests(tmp_path / "absent") == {}
+
+
+ROW_SCHEMA = pa.schema([("s", pa.string()), ("xs", pa.list_(pa.float64())), ("names", pa.list_(pa.string())),
+                        ("flag", pa.bool_()), ("v", pa.float64()), ("n", pa.int32())])
+row_values = st.fixed_dictionaries({
+    "s": maybe_text, "xs": st.one_of(st.none(), st.lists(maybe, max_size=3)),
+    "names": st.one_of(st.none(), st.lists(maybe_text, max_size=3)), "flag": maybe_bool, "v": maybe,
+    "n": st.one_of(st.none(), st.integers(-5, 5))})
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(row_values, min_size=1, max_size=12), st.data())
+def test_digesting_a_run_of_rows_is_digesting_those_rows_alone(rows, data):
+    """RowBytes of a table digests rows a..b as a table of those rows alone digests them, built afresh (as a worker
+    reads one map) or as a zero-copy slice: the per-map digests of a file are each map's own."""
+    import hashlib as hl
+
+    table = pa.Table.from_pylist(rows, schema=ROW_SCHEMA)
+    a = data.draw(st.integers(0, len(rows) - 1))
+    b = data.draw(st.integers(a + 1, len(rows)))
+
+    def digest(t: pa.Table, lo: int, hi: int) -> bytes:
+        h = hl.blake2b(digest_size=16)
+        RowBytes(t).digest(h, lo, hi)
+        return h.digest()
+
+    alone = pa.Table.from_pylist(rows[a:b], schema=ROW_SCHEMA)
+    assert digest(table, a, b) == digest(alone, 0, b - a) == digest(table.slice(a, b - a), 0, b - a)
