@@ -34,7 +34,7 @@ the map a frame names recomputes the frame; a map no frame names does not count.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
