@@ -365,25 +365,55 @@ def _centres(lefts: list[list[tuple[float, float]]], rights: list[list[tuple[flo
     return [FloatPairs(zip(xs[end - k:end], ys[end - k:end])) for end, k in zip(ends, n.tolist())]
 
 
+# Cells a padded matrix of running lengths may hold beyond twice the points it sums (see _running_lengths).
+ROW_SLACK = 1 << 16
+
+
+def _running_lengths(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Each line's running length at each of its points (0 at its first), packed like xy: each line's segment
+    lengths summed in order by np.cumsum along a row of a zero-padded matrix, as _resample's np.cumsum sums them.
+    The lines share one matrix when padding them to the longest costs little (a map's lanes: a few dozen points
+    each), else take one matrix per power of two of their point counts, so the matrices hold at most twice the
+    points plus ROW_SLACK cells: one boundary of 10^6 points does not pad every other lane to 10^6."""
+    start = np.cumsum(counts) - counts
+    d = np.diff(xy, axis=0)
+    seg = np.empty(len(xy))
+    seg[1:] = np.hypot(d[:, 0], d[:, 1])
+    seg[start] = 0.0  # a line's first point ends no segment of it
+    run = np.empty(len(xy))
+    if len(counts) * int(counts.max()) <= 2 * len(xy) + ROW_SLACK:
+        groups = [np.arange(len(counts))]
+    else:
+        size = np.frexp(counts.astype(float))[1]  # counts in [2^(e-1), 2^e) share exponent e
+        order = np.argsort(size, kind="stable")
+        groups = np.split(order, np.flatnonzero(np.diff(size[order])) + 1)
+    for lines in groups:
+        c = counts[lines]
+        first = np.cumsum(c) - c
+        row = np.repeat(np.arange(len(lines)), c)
+        col = np.arange(len(row)) - np.repeat(first, c)
+        at = np.repeat(start[lines], c) + col
+        grid = np.zeros((len(lines), int(c.max())))
+        grid[row, col] = seg[at]
+        run[at] = np.cumsum(grid, axis=1)[row, col]
+    return run
+
+
 def _resample_many(xy: np.ndarray, counts: np.ndarray, ns: np.ndarray) -> np.ndarray:
     """`_resample` of many lines (packed: points xy, each line's count) to ns[b] points each, packed, bit for bit:
-    each line's running length as np.cumsum sums it (along a row, in order), np.linspace's points, and
-    np.interp's interpolation (compiled_base.c's arr_interp: the knot at or below the point, the knot's own value
-    where the point is on one or beyond the last, else slope * (x - x0) + y0). A line that takes np.linspace's
-    or np.interp's rarer paths (no length, a subnormal step, overflow) is resampled by _resample itself."""
-    b_count, width = len(counts), int(counts.max())
+    each line's running length as np.cumsum sums it (_running_lengths), np.linspace's points, and np.interp's
+    interpolation (compiled_base.c's arr_interp: the knot at or below the point, the knot's own value where the
+    point is on one or beyond the last, else slope * (x - x0) + y0). A line that takes np.linspace's or
+    np.interp's rarer paths (no length, a subnormal step, overflow) is resampled by _resample itself. Memory:
+    a few arrays of the points and of the points made (no matrix of lines x the longest line)."""
+    b_count = len(counts)
     start = np.cumsum(counts) - counts
-    row, col = np.repeat(np.arange(b_count), counts), np.arange(len(xy)) - np.repeat(start, counts)
-    d = np.diff(xy, axis=0)
-    lengths = np.hypot(d[:, 0], d[:, 1])
-    grid = np.zeros((b_count, width))
-    later = np.flatnonzero(col > 0)  # point k > 0 of its line ends the segment from point k - 1
-    grid[row[later], col[later]] = lengths[later - 1]
-    s = np.cumsum(grid, axis=1)
-    total = s[np.arange(b_count), counts - 1]
+    s = _running_lengths(xy, counts)
+    total = s[start + counts - 1]
     with np.errstate(all="ignore"):
         step = total / (ns - 1)
-    odd = ~np.isfinite(s).all(axis=1) | (total == 0) | (step == 0)
+    # a line's running lengths are all finite when its total is (they only grow, and NaN stays NaN)
+    odd = ~np.isfinite(total) | (total == 0) | (step == 0)
     out_start = np.cumsum(ns) - ns
     out = np.empty((int(ns.sum()), 2))
     r = np.repeat(np.arange(b_count), ns)
@@ -393,18 +423,18 @@ def _resample_many(xy: np.ndarray, counts: np.ndarray, ns: np.ndarray) -> np.nda
     x[last] = total[r[last]]
     j = np.empty(len(out), dtype=np.int64)
     for b in np.flatnonzero(~odd).tolist():  # the knot at or below each point: np.interp's binary search
-        m, o, n = int(counts[b]), int(out_start[b]), int(ns[b])
-        j[o:o + n] = np.searchsorted(s[b, :m], x[o:o + n], "right") - 1
+        m, o, n, a = int(counts[b]), int(out_start[b]), int(ns[b]), int(start[b])
+        j[o:o + n] = np.searchsorted(s[a:a + m], x[o:o + n], "right") - 1
     ok = ~odd[r]
     jo, ro, xo = j[ok], r[ok], x[ok]
     at = start[ro] + np.clip(jo, 0, None)
     f0 = xy[at]
     res = f0.copy()
     inner = (jo >= 0) & (jo < counts[ro] - 1)
-    s0 = s[ro, np.clip(jo, 0, None)]
+    s0 = s[at]
     between = inner & (s0 != xo)
     bi = np.flatnonzero(between)
-    s1 = s[ro[bi], jo[bi] + 1]
+    s1 = s[at[bi] + 1]
     f1 = xy[at[bi] + 1]
     with np.errstate(all="ignore"):
         slope = (f1 - f0[bi]) / (s1 - s0[bi])[:, None]
