@@ -185,9 +185,17 @@ class PolygonIndex:
         pi, fi = self.candidates(xs, ys)
         if not len(pi):
             return none, none
-        # The edges of the point's band of every candidate pair: pair k owns band_edges[band_start[g]:][:n].
+        # The edges of the point's band of every candidate pair: pair k owns band_edges[band_start[g]:][:n], one
+        # row of the pass each; in chunks of CHUNK_ROWS rows, as a polygon of 10^6 edges has thousands a band.
         g = self.band_first[fi] + self.band_of(ys[pi], fi)
         n = self.band_start[g + 1] - self.band_start[g]
+        inside = np.concatenate([self._inside(pi[c], fi[c], g[c], n[c], xs, ys) for c in row_chunks(n)])
+        return pi[inside], fi[inside]
+
+    def _inside(self, pi: np.ndarray, fi: np.ndarray, g: np.ndarray, n: np.ndarray, xs: np.ndarray,
+                ys: np.ndarray) -> np.ndarray:
+        """Whether polygon fi[k] contains point pi[k], for candidate pairs whose point lies in band g[k] of n[k]
+        edges."""
         pair = np.repeat(np.arange(len(pi)), n)
         edge = self.band_edges[np.repeat(self.band_start[g] - (np.cumsum(n) - n), n) + np.arange(n.sum())]
         px, py = xs[pi][pair], ys[pi][pair]
@@ -203,7 +211,26 @@ class PolygonIndex:
         inside = np.bincount(pair, weights=crossing & sure, minlength=len(pi)).astype(np.int64) % 2 == 1
         for k in np.flatnonzero(doubtful):
             inside[k] = contains(self.features[int(fi[k])].polygon, float(xs[pi[k]]), float(ys[pi[k]]))
-        return pi[inside], fi[inside]
+        return inside
+
+
+CHUNK_ROWS = 1 << 18  # rows (pair x segment, pair x edge) of one vectorised pass: some 30 MB of temporaries
+
+
+def row_chunks(rows: np.ndarray) -> list[slice]:
+    """Consecutive slices of pairs whose rows (rows[j] for pair j) add up to at most CHUNK_ROWS, a pair of more
+    rows in a slice of its own: a pass over every (pair, row) of a slice then holds at most max(CHUNK_ROWS, rows[j]) rows,
+    bounded by the input (a line's or a polygon's own size) however many pairs meet a long one. One slice where
+    all fit (every real map so far)."""
+    ends, limit = np.cumsum(rows), CHUNK_ROWS
+    if not len(ends) or ends[-1] <= limit:
+        return [slice(0, len(rows))]
+    out, i = [], 0
+    while i < len(rows):
+        j = max(i + 1, int(np.searchsorted(ends, (ends[i - 1] if i else 0) + limit, "right")))
+        out.append(slice(i, j))
+        i = j
+    return out
 
 
 GRID_SPAN = 64  # cells a box may span and still be filed in the grid
@@ -466,8 +493,17 @@ class PackedSegments:
     def nearest(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Segments.nearest of line lines[j] at (xs[j], ys[j]) for many pairs at once, with its arithmetic on the
         same values: the row (into a, d, length2) of the first nearest segment (np.argmin's choice) and its
-        distance; row -1 (and gap inf) for a line without a segment."""
+        distance; row -1 (and gap inf) for a line without a segment. Every (pair, segment) is one row of the
+        pass, so the pairs go in chunks of at most CHUNK_ROWS rows (a pair with a longer line alone): a lane of
+        10^6 segments met by a hundred points costs one line's worth of memory at a time, not a hundred."""
         lines = np.asarray(lines, dtype=np.int64)
+        xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
+        parts = [self._nearest(lines[c], xs[c], ys[c]) for c in row_chunks(self.count[lines])]
+        if len(parts) == 1:
+            return parts[0]
+        return np.concatenate([b for b, _ in parts]), np.concatenate([g for _, g in parts])
+
+    def _nearest(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = self.count[lines]
         pair = np.repeat(np.arange(len(lines)), n)
         row = np.repeat(self.start[lines] - (np.cumsum(n) - n), n) + np.arange(n.sum())

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
+from unittest.mock import patch
 
 import numpy as np
 import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from synth import lane_facts
 from synth.lane_facts import Banded, PolygonIndex, RoadIndex, contains, orientation
 from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 from synth.scene_road import SceneRoad
@@ -65,9 +67,10 @@ def test_contains_is_the_rational_answer_and_geos_s_on_random_points_vertices_an
             assert got == poly.covers(shapely.Point(px, py)), (ring, px, py)
 
 
-@given(st.lists(polygons, min_size=1, max_size=6), st.data())
+@given(st.lists(polygons, min_size=1, max_size=6), st.data(), st.sampled_from([lane_facts.CHUNK_ROWS, 1, 7]))
 @settings(max_examples=100, deadline=None)
-def test_the_vectorised_index_gives_the_reference_answer_for_every_pair(rings, data):
+def test_the_vectorised_index_gives_the_reference_answer_for_every_pair(rings, data, chunk_rows):
+    # also in chunks of a few (pair, edge) rows, as the points in a polygon of many edges go
     features = tuple(MapFeature("m", f"f{i}", LANE, polygon=r, line=r[:2]) for i, r in enumerate(rings))
     xs = np.array([data.draw(coord) for _ in range(15)] + [r[0][0] for r in rings])
     ys = np.array([data.draw(coord) for _ in range(15)] + [r[0][1] for r in rings])
@@ -76,7 +79,8 @@ def test_the_vectorised_index_gives_the_reference_answer_for_every_pair(rings, d
         cx = sum(p[0] for p in r) / len(r)
         cy = sum(p[1] for p in r) / len(r)
         xs, ys = np.append(xs, cx), np.append(ys, cy)
-    got = PolygonIndex(features).containing(xs, ys)
+    with patch.object(lane_facts, "CHUNK_ROWS", chunk_rows):
+        got = PolygonIndex(features).containing(xs, ys)
     want = [[i for i, r in enumerate(rings) if contains(r, float(x), float(y))] for x, y in zip(xs, ys)]
     assert got == want
 

@@ -6,12 +6,14 @@ decided one point at a time, on random lines and points (hypothesis)."""
 from __future__ import annotations
 
 import math
+from unittest.mock import patch
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.lane_facts import PackedSegments, RoadIndex, Segments
+from synth import lane_facts
+from synth.lane_facts import PackedSegments, RoadIndex, Segments, row_chunks
 from synth.lane_geometry import (
     MAX_TURNING,
     SHORT_TURNING,
@@ -68,13 +70,16 @@ def _on_segment(ax, ay, bx, by, x, y):
     return (px - t * dx) ** 2 + (py - t * dy) ** 2, t
 
 
-@given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20))
+@given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20),
+       st.sampled_from([lane_facts.CHUNK_ROWS, 1, 5]))
 @settings(max_examples=300, deadline=None)
-def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks):
+def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks, chunk_rows):
+    # also in chunks of a few (pair, segment) rows, as the pairs of a very long lane go
     packed = PackedSegments.of(list(raw))
     asks = [(k % len(raw), x, y) for k, x, y in asks]
-    row, gap = packed.nearest(np.array([k for k, _, _ in asks]), np.array([x for _, x, _ in asks]),
-                              np.array([y for _, _, y in asks]))
+    with patch.object(lane_facts, "CHUNK_ROWS", chunk_rows):
+        row, gap = packed.nearest(np.array([k for k, _, _ in asks]), np.array([x for _, x, _ in asks]),
+                                  np.array([y for _, _, y in asks]))
     for (k, x, y), r, g in zip(asks, row.tolist(), gap.tolist()):
         seg = Segments.of(raw[k])
         if seg is None:
@@ -170,3 +175,14 @@ def test_the_widening_bounds_pass_every_short_line_and_measure_the_rest():
     work = widening_work(np.concatenate([one_cell, spread]), np.array([n, n]), np.array([1.7, 1.7]),
                          np.array([True, True]))
     assert work.tolist() == [n * n, n]
+
+
+@given(st.lists(st.integers(0, 9), max_size=30), st.integers(1, 12))
+@settings(max_examples=300, deadline=None)
+def test_row_chunks_cover_every_pair_in_order_within_the_limit(rows, limit):
+    with patch.object(lane_facts, "CHUNK_ROWS", limit):
+        chunks = row_chunks(np.array(rows, dtype=np.int64))
+    assert [i for c in chunks for i in range(len(rows))[c]] == list(range(len(rows)))
+    # each chunk within the limit, or one pair alone; and no two neighbours that would fit in one
+    assert all(sum(rows[c]) <= limit or c.stop - c.start == 1 for c in chunks)
+    assert all(sum(rows[a]) + rows[b.start] > limit for a, b in zip(chunks, chunks[1:]))
