@@ -14,6 +14,7 @@ place the boxes on the log's map (map/log_map_archive_*.json, read below) for th
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +40,7 @@ from extractors.base import (
 from extractors.categories import Taxonomy
 from extractors.sniff import Look
 from extractors.speed import speeds_by_track, track_speeds
-from storage.regular_files import open_regular
+from storage.regular_files import open_regular, read_regular
 from synth.lane_facts import RoadIndex
 from synth.roadmap import (
     CROSSWALK,
@@ -257,7 +258,9 @@ def _world(x: float, y: float, yaw: float) -> tuple[float, float, float] | None:
 # is the city frame of the log's ego poses (city_SE3_egovehicle.feather).
 
 MAP_GLOB = "log_map_archive_*.json"
-MAX_MAP_BYTES = 1 << 30  # a log's map archive is a few hundred KB
+# A log's map archive is a few hundred KB; reading one costs some 13 MB of memory per MB (its JSON objects, the
+# lanes' points as Python floats, their centre lines), so 256 MB keeps the largest under about 3.5 GB.
+MAX_MAP_BYTES = 256 << 20
 
 
 def map_file(log_dir: Path) -> Path | None:
@@ -272,23 +275,28 @@ def map_file(log_dir: Path) -> Path | None:
 
 
 def read_map(path: Path, map_id: str) -> RoadMap:
+    """The map of a log's map archive; a MapError (its message without the path: extract names the archive) for
+    a file that is not one, or a map that breaks a rule of RoadMap.of."""
     try:
-        with open_regular(path, MAX_MAP_BYTES) as fh:  # a FIFO or a device is refused, never read forever
-            data = json.loads(fh.read().decode("utf-8"), parse_constant=_no_constant)
+        # a FIFO or a device is refused, never read forever; never more than MAX_MAP_BYTES + 1 bytes
+        data = json.loads(read_regular(path, MAX_MAP_BYTES).decode("utf-8"), parse_constant=_no_constant)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise MapError(f"{path} is not a readable Argoverse 2 map archive ({str(exc)[:100]})") from None
-    except ValueError as exc:  # NaN / Infinity
-        raise MapError(f"{path}: {exc}") from None
+        raise MapError(f"not a readable Argoverse 2 map archive ({str(exc)[:100]})") from None
+    except ValueError as exc:  # NaN / Infinity, an integer of more than 4300 digits
+        raise MapError(str(exc)) from None
+    except RecursionError:  # an archive is four levels deep: the parser's stack ends before anything real
+        raise MapError("not an Argoverse 2 map archive: its JSON is nested too deeply") from None
     if not isinstance(data, dict) or not isinstance(data.get("lane_segments"), dict):
-        raise MapError(f"{path} is not an Argoverse 2 map archive (no lane_segments)")
+        raise MapError("not an Argoverse 2 map archive (no lane_segments)")
     try:
         features = _lanes(map_id, list(data["lane_segments"].values()))
         features += [_crossing(map_id, v) for v in (data.get("pedestrian_crossings") or {}).values()]
         features += [_area(map_id, v) for v in (data.get("drivable_areas") or {}).values()]
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         if isinstance(exc, MapError):
             raise
-        raise MapError(f"{path}: a map element lacks a field or has the wrong type ({type(exc).__name__}: "
+        # OverflowError: an integer coordinate beyond a float (JSON's 1 followed by 400 zeros)
+        raise MapError(f"a map element lacks a field or has the wrong type ({type(exc).__name__}: "
                        f"{str(exc)[:80]})") from None
     return RoadMap.of(map_id, links_within(features, neighbours=True))
 
@@ -321,6 +329,10 @@ def _resample(line: np.ndarray, n: int) -> np.ndarray:
 
 
 def _id(v: Any) -> str:
+    """A map element's id as text: Argoverse 2 writes integers (an integral float or decimal text is read as one);
+    anything else, 1e400 (a float overflowing to inf) or 1.5 among them, is a MapError, never truncated."""
+    if isinstance(v, float) and not (math.isfinite(v) and v.is_integer()) or isinstance(v, bool):
+        raise MapError(f"a map element's id {v!r} is not an integer (Argoverse 2 ids are integers)")
     return str(int(v))
 
 
