@@ -258,8 +258,8 @@ def _world(x: float, y: float, yaw: float) -> tuple[float, float, float] | None:
 # is the city frame of the log's ego poses (city_SE3_egovehicle.feather).
 
 MAP_GLOB = "log_map_archive_*.json"
-# A log's map archive is a few hundred KB; reading one costs some 13 MB of memory per MB (its JSON objects, the
-# lanes' points as Python floats, their centre lines), so 256 MB keeps the largest under about 3.5 GB.
+# A log's map archive is a few hundred KB; reading one costs some 11 MB of memory per MB (its JSON objects, the
+# lanes' points as Python floats, their centre lines), so 256 MB keeps the largest near 3 GB.
 MAX_MAP_BYTES = 256 << 20
 
 
