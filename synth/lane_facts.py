@@ -215,6 +215,9 @@ class PolygonIndex:
 
 
 CHUNK_ROWS = 1 << 18  # rows (pair x segment, pair x edge) of one vectorised pass: some 30 MB of temporaries
+LONG_LINE = 4096  # segments: a longer line's nearest segment is found by blocks (PackedSegments._pruned)
+BLOCK_MIN = 16  # segments of a block, at least
+PRUNE_SCALE = 1e100  # coordinates beyond: squares near overflow, the line is scanned whole
 
 
 def row_chunks(rows: np.ndarray) -> list[slice]:
@@ -494,36 +497,99 @@ class PackedSegments:
         """Segments.nearest of line lines[j] at (xs[j], ys[j]) for many pairs at once, with its arithmetic on the
         same values: the row (into a, d, length2) of the first nearest segment (np.argmin's choice) and its
         distance; row -1 (and gap inf) for a line without a segment. Every (pair, segment) is one row of the
-        pass, so the pairs go in chunks of at most CHUNK_ROWS rows (a pair with a longer line alone): a lane of
-        10^6 segments met by a hundred points costs one line's worth of memory at a time, not a hundred."""
+        pass, in chunks of at most CHUNK_ROWS rows; a line of more than LONG_LINE segments is not scanned whole
+        for each of its points but pruned by blocks (`_pruned`), so a lane of 10^6 segments met by a hundred
+        points costs neither a hundred lines' worth of memory nor of time."""
         lines = np.asarray(lines, dtype=np.int64)
         xs, ys = np.asarray(xs, dtype=float).reshape(-1), np.asarray(ys, dtype=float).reshape(-1)
-        parts = [self._nearest(lines[c], xs[c], ys[c]) for c in row_chunks(self.count[lines])]
+        n = self.count[lines]
+        long = n > LONG_LINE
+        if not long.any():
+            return self._in_rows(self.start[lines], n, xs, ys)
+        best, low = np.full(len(lines), -1, dtype=np.int64), np.full(len(lines), np.inf)
+        short = np.flatnonzero(~long)
+        best[short], low[short] = self._in_rows(self.start[lines[short]], n[short], xs[short], ys[short])
+        for line in np.unique(lines[long]).tolist():
+            mine = np.flatnonzero(lines == line)
+            best[mine], low[mine] = self._pruned(line, xs[mine], ys[mine])
+        return best, low
+
+    def _in_rows(self, starts: np.ndarray, n: np.ndarray, xs: np.ndarray, ys: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """`nearest` over the n[j] rows from starts[j] for point j (a line's segments, or a block of them), in
+        chunks of at most CHUNK_ROWS rows."""
+        parts = [self._rows_nearest(starts[c], n[c], xs[c], ys[c]) for c in row_chunks(n)]
         if len(parts) == 1:
             return parts[0]
         return np.concatenate([b for b, _ in parts]), np.concatenate([g for _, g in parts])
 
-    def _nearest(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = self.count[lines]
-        pair = np.repeat(np.arange(len(lines)), n)
-        row = np.repeat(self.start[lines] - (np.cumsum(n) - n), n) + np.arange(n.sum())
+    def _rows_nearest(self, starts: np.ndarray, n: np.ndarray, xs: np.ndarray, ys: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        pair = np.repeat(np.arange(len(n)), n)
+        row = np.repeat(starts - (np.cumsum(n) - n), n) + np.arange(n.sum())
         x, y = xs[pair], ys[pair]
         a0, a1, d0, d1 = self.a[row, 0], self.a[row, 1], self.d[row, 0], self.d[row, 1]
         t = np.clip(((x - a0) * d0 + (y - a1) * d1) / self.length2[row], 0, 1)
         gap = np.hypot(a0 + t * d0 - x, a1 + t * d1 - y)
         has = n > 0
         first = np.cumsum(n) - n
-        low = np.full(len(lines), np.inf)
+        low = np.full(len(n), np.inf)
         low[has] = np.minimum.reduceat(gap, first[has]) if has.any() else low[has]
         # the first row of each pair that reaches its minimum (np.argmin's choice)
         at = np.flatnonzero(gap == low[pair])
         pairs_at, first_at = np.unique(pair[at], return_index=True)
-        best = np.full(len(lines), -1, dtype=np.int64)
+        best = np.full(len(n), -1, dtype=np.int64)
         best[pairs_at] = row[at[first_at]]
         for k in np.flatnonzero(has & (best < 0)):  # NaN gaps (coordinates near overflow): argmin itself
             mine = pair == k
             j = int(np.argmin(gap[mine]))
             best[k], low[k] = row[mine][j], gap[mine][j]
+        return best, low
+
+    def _pruned(self, line: int, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`nearest` of one long line at many points, exactly, without every segment for every point: the
+        line's segments in blocks of about sqrt(count) (at least BLOCK_MIN), each with the box of its segments;
+        per point, the least gap in the block whose box is nearest bounds the answer (upper), and only blocks
+        whose box lies within upper (plus a margin far above the rounding of either computation) can hold a
+        segment whose computed gap reaches the least one; those blocks' rows are decided as `_rows_nearest`
+        decides them, the first least gap over them, block after block, is np.argmin's. Points or lines beyond
+        PRUNE_SCALE (where products could overflow) are scanned whole."""
+        s0, m = int(self.start[line]), int(self.count[line])
+        a, d = self.a[s0:s0 + m], self.d[s0:s0 + m]
+        e = a + d
+        scale = float(max(np.abs(a).max(), np.abs(e).max()))
+        best, low = np.full(len(xs), -1, dtype=np.int64), np.full(len(xs), np.inf)
+        ok = np.isfinite(xs) & np.isfinite(ys) & (np.abs(xs) < PRUNE_SCALE) & (np.abs(ys) < PRUNE_SCALE)
+        if not scale < PRUNE_SCALE:
+            ok[:] = False
+        whole = np.flatnonzero(~ok)
+        if len(whole):
+            best[whole], low[whole] = self._in_rows(np.full(len(whole), s0), np.full(len(whole), m), xs[whole],
+                                                    ys[whole])
+        size = max(BLOCK_MIN, math.isqrt(m))
+        first = np.arange(0, m, size)
+        rows = np.diff(np.append(first, m))
+        lo = np.minimum.reduceat(np.minimum(a, e), first, axis=0)
+        hi = np.maximum.reduceat(np.maximum(a, e), first, axis=0)
+        points = np.flatnonzero(ok)
+        step = max(1, CHUNK_ROWS // len(first))
+        for c in range(0, len(points), step):
+            at = points[c:c + step]
+            x, y = xs[at], ys[at]
+            dx = np.maximum(np.maximum(lo[:, 0] - x[:, None], x[:, None] - hi[:, 0]), 0.0)
+            dy = np.maximum(np.maximum(lo[:, 1] - y[:, None], y[:, None] - hi[:, 1]), 0.0)
+            box_gap = np.hypot(dx, dy)  # points x blocks: at most a lower bound of the gap of any segment in it
+            k = np.argmin(box_gap, axis=1)
+            _, upper = self._in_rows(s0 + first[k], rows[k], x, y)
+            margin = 1e-12 * (1.0 + scale + np.abs(x) + np.abs(y) + upper)
+            near = box_gap <= (upper + margin)[:, None]
+            near[np.arange(len(at)), k] = True
+            p, b = np.nonzero(near)  # row-major: each point's blocks ascending
+            row, gap = self._in_rows(s0 + first[b], rows[b], x[p], y[p])
+            order = np.lexsort((row, gap, p))  # each point's least gap, its first row
+            p, row, gap = p[order], row[order], gap[order]
+            head = np.flatnonzero(np.r_[True, p[1:] != p[:-1]])
+            best[at[p[head]]], low[at[p[head]]] = row[head], gap[head]
         return best, low
 
     def directions_near(self, lines: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> list[float | None]:

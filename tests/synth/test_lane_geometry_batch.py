@@ -5,6 +5,7 @@ decided one point at a time, on random lines and points (hypothesis)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from unittest.mock import patch
 
@@ -70,16 +71,22 @@ def _on_segment(ax, ay, bx, by, x, y):
     return (px - t * dx) ** 2 + (py - t * dy) ** 2, t
 
 
-@given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20),
-       st.sampled_from([lane_facts.CHUNK_ROWS, 1, 5]))
-@settings(max_examples=300, deadline=None)
-def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks, chunk_rows):
-    # also in chunks of a few (pair, segment) rows, as the pairs of a very long lane go
+# how nearest goes: as a real map (one pass); in chunks of a few (pair, segment) rows; every line pruned by blocks
+# of one or two segments, as a line of more than LONG_LINE segments is (with chunks of a few rows besides)
+MODES = [{}, {"CHUNK_ROWS": 5}, {"LONG_LINE": 0, "BLOCK_MIN": 1}, {"LONG_LINE": 1, "BLOCK_MIN": 2, "CHUNK_ROWS": 3}]
+
+
+def _nearest_in_mode(packed, mode, lines, xs, ys):
+    with contextlib.ExitStack() as stack:
+        for name, value in mode.items():
+            stack.enter_context(patch.object(lane_facts, name, value))
+        return packed.nearest(np.asarray(lines), np.asarray(xs, dtype=float), np.asarray(ys, dtype=float))
+
+
+def _assert_nearest_is_segments_nearest(raw, asks, mode):
     packed = PackedSegments.of(list(raw))
-    asks = [(k % len(raw), x, y) for k, x, y in asks]
-    with patch.object(lane_facts, "CHUNK_ROWS", chunk_rows):
-        row, gap = packed.nearest(np.array([k for k, _, _ in asks]), np.array([x for _, x, _ in asks]),
-                                  np.array([y for _, _, y in asks]))
+    row, gap = _nearest_in_mode(packed, mode, [k for k, _, _ in asks], [x for _, x, _ in asks],
+                                [y for _, _, y in asks])
     for (k, x, y), r, g in zip(asks, row.tolist(), gap.tolist()):
         seg = Segments.of(raw[k])
         if seg is None:
@@ -87,7 +94,14 @@ def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks, chunk_rows):
             continue
         j, want_gap = seg.nearest(x, y)
         assert g == want_gap
-        assert (packed.a[r] == seg.a[j]).all() and (packed.d[r] == seg.d[j]).all()
+        assert r - packed.start[k] == j  # the first nearest segment, as np.argmin chooses
+
+
+@given(lines, st.lists(st.tuples(st.integers(0, 7), coord, coord), min_size=1, max_size=20),
+       st.sampled_from(MODES))
+@settings(max_examples=300, deadline=None)
+def test_packed_nearest_is_segments_nearest_of_each_pair(raw, asks, mode):
+    _assert_nearest_is_segments_nearest(raw, [(k % len(raw), x, y) for k, x, y in asks], mode)
 
 
 @given(st.lists(st.tuples(coord, coord, st.floats(0, 360, exclude_max=True)), min_size=1, max_size=40))
@@ -186,3 +200,14 @@ def test_row_chunks_cover_every_pair_in_order_within_the_limit(rows, limit):
     # each chunk within the limit, or one pair alone; and no two neighbours that would fit in one
     assert all(sum(rows[c]) <= limit or c.stop - c.start == 1 for c in chunks)
     assert all(sum(rows[a]) + rows[b.start] > limit for a, b in zip(chunks, chunks[1:]))
+
+
+@given(st.lists(st.tuples(st.integers(-6, 6), st.integers(-6, 6)), min_size=40, max_size=300),
+       st.lists(st.tuples(st.integers(-14, 14), st.integers(-14, 14)), min_size=1, max_size=30), st.sampled_from(MODES))
+@settings(max_examples=150, deadline=None)
+def test_a_long_line_pruned_by_blocks_gives_the_first_nearest_segment_even_among_ties(walk, points, mode):
+    # a line on a small grid of half metres folds back over itself: many segments at the same least distance
+    # from a point, in different blocks, and the pruned search must still pick np.argmin's first
+    line = tuple((x / 2, y / 2) for x, y in walk)
+    _assert_nearest_is_segments_nearest((line, line[:3]), [(0, x / 4, y / 4) for x, y in points] + [(1, 0.0, 0.0)],
+                                        {**mode, "LONG_LINE": mode.get("LONG_LINE", 8)})
