@@ -59,11 +59,21 @@ _TOKEN = re.compile(
 )
 _LINE_END = re.compile(r"\r\n|\r|\n")
 BLANKS = " \t"
+_BLANKS = re.compile(r"[ \t]*")
+# The longest line of DSL text (programs, patterns), in characters. A statement r2sgen writes is a few hundred
+# (five clauses, a lane id of at most 256 characters); the bound keeps what one line can cost small before a
+# token is read (docs/cli.md, "Inputs and their bounds").
+MAX_LINE = 10_000
 
 
 def lines(text: str) -> list[str]:
-    """The lines of DSL text (see _TOKEN)."""
-    return _LINE_END.split(text)
+    """The lines of DSL text (see _TOKEN), each at most MAX_LINE characters."""
+    out = _LINE_END.split(text)
+    for lineno, line in enumerate(out, start=1):
+        if len(line) > MAX_LINE:
+            raise DslError(f"line {lineno}: {len(line)} characters, more than the {MAX_LINE} a line may have "
+                           "(one statement a line)")
+    return out
 
 
 @dataclass(frozen=True)
@@ -74,14 +84,12 @@ class _Tok:
 
 
 def _tokens(line: str, lineno: int) -> list[_Tok]:
+    # Matched in place from `pos` (no slice of the rest of the line per token): linear in the line's length.
     out, pos = [], 0
-    while pos < len(line):
-        if line[pos:].strip(BLANKS) == "":
-            break
+    while (pos := _BLANKS.match(line, pos).end()) < len(line):
         m = _TOKEN.match(line, pos)
-        if not m or m.end() == pos:
-            bad = pos + len(line[pos:]) - len(line[pos:].lstrip(BLANKS))
-            raise DslError(f"line {lineno} column {bad + 1}: unexpected character {line[bad]!r}")
+        if not m:
+            raise DslError(f"line {lineno} column {pos + 1}: unexpected character {line[pos]!r}")
         kind = m.lastgroup or "?"
         out.append(_Tok(kind, m.group(kind), m.start(kind) + 1))
         pos = m.end()
