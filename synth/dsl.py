@@ -108,13 +108,13 @@ def parse_program(text: str) -> Program:
     return Program(parse_statements(text, ENTITY_TYPES))
 
 
-def parse_statements(text: str, types: Collection[str], reader=None) -> tuple[Statement, ...]:
+def parse_statements(text: str, types: Collection[str], reader=None, first_line: int = 1) -> tuple[Statement, ...]:
     """The statements of DSL text whose TYPEs are drawn from `types` (programs: the entity types; patterns,
     synth.pattern, add their type classes and read their lines with their own `reader`, called as _statement
-    is). Errors name the line and column."""
+    is). Errors name the line (the text's first is `first_line`) and column."""
     declared: set[str] = set()
     statements = []
-    for lineno, raw in enumerate(lines(text), start=1):
+    for lineno, raw in enumerate(lines(text, first_line), start=first_line):
         line = raw.split("#", 1)[0]
         if not line.strip(BLANKS):
             continue

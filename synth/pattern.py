@@ -29,6 +29,10 @@ from synth.parts.position import LENGTH_EPS
 from synth.scene import EGO_ID, ENTITY_TYPES, VEHICLE_CLASSES, Entity, Scene
 from synth.syntax import Line, Range
 
+# The most names a pattern declares (its steps together, for a temporal one): each name is a join of the query.
+# Checked as the lines are read, so a pattern of a million lines is refused at its 13th name, not after parsing.
+MAX_NAMES = 12
+
 VEHICLE = "Vehicle"
 ANY = "Object"
 PATTERN_TYPES = frozenset(ENTITY_TYPES) | {VEHICLE}
@@ -108,12 +112,14 @@ class Pattern:
         return "".join(f"{s}\n" for s in self.statements) + ego
 
 
-def parse_pattern(text: str) -> Pattern:
-    """A pattern from DSL text; errors (DslError) carry the line and column, as `r2s check` reports them."""
-    lines = parse_statements(text, PATTERN_TYPES, reader=_pattern_line)
+def parse_pattern(text: str, first_line: int = 1) -> Pattern:
+    """A pattern from DSL text whose first line is line `first_line` of its file; errors (DslError) carry the line
+    and column, as `r2s check` reports them."""
+    lines = parse_statements(text, PATTERN_TYPES, reader=_pattern_line, first_line=first_line)
     statements = tuple(st for st in lines if st.id != EGO_ID)
     if not statements:
-        raise DslError("line 1 column 1: the pattern declares no name (one statement a line: NAME = new TYPE ...)")
+        raise DslError(f"line {first_line} column 1: the pattern declares no name (one statement a line: "
+                       "NAME = new TYPE ...)")
     return Pattern(statements, next((st for st in lines if st.id == EGO_ID), None))
 
 
@@ -133,8 +139,15 @@ def _pattern_line(ln: Line, declared: set[str], types: Collection[str]) -> State
             raise DslError(f"{ln.where()}: expected a clause about ego after `ego`")
         declared.add(EGO_ID)  # marks the ego line as given (references to ego are always allowed)
         return Statement(EGO_ID, ANY, **clauses)
+    if len(declared - {EGO_ID}) >= MAX_NAMES:
+        raise too_many_names(ln.lineno)
     name, etype = statement_head(ln, declared, types)
     return Statement(name, etype, **_clauses(ln, declared, list(all_parts()), name))
+
+
+def too_many_names(lineno: int) -> DslError:
+    return DslError(f"line {lineno}: the pattern declares {MAX_NAMES + 1} or more names, more than the bound of "
+                    f"{MAX_NAMES} (docs/cli.md, Inputs and their bounds)")
 
 
 def _clauses(ln: Line, declared: set[str], parts: list[Part], who: str) -> dict[str, Clause]:

@@ -66,10 +66,11 @@ _BLANKS = re.compile(r"[ \t]*")
 MAX_LINE = 10_000
 
 
-def lines(text: str) -> list[str]:
-    """The lines of DSL text (see _TOKEN), each at most MAX_LINE characters."""
+def lines(text: str, first_line: int = 1) -> list[str]:
+    """The lines of DSL text (see _TOKEN), each at most MAX_LINE characters (errors number them from
+    `first_line`)."""
     out = _LINE_END.split(text)
-    for lineno, line in enumerate(out, start=1):
+    for lineno, line in enumerate(out, start=first_line):
         if len(line) > MAX_LINE:
             raise DslError(f"line {lineno}: {len(line)} characters, more than the {MAX_LINE} a line may have "
                            "(one statement a line)")

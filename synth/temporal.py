@@ -16,8 +16,9 @@ from dataclasses import dataclass
 
 from synth.dsl import DslError
 from synth.geometry import normalize
-from synth.pattern import Pattern, parse_pattern
+from synth.pattern import MAX_NAMES, Pattern, parse_pattern, too_many_names
 from synth.scene import EGO_ID
+from synth.syntax import lines
 
 # Behaviours of a track over time, read from its own frames (speeds in m/s, timestamps in microseconds).
 SPEED_CHANGE = 1.0  # accelerating / braking: a speed change of at least this, m/s ...
@@ -37,9 +38,16 @@ LANE_BEHAVIOURS = ("changing lanes",)
 BEHAVIOURS = SPEED_BEHAVIOURS + TURNING + LANE_BEHAVIOURS
 _FIRST_WORDS = {b.split()[0] for b in BEHAVIOURS}
 
+# The most steps a pattern has (each is a query of its own), checked at each `then` as the lines are read; and the
+# longest duration of `within T s` / `for at least T s`, in seconds (about 11.6 days: longer than any recorded
+# scene, and T in microseconds stays an exact integer far from int64's end).
+MAX_STEPS = 12
+MAX_DURATION_S = 1e6
+
 _THEN = re.compile(r"then(?:\s+within\s+(?P<t>\S+)\s+s)?\Z")
 _FOR = re.compile(r"for\s+at\s+least\s+(?P<t>\S+)\s+s\Z")
 _BEHAVIOUR = re.compile(r",\s*(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")
+_BEHAVIOUR_TEXT = re.compile(r"\s*(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")  # what follows a comma in _BEHAVIOUR
 # An ego line of behaviours alone has no comma after `ego`: `ego turning left` (`ego changing lanes, braking`).
 _EGO_BEHAVIOUR = re.compile(rf"\A\s*{EGO_ID}\s+(?P<b>[a-z]+(?:\s+[a-z]+)?)\s*\Z")
 _HEAD = re.compile(r"\s*(?P<id>[A-Za-z_][A-Za-z0-9_]*)")
@@ -121,25 +129,29 @@ def turn_of(before: float, now: float) -> float:
 
 
 def duration_us(text: str, where: str) -> int:
-    """T of `within T s` / `for at least T s`: a finite number of seconds >= 0, in whole microseconds (rounded to
-    the nearest), so that the engine and the definition compare integers."""
+    """T of `within T s` / `for at least T s`: a number of seconds from 0 to MAX_DURATION_S, in whole
+    microseconds (rounded to the nearest), so that the engine and the definition compare integers."""
     try:
         t = float(text)
     except ValueError:
         raise DslError(f"{where}: expected a number of seconds, found {text!r}") from None
-    if not (math.isfinite(t) and t >= 0):
-        raise DslError(f"{where}: a duration is a finite number of seconds >= 0, found {text}")
+    if not (math.isfinite(t) and 0 <= t <= MAX_DURATION_S):
+        raise DslError(f"{where}: a duration is a number of seconds from 0 to {MAX_DURATION_S:g}, found {text}")
     return round(t * 1e6)
 
 
 def _strip_behaviours(line: str) -> tuple[str, tuple[str, ...]]:
     """The statement without its trailing behaviour clauses, and those clauses. An ego line's first clause may be
     a behaviour too (`ego turning left`); an ego line of behaviours alone leaves no statement ("")."""
-    found: list[str] = []
-    while (m := _BEHAVIOUR.search(line)) is not None and m.group("b") in BEHAVIOURS:
-        found.insert(0, m.group("b"))
-        line = line[:m.start()]
+    # The line cut at its commas once, the behaviours read from the last piece back (what _BEHAVIOUR finds at the
+    # last comma, again and again): linear in the line, however many behaviours it lists.
+    pieces = line.split(",")
+    k = len(pieces)
+    while k > 1 and (m := _BEHAVIOUR_TEXT.match(pieces[k - 1])) is not None and m.group("b") in BEHAVIOURS:
+        k -= 1
     # else a DSL clause (stationary, ...) ends the line: the statement parser reads it
+    found = [_BEHAVIOUR_TEXT.match(p).group("b") for p in pieces[k:]]
+    line = ",".join(pieces[:k])
     if (m := _EGO_BEHAVIOUR.match(line)) is not None and m.group("b") in BEHAVIOURS:
         return "", (m.group("b"), *found)
     return line, tuple(found)
@@ -147,7 +159,7 @@ def _strip_behaviours(line: str) -> tuple[str, tuple[str, ...]]:
 
 def is_temporal(text: str) -> bool:
     """Does the text use any temporal syntax (then, for at least, a behaviour)?"""
-    for raw in text.splitlines():
+    for raw in lines(text):
         line = raw.split("#", 1)[0].strip()
         if _THEN.match(line) or _FOR.match(line) or line.startswith(("then ", "for ")) or line == "then":
             return True
@@ -158,15 +170,18 @@ def is_temporal(text: str) -> bool:
 
 def parse_temporal(text: str) -> TemporalPattern:
     """A temporal pattern; errors (DslError) carry the line (and column where there is one)."""
-    lines = text.splitlines()
+    text_lines = lines(text)
     blocks: list[dict] = [{"lines": {}, "behaviours": [], "within": None, "for": 0, "for_line": None}]
-    for lineno, raw in enumerate(lines, start=1):
+    for lineno, raw in enumerate(text_lines, start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
         if (m := _THEN.match(line)) is not None:
             if not blocks[-1]["lines"]:
                 raise DslError(f"line {lineno}: `then` follows no step (a step is one or more statements)")
+            if len(blocks) == MAX_STEPS:
+                raise DslError(f"line {lineno}: the pattern has {MAX_STEPS + 1} or more steps, more than the bound of "
+                               f"{MAX_STEPS} (docs/cli.md, Inputs and their bounds)")
             within = duration_us(m.group("t"), f"line {lineno}") if m.group("t") is not None else None
             blocks.append({"lines": {}, "behaviours": [], "within": within, "for": 0, "for_line": None})
             continue
@@ -182,19 +197,31 @@ def parse_temporal(text: str) -> TemporalPattern:
                            "start the next step with `then`")
         statement, behaviours = _strip_behaviours(raw.split("#", 1)[0])
         blocks[-1]["lines"][lineno] = statement
-        blocks[-1]["behaviours"] += [(_head(statement or EGO_ID), b) for b in behaviours]
+        who = _head(statement or EGO_ID)
+        for b in behaviours:
+            # Said twice, a behaviour would only ask the engine the same question again (one join each).
+            if (who, b) in blocks[-1]["behaviours"]:
+                raise DslError(f"line {lineno}: {who} is {b!r} twice in one step: say each behaviour once")
+            blocks[-1]["behaviours"].append((who, b))
     if not blocks[-1]["lines"]:
-        raise DslError(f"line {len(lines)}: the pattern ends with `then` and no step after it")
+        raise DslError(f"line {len(text_lines)}: the pattern ends with `then` and no step after it")
     steps = []
     for block in blocks:
         if all(text == "" or _head(text) == EGO_ID for text in block["lines"].values()):
             raise DslError(f"line {min(block['lines'])}: a step declares at least one name (NAME = new TYPE ...); "
                            "ego's line alone is no step")
-        # The step's statements at their own line numbers, so a DSL error names the line of the file.
-        step_text = "\n".join(block["lines"].get(n, "") for n in range(1, max(block["lines"]) + 1))
-        pattern = parse_pattern(step_text)
+        # The step's lines, numbered as in the file, so a DSL error names the line of the file.
+        first = min(block["lines"])
+        step_text = "\n".join(block["lines"].get(n, "") for n in range(first, max(block["lines"]) + 1))
+        pattern = parse_pattern(step_text, first_line=first)
         steps.append(Step(pattern, tuple(block["behaviours"]), block["within"], block["for"]))
     pattern = TemporalPattern(tuple(steps))
+    if len(pattern.names) > MAX_NAMES:  # each step has at most MAX_NAMES; together they may have more
+        first_at: dict[str, int] = {}  # each name and the line it is first declared on, in file order
+        for block in blocks:
+            for ln, text in sorted(block["lines"].items()):
+                first_at.setdefault(_head(text), ln)
+        raise too_many_names([ln for name, ln in first_at.items() if name not in (EGO_ID, "")][MAX_NAMES])
     if len(steps) > 1:
         for name in pattern.names:
             where = [k for k, s in enumerate(steps) if name in s.names]

@@ -55,9 +55,9 @@ from pipeline.query.temporal import estimate_query as temporal_estimate_query
 from pipeline.query.temporal import prepare
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
-from synth.pattern import Pattern, binding_holds, matched_types
+from synth.pattern import MAX_NAMES, Pattern, binding_holds, matched_types
 from synth.scene import EGO_ID, Entity
-from synth.temporal import TURNING, TemporalPattern, parse_query_pattern
+from synth.temporal import MAX_STEPS, TURNING, TemporalPattern, parse_query_pattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -68,7 +68,7 @@ LOG_EVERY_S = 30.0
 # MAX_FRAME_BINDINGS in a frame or MAX_BINDINGS in all (about 10 minutes of DuckDB on 2 cores at the ~1.5 million
 # a second measured for unrelated names). DuckDB plans every name as a join, so their number is bounded too; the
 # spill under the memory limit is capped.
-MAX_PATTERN_NAMES = 12
+MAX_PATTERN_NAMES = MAX_NAMES  # synth.pattern refuses more as it reads them; a Pattern built in code is checked here
 MAX_FRAME_BINDINGS = 10**6
 MAX_BINDINGS = 10**9
 SPILL_LIMIT_MB = 8192
@@ -270,8 +270,8 @@ def check_pattern_size(pattern: Pattern | TemporalPattern, steps: int) -> None:
     if len(pattern.names) > MAX_PATTERN_NAMES:
         raise UserError(f"the pattern declares {len(pattern.names)} names, more than the bound of "
                         f"{MAX_PATTERN_NAMES} (docs/cli.md, Inputs and their bounds)")
-    if steps > MAX_PATTERN_NAMES:
-        raise UserError(f"the pattern has {steps} steps, more than the bound of {MAX_PATTERN_NAMES} "
+    if steps > MAX_STEPS:
+        raise UserError(f"the pattern has {steps} steps, more than the bound of {MAX_STEPS} "
                         "(docs/cli.md, Inputs and their bounds)")
 
 
