@@ -111,6 +111,7 @@ def clip_entities(scenes: Sequence[Scene]) -> tuple[tuple[str, ...], dict[str, l
     frames (indices) each is present in. Refuses what is not frames of one scene."""
     if not scenes:
         raise WindowError("a window needs at least one frame")
+    _check_one_scene_in_order(scenes)
     seen_frames: set[str] = set()
     types: dict[str, tuple[str, str]] = {}
     frames: dict[str, list[int]] = {}
@@ -125,6 +126,31 @@ def clip_entities(scenes: Sequence[Scene]) -> tuple[tuple[str, ...], dict[str, l
                                   f"{scene.frame_id!r}: a window needs one id per object (stable ids, docs/formats.md)")
             frames.setdefault(e.id, []).append(k)
     return tuple(frames), frames
+
+
+def _check_one_scene_in_order(scenes: Sequence[Scene]) -> None:
+    """Where scene JSON says it (its `world`: source, scene, frame_index), the frames are of one scene and in time
+    order: two frames naming different scenes (or sources), or a frame whose index is not above the index of the
+    frame before it that gives one, are refused. Frames that do not say are taken as given."""
+    named: dict[str, tuple[str, str]] = {}  # "source" / "scene": (the first frame that names one, its name)
+    last: tuple[str, int] | None = None  # the last frame that gives its index, and that index
+    for scene in scenes:
+        world = scene.world
+        if world is None:
+            continue
+        for key in ("source", "scene"):
+            name = getattr(world, key)
+            if name is None:
+                continue
+            first = named.setdefault(key, (scene.frame_id, name))
+            if first[1] != name:
+                raise WindowError(f"frame {scene.frame_id!r} is of {key} {name!r} and frame {first[0]!r} of {key} "
+                                  f"{first[1]!r} (their world): a clip is frames of one scene")
+        if world.frame_index is not None:
+            if last is not None and world.frame_index <= last[1]:
+                raise WindowError(f"frame {scene.frame_id!r} (frame_index {world.frame_index}) comes after frame "
+                                  f"{last[0]!r} (frame_index {last[1]}): give a clip's frames in time order")
+            last = (scene.frame_id, world.frame_index)
 
 
 def window_table(oracles: Sequence[Any], ids: tuple[str, ...]):

@@ -203,3 +203,46 @@ def test_a_clip_with_lanes_as_a_user_runs_it(excerpt_frames, tmp_path):
     doc = json.loads(open(paths[1]).read())
     bare.write_text(json.dumps({k: v for k, v in doc.items() if k != "road"}))
     assert_one_line_error(run_r2s("synth", paths[0], str(bare), "--lanes"), 2, "has no road")
+
+
+def test_a_clip_is_of_one_scene_in_time_order_where_its_frames_say(tmp_path):
+    """Issue 35, item 13: frames whose `world` names two scenes (or sources), or frames given out of their
+    frame_index order, were synthesized as one clip. Now one line, exit 2, nothing written; frames that do not say
+    (no world) are taken as given."""
+    log = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
+    paths = []
+    for k in range(3):
+        path = tmp_path / f"f{k}.json"
+        proc = run_r2s("scene", "data/argoverse2-log-excerpt/frames.parquet", f"{log}/{k}", "--out", str(path))
+        assert proc.returncode == 0, proc.stderr
+        paths.append(path)
+    worlds = [json.loads(p.read_text())["world"] for p in paths]
+    assert [(w["source"], w["scene"], w["frame_index"]) for w in worlds] == [("argoverse2", log, k) for k in range(3)]
+    out = tmp_path / "out.dsl"
+    ok = run_r2s("synth", *map(str, paths), "--out", str(out))
+    assert ok.returncode == 0 and out.exists(), ok.stderr
+    out.unlink()
+
+    def variant(name: str, **world) -> str:
+        doc = json.loads(paths[1].read_text())
+        doc["world"].update(world)
+        (tmp_path / name).write_text(json.dumps(doc))
+        return str(tmp_path / name)
+
+    first, last = str(paths[0]), str(paths[2])
+    for clip, says in (
+            ([last, first], f"frame '{log}/0' (frame_index 0) comes after frame '{log}/2' (frame_index 2)"),
+            ([first, last, str(paths[1])], "comes after"),
+            ([first, variant("again.json", frame_index=0)], f"frame '{log}/1' (frame_index 0) comes after"),
+            ([first, variant("other.json", scene="another-log")], f"frame '{log}/1' is of scene 'another-log' and "
+                                                                    f"frame '{log}/0' of scene '{log}'"),
+            ([first, variant("source.json", source="scenarionet")], "is of source 'scenarionet'")):
+        assert_one_line_error(run_r2s("synth", *clip, "--out", str(out)), 2, says)
+        assert not out.exists()
+    unsaid = []  # the frames without their world (nor their road, which needs it), given in reverse
+    for path in reversed(paths):
+        doc = {k: v for k, v in json.loads(path.read_text()).items() if k not in ("world", "road")}
+        (tmp_path / f"unsaid-{path.name}").write_text(json.dumps(doc))
+        unsaid.append(str(tmp_path / f"unsaid-{path.name}"))
+    taken = run_r2s("synth", *unsaid, "--out", str(out))
+    assert taken.returncode == 0 and out.exists(), taken.stderr
