@@ -377,9 +377,10 @@ def _walk(doc: Document, heading: Callable[[str], str], table: Callable[[Table],
 
 # Every string of the document is plain text, much of it data (frame ids, strategy names, error messages,
 # programs, file names: anyone's). The HTML renderer escapes it with html.escape; the Markdown renderer with
-# md_text and md_code, so that a Markdown viewer shows the text and nothing else: no raw HTML (a `<script` or an
-# `<iframe src=javascript:...>` in a frame id), no link, no code span or emphasis, no new block from a newline
-# or a leading `#`, `-` or `1.`, and no code fence closed from inside. The only links are to the plots we wrote.
+# md_text and md_code (md_html_text inside its one HTML block, a program's summary line), so that a Markdown
+# viewer shows the text and nothing else: no raw HTML (a `<script` or an `<iframe src=javascript:...>` in a frame
+# id), no link, no code span or emphasis, no new block from a newline or a leading `#`, `-` or `1.`, and no code
+# fence closed from inside. The only links are to the plots we wrote.
 _MD_ACTIVE = re.compile(r"([\\`*_\[\]|~])")
 _MD_NUMBERED = re.compile(r"\d+(?=[.)])")
 
@@ -396,6 +397,16 @@ def md_text(text: str, block: bool = True) -> str:
         return "\\" + text
     start = _MD_NUMBERED.match(text)  # "1." or "1)": an ordered list
     return f"{start.group()}\\{text[start.end():]}" if start else text
+
+
+def md_html_text(text: str) -> str:
+    """Plain text inside an HTML block of report.md (a <details> block's <summary>), on one line. CommonMark
+    leaves an HTML block as it is, but some renderers read Markdown inside HTML, so the text is escaped for both:
+    every ASCII character other than a letter, a digit or a space becomes a numeric character reference, which
+    HTML decodes and Markdown shows as that character (`![p](http://...)` is no image in either, `http://` no
+    autolink, `<` no tag)."""
+    line = " ".join(str(text).splitlines()).strip()
+    return "".join(f"&#{ord(c)};" if c.isascii() and not c.isalnum() and c != " " else c for c in line)
 
 
 def md_code(code: str) -> str:
@@ -428,7 +439,7 @@ def render_markdown(doc: Document) -> str:
     out += _walk(doc, lambda title: f"## {md_text(title, block=False)}", _md_table,
                  lambda plot: f"![{md_text(plot.title)}]({_own_file(plot.filename)})\n\n*{md_text(plot.caption)}*",
                  md_text,
-                 lambda d: f"<details><summary>{html.escape(' '.join(d.summary.splitlines()))}</summary>\n\n"
+                 lambda d: f"<details><summary>{md_html_text(d.summary)}</summary>\n\n"
                            f"{md_code(d.code)}\n\n</details>")
     return "\n\n".join(out) + "\n"
 

@@ -6,6 +6,8 @@ is shown as its text. Also: `--out` never deletes what the report did not write.
 
 from __future__ import annotations
 
+import html
+import re
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -13,7 +15,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from pipeline.programs import failure_row, programs_table, result_row
-from pipeline.report.document import md_code, md_text
+from pipeline.report.document import md_code, md_html_text, md_text
 from pipeline.report.plots import PLOT_FILES
 from synth.config import SynthConfig
 from synth.synthesize import synthesize
@@ -24,8 +26,9 @@ markdown_it = pytest.importorskip("markdown_it")
 SCRIPT = "<script>alert(1)</script>"
 IFRAME = "<iframe src=javascript:alert(2)>"
 LINK = "[click](javascript:alert(3))"
+IMAGE = "![p](http://example.com/p.png)"  # a renderer reading Markdown inside HTML would load it (issue 35, item 14)
 HOSTILE_IDS = (f"{SCRIPT}/0", f"x{IFRAME}/1", f"{LINK}/2", "&lt;script&gt;/3", "# heading\n\n<b>x</b>/4",
-               "1. item | cell `code`/5")
+               "1. item | cell `code`/5", f"{IMAGE}/6")
 HOSTILE_PROGRAM = f"car = new Car ahead of ego by Range(0, 1)\n```\n{SCRIPT}\n````\n{IFRAME}\n"
 HOSTILE_ERROR = f"boom {SCRIPT} {LINK}\n\n<img src=x onerror=alert(4)>"
 
@@ -91,6 +94,30 @@ def test_report_md_renders_every_hostile_string_as_text(hostile_report):
     for fid in HOSTILE_IDS:
         assert " ".join(fid.splitlines()).strip() in text  # shown, as text, one line
     assert HOSTILE_PROGRAM.rstrip("\n") in text  # the whole program inside one code block: the fence held
+
+
+def test_report_md_summaries_are_text_to_a_renderer_reading_markdown_inside_html(hostile_report):
+    """A program's summary line sits in report.md's one HTML block (<details><summary>), which CommonMark leaves as
+    it is (the test above) but some renderers read as Markdown: read so, it is text too, and the same text."""
+    md = (hostile_report / "report.md").read_text()
+    summaries = re.findall(r"<summary>(.*?)</summary>", md)
+    assert any(html.unescape(s).startswith(f"{IMAGE}/6 ") for s in summaries), summaries
+    for summary in summaries:
+        assert "<" not in summary and "[" not in summary and "http:" not in summary
+        elements = _elements(markdown_it.MarkdownIt("commonmark").render(summary))
+        assert [tag for tag, _ in elements.tags] == ["p"], summary
+        assert "".join(elements.text).strip() == html.unescape(summary)
+
+
+@pytest.mark.parametrize("text", [IMAGE, LINK, SCRIPT, "- a *b* _c_ `d` ~~e~~ \\ | f", "&amp; &#60;x&#62;",
+                                  "www.example.com http://example.com <http://x.y>", "line\nbreak\u2028more", ""])
+def test_md_html_text_is_the_text_in_html_and_in_markdown(text):
+    shown = " ".join(text.splitlines()).strip()
+    escaped = md_html_text(text)
+    as_html = _elements(markdown_it.MarkdownIt("commonmark").render(f"<details><summary>{escaped}</summary>\n"))
+    assert {tag for tag, _ in as_html.tags} == {"details", "summary"} and "".join(as_html.text).strip() == shown
+    as_markdown = _elements(markdown_it.MarkdownIt("commonmark").enable("table").render(escaped + "\n"))
+    assert {tag for tag, _ in as_markdown.tags} <= {"p"} and "".join(as_markdown.text).strip() == shown
 
 
 def test_report_html_has_only_its_own_elements(hostile_report):
