@@ -579,4 +579,7 @@ def _coords(value: object, where: str) -> Points:
             isinstance(p, list) and len(p) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                                         for v in p) for p in value):
         raise MapError(f"{where}: coordinates must be a list of [x, y] number pairs")
-    return tuple((float(p[0]), float(p[1])) for p in value)
+    try:
+        return tuple((float(p[0]), float(p[1])) for p in value)
+    except OverflowError:  # a JSON integer of hundreds of digits: no float holds it (JSON has no bound)
+        raise MapError(f"{where}: a coordinate is an integer beyond a float (finite numbers of metres)") from None

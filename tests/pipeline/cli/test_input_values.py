@@ -112,3 +112,39 @@ def test_numpy_warnings_do_not_precede_the_line(tmp_path):
     (tmp_path / "s.json").write_text(_scene("1e308", "1e308"))
     proc = run_r2s("synth", str(tmp_path / "s.json"))
     assert_one_line_error(proc, 2, "outside the supported range")
+
+
+@pytest.fixture(scope="module")
+def scene_with_a_huge_road_coordinate(tmp_path_factory):
+    """A real scene with its road (`r2s scene` on the Argoverse 2 excerpt), its first road point's x replaced by an
+    integer of 400 digits (JSON has no bound; no float holds it); and the program of the scene as it was."""
+    where = tmp_path_factory.mktemp("road")
+    frames = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
+    proc = run_r2s("scene", str(frames), "adcf7d18-0510-35b0-a2fa-b4cea13a6d76/0", "--out", str(where / "s.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert run_r2s("synth", str(where / "s.json"), "--out", str(where / "p.dsl")).returncode == 0
+    doc = json.loads((where / "s.json").read_text())
+    feature = next(f for f in doc["road"]["features"] if f.get("polygon"))
+    feature["polygon"][0][0] = 10 ** 400
+    (where / "big.json").write_text(json.dumps(doc))
+    return where, feature["id"]
+
+
+@pytest.mark.parametrize("verb", ["synth", "check", "sample"])
+def test_a_road_coordinate_beyond_a_float_is_bad_input(scene_with_a_huge_road_coordinate, verb):
+    """Issue 35, item 15: was an OverflowError (exit 1) in every verb that reads scene JSON."""
+    where, feature = scene_with_a_huge_road_coordinate
+    scene, program = str(where / "big.json"), str(where / "p.dsl")
+    args = {"synth": [scene], "check": [scene, program],
+            "sample": ["--program", program, "--scene", scene, "--out", str(where / "variants")]}[verb]
+    assert_one_line_error(run_r2s(verb, *args), 2, f"road feature '{feature}': a coordinate is an integer beyond a float")
+    assert not (where / "variants").exists()
+
+
+def test_a_temporal_pattern_ends_its_lines_as_the_dsl_does():
+    """`then` on a line of its own only where the DSL ends lines: U+2028 is inside a line, as in any pattern."""
+    from synth.temporal import parse_query_pattern
+
+    with pytest.raises(DslError, match="line 1 column 12: unexpected character"):
+        parse_query_pattern("c = new Car\u2028then\u2028c = new Car\n")
+    assert len(parse_query_pattern("c = new Car\r\nthen\rc = new Car\n").steps) == 2
