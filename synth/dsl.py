@@ -108,6 +108,13 @@ def parse_program(text: str) -> Program:
     return Program(parse_statements(text, ENTITY_TYPES))
 
 
+# The most statements a program has: one an entity, and a scene has at most 1,000 by default (r2s check; synthesis
+# of ten times as many would not end). The bound keeps what a program file can cost to parse (about 100 us a
+# statement: 1 s at the bound) far from the 100 s that 64 MB of statements take (docs/cli.md, "Inputs and their
+# bounds").
+MAX_STATEMENTS = 10_000
+
+
 def parse_statements(text: str, types: Collection[str], reader=None, first_line: int = 1) -> tuple[Statement, ...]:
     """The statements of DSL text whose TYPEs are drawn from `types` (programs: the entity types; patterns,
     synth.pattern, add their type classes and read their lines with their own `reader`, called as _statement
@@ -118,6 +125,9 @@ def parse_statements(text: str, types: Collection[str], reader=None, first_line:
         line = raw.split("#", 1)[0]
         if not line.strip(BLANKS):
             continue
+        if len(statements) == MAX_STATEMENTS:
+            raise DslError(f"line {lineno}: statement {MAX_STATEMENTS + 1:,}, more than the bound of "
+                           f"{MAX_STATEMENTS:,} (docs/cli.md, Inputs and their bounds)")
         st = (reader or _statement)(Line(line, lineno), declared, types)
         if st.id != EGO_ID:  # a pattern's line about ego (synth.pattern) declares nothing
             declared.add(st.id)

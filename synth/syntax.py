@@ -10,6 +10,7 @@ import math
 import re
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import NamedTuple
 
 from synth.errors import InputError
 from synth.scene import EGO_ID
@@ -52,14 +53,15 @@ def printed(v: float) -> Fraction:
 # numbers), blanks are spaces and tabs, and a line ends at \n, \r\n or \r only (str.splitlines would also end one
 # at U+2028, U+0085, a form feed...). A string (a lane id) is printable ASCII in double quotes, without a quote or a
 # backslash or a # (which begins a comment). Any other character is "unexpected", with its line and column.
+# One scan of the line reads every token in turn: blanks are skipped, and `bad` (any one character) is the
+# unexpected one, so the matches tile the line and finditer never looks back (linear in the line).
 _TOKEN = re.compile(
-    r"[ \t]*(?:(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/])"
-    r'|(?P<str>"[ !$-\[\]-~]*"))',
-    re.ASCII,
+    r"(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<word>[A-Za-z_][A-Za-z0-9_]*)|(?P<punct>[(),@=/])"
+    r'|(?P<str>"[ !$-\[\]-~]*")|[ \t]+|(?P<bad>.)',
+    re.ASCII | re.DOTALL,
 )
 _LINE_END = re.compile(r"\r\n|\r|\n")
 BLANKS = " \t"
-_BLANKS = re.compile(r"[ \t]*")
 # The longest line of DSL text (programs, patterns), in characters. A statement r2sgen writes is a few hundred
 # (five clauses, a lane id of at most 256 characters); the bound keeps what one line can cost small before a
 # token is read (docs/cli.md, "Inputs and their bounds").
@@ -77,23 +79,20 @@ def lines(text: str, first_line: int = 1) -> list[str]:
     return out
 
 
-@dataclass(frozen=True)
-class _Tok:
+class _Tok(NamedTuple):
     kind: str
     text: str
     col: int
 
 
 def _tokens(line: str, lineno: int) -> list[_Tok]:
-    # Matched in place from `pos` (no slice of the rest of the line per token): linear in the line's length.
-    out, pos = [], 0
-    while (pos := _BLANKS.match(line, pos).end()) < len(line):
-        m = _TOKEN.match(line, pos)
-        if not m:
-            raise DslError(f"line {lineno} column {pos + 1}: unexpected character {line[pos]!r}")
-        kind = m.lastgroup or "?"
-        out.append(_Tok(kind, m.group(kind), m.start(kind) + 1))
-        pos = m.end()
+    out = []
+    for m in _TOKEN.finditer(line):
+        kind = m.lastgroup
+        if kind == "bad":
+            raise DslError(f"line {lineno} column {m.start() + 1}: unexpected character {m.group()!r}")
+        if kind is not None:  # else blanks
+            out.append(_Tok(kind, m.group(), m.start() + 1))
     return out
 
 

@@ -1,5 +1,5 @@
 """The DSL's parsers within their bounds (issue 35, items 6, 7 and 15): a line is at most MAX_LINE characters, a
-pattern at most MAX_NAMES names and MAX_STEPS steps, a name shows each behaviour once a step, a duration is at most
+program at most MAX_STATEMENTS statements, a pattern at most MAX_NAMES names and MAX_STEPS steps, a name shows each behaviour once a step, a duration is at most
 MAX_DURATION_S; each is refused at the line that passes it, as one line and exit 2, before the rest is parsed.
 Tokens are read in time linear in the line. Real `r2s` processes on real files, under the watchdog
 (tests.support.bounded): before, these ran for minutes, ran out of memory or exited 1."""
@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from synth.dsl import MAX_STATEMENTS
 from synth.pattern import MAX_NAMES
 from synth.syntax import MAX_LINE
 from synth.temporal import MAX_DURATION_S, MAX_STEPS, parse_temporal
@@ -58,6 +59,23 @@ def test_a_line_of_max_line_characters_is_read(scene, tmp_path):
     (tmp_path / "P.dsl").write_text("\n".join([padded + " ", *rest]) + "\n")
     assert_refused(run_bounded("check", str(scene), str(tmp_path / "P.dsl"), timeout=60),
                    f"line 1: {MAX_LINE + 1} characters")
+
+
+def test_a_program_of_too_many_statements_is_refused_at_the_bound(scene, tmp_path):
+    """200,000 statements took about 20 s to parse (64 MB of them, 100 s); now the parse stops at
+    the first statement past MAX_STATEMENTS. At the bound, the program is checked (exit 3: every statement names
+    no entity of the scene)."""
+    def statements(n: int) -> str:
+        return "".join(f"c{k} = new Car ahead of ego by Range(0, 1), facing toward ego\n" for k in range(n))
+
+    (tmp_path / "P.dsl").write_text(statements(200_000))
+    result = run_bounded("check", str(scene), str(tmp_path / "P.dsl"), timeout=30, max_rss_mb=800)
+    assert_refused(result, f"line {MAX_STATEMENTS + 1}: statement {MAX_STATEMENTS + 1:,}, more than the bound of "
+                           f"{MAX_STATEMENTS:,}")
+    (tmp_path / "P.dsl").write_text(statements(MAX_STATEMENTS))
+    result = run_bounded("check", str(scene), str(tmp_path / "P.dsl"), timeout=60)
+    assert result.returncode == 3 and result.killed is None, result.stderr[-300:]
+    assert result.stdout.count(": extra: declared but not an entity of the scene") == MAX_STATEMENTS
 
 
 def test_tokens_are_read_in_linear_time():
