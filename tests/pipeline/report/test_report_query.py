@@ -13,6 +13,7 @@ import pytest
 
 from extractors.frames import scene_to_rows, write_frames
 from pipeline.programs import programs_table, result_row
+from pipeline.report.document import md_html_text
 from synth.config import SynthConfig
 from synth.pattern import parse_pattern
 from synth.synthesize import synthesize
@@ -75,7 +76,8 @@ def test_count_and_top_frames_are_the_brute_force_s(section, real_frames, inputs
         command = row[4].replace("\\|", "|")
         assert command.startswith(f"r2s scene {frames} ") and f" --programs {programs_path} " in command
         # The frame's program, whole, in its folded block.
-        block = section.split(f"<summary>{fid} (auto, optimal, cost {programs[fid]['cost']})</summary>", 1)[1]
+        summary = md_html_text(f"{fid} (auto, optimal, cost {programs[fid]['cost']})")
+        block = section.split(f"<summary>{summary}</summary>", 1)[1]
         assert block.split("```\n", 1)[1].split("\n```", 1)[0] == programs[fid]["program"].rstrip("\n")
 
 
