@@ -131,8 +131,11 @@ def _widened(geoms: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarr
     each as one polygon: of parts that meet only at a point, the largest."""
     import shapely
 
-    areas = shapely.buffer(geoms, left, cap_style="flat", join_style="bevel")
+    # each line buffered once: both sides in one buffer where they agree, else one single-sided buffer a side
+    # (GEOS buffers each geometry of an array alone, so a subset's buffers are those of the whole array)
     sided = left != right
+    areas = np.empty(len(geoms), dtype=object)
+    areas[~sided] = shapely.buffer(geoms[~sided], left[~sided], cap_style="flat", join_style="bevel")
     if sided.any():
         areas[sided] = shapely.union(
             shapely.buffer(geoms[sided], left[sided], cap_style="flat", join_style="bevel", single_sided=True),
