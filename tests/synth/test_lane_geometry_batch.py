@@ -10,6 +10,7 @@ import math
 from unittest.mock import patch
 
 import numpy as np
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -26,6 +27,7 @@ from synth.lane_geometry import (
     halfway,
     halfways,
     lane_polygon,
+    lane_polygons,
     widening_work,
 )
 from synth.roadmap import LANE, MapFeature, RoadMap
@@ -170,7 +172,6 @@ def test_halfways_of_long_lines_one_at_a_time_are_the_matrix_s(raw):
 def test_lane_polygons_are_simple_rings_as_check_simple_trusts(raw, left, right):
     # check_simple does not ask GEOS again about a ShellRing (the shell GEOS's buffer made): it must be simple,
     # however tightly the centre line turns or doubles back
-    from synth.lane_geometry import lane_polygons
     from synth.roadmap import ShellRing, ring_is_simple
 
     for ring in lane_polygons([tuple(r) for r in raw], [left] * len(raw), [right] * len(raw)):
@@ -211,3 +212,24 @@ def test_a_long_line_pruned_by_blocks_gives_the_first_nearest_segment_even_among
     line = tuple((x / 2, y / 2) for x, y in walk)
     _assert_nearest_is_segments_nearest((line, line[:3]), [(0, x / 4, y / 4) for x, y in points] + [(1, 0.0, 0.0)],
                                         {**mode, "LONG_LINE": mode.get("LONG_LINE", 8)})
+
+
+@given(st.lists(st.tuples(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=8),
+                          st.sampled_from([0.5, 1.7, 2.0]), st.sampled_from([0.5, 1.7, 2.0])), min_size=1,
+                max_size=6))
+@settings(max_examples=150, deadline=None)
+def test_a_batch_of_lanes_some_sided_widens_each_as_alone(lanes):
+    # a batch buffers the lanes whose sides agree and those whose sides differ in separate calls: each lane's
+    # polygon must still be its own: the outer ring of its line's buffer (or of the union of its single-sided ones)
+    raw = [tuple(line) for line, _, _ in lanes]
+    rings = lane_polygons(raw, [left for _, left, _ in lanes], [right for _, _, right in lanes])
+    for (line, left, right), ring in zip(lanes, rings):
+        assert ring == lane_polygon(tuple(line), left, right)
+        if ring:
+            g = shapely.LineString(dedup(tuple(line)))
+            area = (shapely.buffer(g, left, cap_style="flat", join_style="bevel") if left == right else
+                    shapely.union(shapely.buffer(g, left, cap_style="flat", join_style="bevel", single_sided=True),
+                                  shapely.buffer(g, -right, cap_style="flat", join_style="bevel",
+                                                 single_sided=True)))
+            area = area if area.geom_type == "Polygon" else max(area.geoms, key=lambda p: p.area)
+            assert shapely.Polygon(ring).equals(shapely.Polygon(area.exterior))  # its outer ring kept
