@@ -8,8 +8,9 @@ dataset, an extractor's input folder) is read back as input by the next run. Pat
 resolving symlinks (os.path.realpath) and, for files that exist, by identity (os.path.samefile: hard links):
 `--out F` for the input F, a link to F, or `F/part.parquet` of a dataset F is refused with one line, exit 2.
 
-`staged_directory`: an output directory is built beside its place and renamed into it when whole (files are
-written by storage.atomic.atomic_path, the same discipline for one file).
+`staged_directory`: an output directory is built beside its place and renamed into it when whole, and replaces
+only a folder of the writer's own files (storage.folders; files are written by storage.atomic.atomic_path, the
+same discipline for one file).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from pipeline.errors import UserError
+from storage.atomic import place, temp_directory
+from storage.folders import NotReplaceable, Owns, check_replaceable, replaced_directory
 
 
 def _real(path: str | os.PathLike) -> Path:
@@ -58,35 +61,48 @@ def check_apart(out: str | os.PathLike, inputs: Iterable[tuple[str, str | os.Pat
                             f"{flag}")
 
 
-def stage_beside(target: Path) -> Path:
-    """A new empty directory beside `target` (storage.atomic.temp_directory), or a UserError (exit 2)."""
-    from storage.atomic import temp_directory
-
+def output_place(out: str | os.PathLike, flag: str = "--out") -> Path:
+    """Where an output lands: symbolic links followed (storage.atomic.place: a link given as --out is written
+    through and stays a link), or a UserError (a loop of links)."""
     try:
-        return temp_directory(target)
+        return place(out)
     except OSError as exc:
-        raise UserError(f"cannot write beside --out {target}: {exc.strerror or exc}") from None
+        raise UserError(f"{flag} {out} {exc.strerror}") from None
 
 
 @contextmanager
-def staged_directory(target: str | os.PathLike) -> Iterator[Path]:
-    """Yield an empty directory beside `target`; when the block ends normally it takes target's place (an old
-    target is removed), so a reader never sees half an output directory: a failure (a full disk, an error, a
-    kill) leaves the old target as it was. A write that fails (OSError) is a UserError (exit 2)."""
-    target = Path(target)
-    stage = stage_beside(target)
-    retired = stage.with_name(stage.name + ".old")
+def writing(out: str | os.PathLike, flag: str = "--out") -> Iterator[None]:
+    """A block that writes the output `out` (storage.atomic): an OSError in it (a directory where one file goes,
+    a read-only folder, a full disk) is one line, exit 2; the atomic write has left nothing."""
     try:
-        try:
+        yield
+    except OSError as exc:
+        raise UserError(f"cannot write {flag} {out}: {exc.strerror or exc}") from None
+
+
+def check_folder(target: str | os.PathLike, owns: Owns, what: str, flag: str = "--out") -> None:
+    """Refuse (UserError), before any work, a folder output that may not be replaced (storage.folders: absent,
+    empty or the writer's own files only; never the working directory)."""
+    try:
+        check_replaceable(target, owns, what)
+    except OSError as exc:
+        raise UserError(f"{flag} {target} {exc.strerror or exc}") from None
+
+
+@contextmanager
+def staged_directory(target: str | os.PathLike, owns: Owns, what: str) -> Iterator[Path]:
+    """Yield an empty directory beside `target`; when the block ends normally it takes target's place
+    (storage.folders.replaced_directory: only a folder of the writer's own files is replaced, a link is followed),
+    so a reader never sees half an output directory: a failure (a full disk, an error, a kill) leaves the old
+    target as it was. A refusal or a write that fails (OSError) is a UserError (exit 2)."""
+    check_folder(target, owns, what)
+    try:
+        with replaced_directory(target, owns, what) as stage:
             yield stage
-        except OSError as exc:
-            raise UserError(f"cannot write {target}: {exc.strerror or exc}") from None
-        if target.exists():
-            os.replace(target, retired)  # rename aside first: rename(2) will not replace a non-empty directory
-        os.replace(stage, target)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-        shutil.rmtree(retired, ignore_errors=True)
+    except NotReplaceable as exc:  # a user's file put there while the output was built
+        raise UserError(f"--out {target} {exc.strerror}") from None
+    except OSError as exc:
+        raise UserError(f"cannot write {target}: {exc.strerror or exc}") from None
 
 
 @contextmanager
@@ -95,15 +111,26 @@ def staged_files(directory: str | os.PathLike) -> Iterator[Path]:
     into `directory` (created if need be), whose other files stay. The files are written, and may fail (a full
     disk: a UserError, exit 2), before any of them moves; renames need no space, so an output never has some of
     them only."""
-    directory = Path(directory)
-    stage = stage_beside(directory)
-    try:
+    real = output_place(directory)
+    with scratch_beside(real) as stage:
         try:
             yield stage
-            directory.mkdir(parents=True, exist_ok=True)
+            real.mkdir(parents=True, exist_ok=True)
             for f in sorted(stage.iterdir()):
-                os.replace(f, directory / f.name)
+                os.replace(f, real / f.name)
         except OSError as exc:
             raise UserError(f"cannot write {directory}: {exc.strerror or exc}") from None
+
+
+@contextmanager
+def scratch_beside(target: str | os.PathLike) -> Iterator[Path]:
+    """A new empty directory beside the place of `target` (storage.atomic.temp_directory: a crashed writer's
+    removed first), removed when the block ends; one that cannot be made is a UserError (exit 2)."""
+    try:
+        stage = temp_directory(output_place(target))
+    except OSError as exc:
+        raise UserError(f"cannot write beside {target}: {exc.strerror or exc}") from None
+    try:
+        yield stage
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -1,6 +1,11 @@
 """Atomic writes for every output (frames, programs, reports): a temporary file beside the target, then
 rename, so a crash or kill never leaves half a file where a reader looks (ScenarioNet's writer discipline).
 
+An output given as a symbolic link is written through it (`place`): the file or folder it points to is replaced,
+beside itself, and the link stays a link. Renaming over the link instead would turn it into a real file or
+folder, leaving the file it points to stale and the link lost (and a folder's rename aside would hide the link
+in a temporary).
+
 Temporaries are named `.<target name>.<host>-<pid>.<random>.tmp` (hidden: dataset readers skip names starting
 with "."), so that the next write of the same target can tell its own kind of leftovers from a live writer's:
 one of this host whose process is gone was left by a crash or a kill -9, and is removed (`remove_stale`).
@@ -8,6 +13,7 @@ one of this host whose process is gone was left by a crash or a kill -9, and is 
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import re
@@ -19,6 +25,15 @@ from contextlib import contextmanager
 from pathlib import Path
 
 HOST_TAG = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # a pid means something on its host only
+
+
+def place(target: str | os.PathLike) -> Path:
+    """Where a write of `target` lands: its absolute path with every symbolic link followed (a link that points
+    nowhere yet: where it points). A loop of links is an OSError (ELOOP), as opening it would be."""
+    real = Path(os.path.realpath(target))
+    if real.is_symlink():  # realpath leaves a link it cannot resolve: a loop
+        raise OSError(errno.ELOOP, "is a loop of symbolic links", os.fspath(target))
+    return real
 
 
 def temp_prefix(target: str | os.PathLike) -> str:
@@ -75,8 +90,11 @@ def temp_directory(target: str | os.PathLike) -> Path:
 
 @contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path in the target's directory; on success rename it over the target."""
-    target = Path(target)
+    """Yield a temporary path in the directory of the target's place (links followed); on success rename it
+    over the target. A target that is a directory is an IsADirectoryError before anything is written."""
+    given, target = target, place(target)
+    if target.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a directory; this output is one file: name a file", os.fspath(given))
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(target)
     fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target), suffix=".tmp", dir=target.parent)

@@ -37,7 +37,7 @@ from extractors.sniff import wrong_source_hint
 from extractors.writer import frames_writer
 from pipeline.batch.parent import watch_parent
 from pipeline.errors import UserError
-from pipeline.outputs import check_apart, stage_beside
+from pipeline.outputs import check_apart, check_folder, scratch_beside, staged_directory
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 
@@ -165,37 +165,42 @@ def is_dataset(out: str) -> bool:
 def extract_parallel(source: Source, input_path: str, out: str, options: ExtractOptions, jobs: int,
                      tally: ExtractTally) -> tuple[int, int]:
     """Extract every piece of the input (in `jobs` worker processes when jobs > 1) into `out`: a dataset
-    directory of parts, or one file merged from them. Returns (frames, rows)."""
+    directory of parts (replaced whole: pipeline.outputs.staged_directory), or one file merged from them.
+    Returns (frames, rows)."""
     target = Path(out)
-    if is_dataset(out) and target.exists():
-        _check_replaceable(target)
+    if is_dataset(out):
+        check_folder(target, _frames_parts, FRAMES_PARTS)
+        units = source.units(input_path)
+        with staged_directory(target, _frames_parts, FRAMES_PARTS) as stage:  # a crashed extraction's is removed
+            return _extract_into(stage, source, units, input_path, options, jobs, tally)
     units = source.units(input_path)
-    stage = stage_beside(target)  # a crashed extraction's is removed first
-    (stage / MAPS_DIR).mkdir()
-    try:
-        results = []
-        bar = tqdm(total=len(units), desc=f"extract {source.name}", unit=" inputs", file=sys.stderr, disable=None,
-                   leave=False)
-        for result in _map(source, units, options, str(stage), jobs):
-            results.append(result)
-            bar.update(1)
-        bar.close()
-        kept = _keep_first_scenes(sorted(results, key=lambda r: r.index), units, stage, tally)
-        frames, rows = sum(r.frames for r in kept), sum(r.rows for r in kept)
-        if frames == 0:
-            raise UserError(f"no frames found in {input_path} (check the source, --categories and --topics)")
-        _check(stage, kept)
-        if not any((stage / MAPS_DIR).iterdir()):
-            (stage / MAPS_DIR).rmdir()
-        if is_dataset(out):
-            _replace(stage, target)
-        else:
-            check_maps_target(maps_dir(target))
-            _merge(stage, target)
-            replace_maps(stage / MAPS_DIR, maps_dir(target))
+    with scratch_beside(target) as stage:
+        frames, rows = _extract_into(stage, source, units, input_path, options, jobs, tally)
+        check_maps_target(maps_dir(target))
+        _merge(stage, target)
+        replace_maps(stage / MAPS_DIR, maps_dir(target))
         return frames, rows
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _extract_into(stage: Path, source: Source, units: list[str], input_path: str, options: ExtractOptions,
+                  jobs: int, tally: ExtractTally) -> tuple[int, int]:
+    """The parts of every piece, checked, in `stage` (their maps in stage/_maps/, absent without a map)."""
+    (stage / MAPS_DIR).mkdir()
+    results = []
+    bar = tqdm(total=len(units), desc=f"extract {source.name}", unit=" inputs", file=sys.stderr, disable=None,
+               leave=False)
+    for result in _map(source, units, options, str(stage), jobs):
+        results.append(result)
+        bar.update(1)
+    bar.close()
+    kept = _keep_first_scenes(sorted(results, key=lambda r: r.index), units, stage, tally)
+    frames, rows = sum(r.frames for r in kept), sum(r.rows for r in kept)
+    if frames == 0:
+        raise UserError(f"no frames found in {input_path} (check the source, --categories and --topics)")
+    _check(stage, kept)
+    if not any((stage / MAPS_DIR).iterdir()):
+        (stage / MAPS_DIR).rmdir()
+    return frames, rows
 
 
 def _map(source, units, options, stage, jobs):
@@ -247,26 +252,22 @@ def _check(stage: Path, kept: list[UnitResult]) -> None:
         FramesDataset.open(stage).check()
 
 
-def _check_replaceable(target: Path) -> None:
-    if not target.is_dir():
-        raise UserError(f"--out {target} exists and is not a directory")
-    foreign = sorted(p.name for p in target.iterdir() if not (p.name.startswith("part-") and p.suffix == ".parquet")
-                     and not (p.name == MAPS_DIR and p.is_dir() and _only_parts(p)))
-    if foreign:
-        raise UserError(f"--out {target} holds files that are not frames parts ({', '.join(foreign[:3])}); "
-                        "choose an empty or new directory")
+FRAMES_PARTS = "frames parts"
+
+
+def _frames_parts(entry: os.DirEntry) -> bool:
+    """What `r2s extract --out DIR` writes there: part files, and _maps/ of part files."""
+    if entry.name == MAPS_DIR and entry.is_dir(follow_symlinks=False):
+        return _only_parts(Path(entry.path))
+    return entry.is_file(follow_symlinks=False) and _is_part(entry.name)
+
+
+def _is_part(name: str) -> bool:
+    return name.startswith("part-") and name.endswith(".parquet")
 
 
 def _only_parts(folder: Path) -> bool:
-    return all(p.name.startswith("part-") and p.suffix == ".parquet" for p in folder.iterdir())
-
-
-def _replace(stage: Path, target: Path) -> None:
-    retired = stage.with_name(stage.name + ".old")
-    if target.exists():
-        os.replace(target, retired)  # rename aside first: rename(2) will not replace a non-empty directory
-    os.replace(stage, target)
-    shutil.rmtree(retired, ignore_errors=True)
+    return all(p.is_file() and not p.is_symlink() and _is_part(p.name) for p in folder.iterdir())
 
 
 def _merge(stage: Path, target: Path) -> None:

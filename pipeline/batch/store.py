@@ -35,6 +35,7 @@ import pyarrow.parquet as pq
 
 from extractors.frame_hash import frame_keys, from_hex
 from pipeline.errors import UserError
+from pipeline.outputs import output_place
 from pipeline.programs import (
     LATER_COLUMNS,
     PROGRAMS_SCHEMA,
@@ -80,7 +81,9 @@ class RunStore:
         self.out = Path(out)
         self.schema = schema  # the rows' (PROGRAMS_SCHEMA, or WINDOW_SCHEMA for r2s run --window)
         self.single_file = is_single_file(out)
-        self.parts = Path(f"{self.out}.parts") if self.single_file else self.out
+        # a link given as a dataset --out is written through (pipeline.outputs.output_place), even one that
+        # points to a folder not made yet
+        self.parts = Path(f"{self.out}.parts") if self.single_file else output_place(self.out)
         self._next = 0
         self._lock = None
         self._unreadable: list[Path] = []

@@ -28,14 +28,15 @@ def run(args: argparse.Namespace) -> int:
     from extractors.frames import read_frames
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
-    from pipeline.outputs import check_apart
+    from pipeline.outputs import check_apart, output_place
     from storage.atomic import write_text_atomic
 
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number of metres, got {args.max_distance!r}")
     out = Path(args.out)
     check_apart(out, [("predictions", args.pred), ("ground truth", args.gt)], directory=True)
-    if out.exists() and not out.is_dir():
+    folder = output_place(out)  # a link to a folder is written through
+    if folder.exists() and not folder.is_dir():
         raise UserError(f"--out {out} exists and is not a directory")
     pred, gt = read_frames(args.pred), read_frames(args.gt)
     ev = evaluate(objects_by_frame(gt), objects_by_frame(pred), args.max_distance)
@@ -43,10 +44,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.pred} and {args.gt} have no frames")
     doc = metrics(ev)
     method = args.name or Path(args.pred).stem
-    out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "metrics.json", json.dumps({"method": method, **doc}, indent=1, allow_nan=False) + "\n")
-    write_text_atomic(out / "table.md", table_md(doc, method))
-    plot(ev, doc, method, out / "recall_by_range.png")
+    folder.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(folder / "metrics.json", json.dumps({"method": method, **doc}, indent=1, allow_nan=False) + "\n")
+    write_text_atomic(folder / "table.md", table_md(doc, method))
+    plot(ev, doc, method, folder / "recall_by_range.png")
     o = doc["overall"]
     print(f"{method}: {len(ev.frames)} frames, TP {o['tp']} FP {o['fp']} FN {o['fn']}, F1 "
           f"{'-' if o['f1'] is None else format(o['f1'], '.3f')}; wrote {out}/metrics.json, table.md, recall_by_range.png")

@@ -14,9 +14,8 @@ import argparse
 from pathlib import Path
 
 from pipeline.cli.options import bounded_int
-from pipeline.errors import UserError
 from pipeline.export import TARGETS
-from pipeline.outputs import check_apart
+from pipeline.outputs import check_apart, check_folder
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "directories of them (their *.json files)")
     p.add_argument("--to", required=True, choices=TARGETS, help="scenarionet: a ScenarioNet database; "
                    "openscenario: .xosc files and one .xodr road")
-    p.add_argument("--out", required=True, metavar="DIR", help="the output directory (replaced whole)")
+    p.add_argument("--out", required=True, metavar="DIR", help="the output directory, replaced whole: absent, empty or an earlier export")
     p.add_argument("--program", metavar="P", help="the program the variants were sampled from (.dsl or .scenic): "
                    "named in every scenario's metadata")
     p.add_argument("--steps", type=bounded_int(1, 10_000), default=1, metavar="T",
@@ -35,13 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene, read_text_file
-    from pipeline.export.stage import ExportOptions, export, variant_files
+    from pipeline.export.stage import EXPORTED, ExportOptions, export, exported, variant_files
 
     out = Path(args.out)
     check_apart(out, [("scene", args.scene), ("program", args.program)]
                 + [("variant", v) for v in args.variants], directory=True)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out {args.out} exists and is not a directory")
+    check_folder(out, exported, EXPORTED)  # before any input is read: an earlier export's, or empty, or new
     recorded = read_scene(args.scene)
     files = variant_files(args.variants)
     program = read_text_file(args.program, "program") if args.program else None

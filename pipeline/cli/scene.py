@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.outputs import check_apart
+from pipeline.outputs import check_apart, writing
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,7 +28,8 @@ def run(args: argparse.Namespace) -> int:
     check_apart(args.out, [("input frames", args.frames)])
     text = scene(args.frames, args.frame_id, radius=args.radius).to_json()
     if args.out:
-        write_text_atomic(args.out, text)
+        with writing(args.out):
+            write_text_atomic(args.out, text)
     else:
         sys.stdout.write(text)
     return 0

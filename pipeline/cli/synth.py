@@ -10,7 +10,7 @@ import sys
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
 from pipeline.errors import UserError
-from pipeline.outputs import check_apart
+from pipeline.outputs import check_apart, writing
 from synth.synthesize import synthesize
 
 
@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         text = str(result.program)
     if args.out:
-        write_text_atomic(args.out, text)
+        with writing(args.out):
+            write_text_atomic(args.out, text)
     else:
         sys.stdout.write(text)
     if result.status != "optimal":

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,8 @@ DATE = datetime.datetime(2000, 1, 1)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a mean lane width outside these is a degenerate polygon, clamped
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance
+VENDOR = "r2sgen"  # the .xodr header's vendor; the .xosc's FileHeader author starts with it too
+SIGNATURE = f'="{VENDOR}'.encode()  # how an earlier export's file is told from a user's (OpenScenarioTarget.owns)
 # Scenic class -> (what it is in OpenSCENARIO, its category)
 CATEGORIES: dict[str, tuple[str, str]] = {
     "Car": ("vehicle", "car"), "Truck": ("vehicle", "truck"), "Bus": ("vehicle", "bus"),
@@ -130,7 +133,7 @@ def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, steps: i
     stop = xosc.ValueTrigger("stop", 0, xosc.ConditionEdge.rising,
                              xosc.SimulationTimeCondition(steps * STEP_S, xosc.Rule.greaterThan), "stop")
     board = xosc.StoryBoard(init, stop)
-    return xosc.Scenario(name, f"r2sgen {__version__}: {note}", xosc.ParameterDeclarations(), entities, board,
+    return xosc.Scenario(name, f"{VENDOR} {__version__}: {note}", xosc.ParameterDeclarations(), entities, board,
                          xosc.RoadNetwork(roadfile=road_file), xosc.Catalog(), osc_minor_version=2,
                          creation_date=DATE)
 
@@ -169,7 +172,9 @@ class _Writer:
 
             raise UserError(f"the scene {recorded.frame_id!r} has no lane with a centre line: OpenDRIVE needs a road")
         element = odr.get_element()
-        element.find("header").set("date", DATE.isoformat())
+        header = element.find("header")
+        header.set("date", DATE.isoformat())
+        header.set("vendor", VENDOR)
         write_xml(element, folder / self.road_file)
 
     def add(self, item, world: WorldPose, road: RoadMap | None) -> None:
@@ -186,6 +191,17 @@ class _Writer:
 class OpenScenarioTarget:
     name = "openscenario"
     needs_road = True
+
+    def owns(self, entry: os.DirEntry) -> bool:
+        """An .xosc or .xodr file that says it was written by r2sgen (FileHeader's author, the header's vendor) in
+        its first KB: a folder of someone else's OpenSCENARIO files is not replaced."""
+        if not entry.name.endswith((".xosc", ".xodr")):
+            return False
+        try:
+            with open(entry.path, "rb") as f:
+                return SIGNATURE in f.read(1024)
+        except OSError:
+            return False
 
     def open(self, folder: Path, recorded: Scene, options) -> _Writer:
         return _Writer(folder, recorded, options)

@@ -12,6 +12,7 @@ does not grow with the number of scenarios (each is written and dropped).
 from __future__ import annotations
 
 import math
+import os
 import pickle
 from dataclasses import dataclass
 from pathlib import Path
@@ -246,6 +247,10 @@ class _Writer:
 class ScenarioNetTarget:
     name = "scenarionet"
     needs_road = False
+
+    def owns(self, entry: os.DirEntry) -> bool:
+        name = entry.name
+        return name in (SUMMARY, MAPPING) or (name.startswith(f"sd_{DATASET}_") and name.endswith(".pkl"))
 
     def open(self, folder: Path, recorded: Scene, options) -> _Writer:
         return _Writer(folder, recorded.frame_id, options)

@@ -1,6 +1,7 @@
 """The export stage: the recorded scene and each variant, read one at a time, put back in the scene's world and
 written by the chosen target into a directory staged beside --out (pipeline.outputs.staged_directory: a reader
-never sees half a database, a failure leaves nothing).
+never sees half a database, a failure leaves nothing, and only an absent or empty folder or an earlier export is
+replaced: a folder of the user's files given as --out is refused, not emptied).
 
 The world of every scenario is the recorded scene's (`world`: the ego's recorded pose; a scene without one is
 exported with its ego frame as the world), and so is its road (a variant may carry its own of each; OpenSCENARIO
@@ -9,13 +10,14 @@ files all stand on the one OpenDRIVE road of the recorded scene). Variants are s
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
 from pipeline.errors import UserError
-from pipeline.export import slug
+from pipeline.export import TARGETS, slug
 from synth.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose
@@ -45,6 +47,11 @@ class Target(Protocol):
     needs_road: bool  # a target that cannot be written without a road (OpenDRIVE) refuses a scene without one
 
     def open(self, folder: Path, recorded: Scene, options: ExportOptions) -> Writer: ...
+
+    def owns(self, entry: os.DirEntry) -> bool:
+        """Whether a regular file of an output folder is one this target writes (so an earlier export may be
+        replaced, and nothing else: storage.folders)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -84,6 +91,14 @@ def items(recorded: Scene, files: list[Path], max_entities: int | None = None) -
         yield Item(read_scene(str(f), max_entities), f"{base}-{slug(f.stem)}", f.name)
 
 
+EXPORTED = "scenarios of r2s export"
+
+
+def exported(entry: os.DirEntry) -> bool:
+    """What an output folder of r2s export may hold to be replaced: an earlier export's files, of either target."""
+    return entry.is_file(follow_symlinks=False) and any(target(t).owns(entry) for t in TARGETS)
+
+
 def target(name: str) -> Target:
     if name == "scenarionet":
         from pipeline.export.scenarionet import TARGET
@@ -107,7 +122,7 @@ def export(recorded: Scene, files: list[Path], to: str, out: Path, options: Expo
     if recorded.world is None:
         notes.append("the scene has no world pose: coordinates are its ego frame's")
     n = 0
-    with staged_directory(out) as stage:
+    with staged_directory(out, exported, EXPORTED) as stage:
         writer = chosen.open(stage, recorded, options)
         for item in items(recorded, files):
             scene = item.scene

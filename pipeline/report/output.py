@@ -1,5 +1,5 @@
-"""`r2s report` (report, its Python API: `from pipeline.report import report`) and where it writes: DIR is replaced wholesale, so it must be absent, empty or an earlier report, and the new
-report is built in a directory beside it that takes its place only when complete (pipeline.outputs.staged_directory,
+"""`r2s report` (report, its Python API: `from pipeline.report import report`) and where it writes: DIR is replaced wholesale, so it must be absent, empty or an earlier report (storage.folders, the rule of every
+folder replaced whole), and the new report is built in a directory beside it that takes its place only when complete (pipeline.outputs.staged_directory,
 as every output directory)."""
 
 from __future__ import annotations
@@ -18,18 +18,12 @@ def report_files() -> frozenset[str]:
     return frozenset((MD_NAME, HTML_NAME, *PLOT_FILES))
 
 
-def check_replaceable(target: Path) -> None:
-    """DIR is replaced wholesale, so it must be absent, empty or an earlier report: never a user's other files."""
-    if not target.exists():
-        return
-    if not target.is_dir():
-        raise UserError(f"--out {target} exists and is not a directory")
+REPORT = "part of a report"
+
+
+def _report_file(entry: os.DirEntry) -> bool:
     # A report's own files are regular files: a folder or a link named report.md is the user's, never ours.
-    foreign = sorted(e.name for e in target.iterdir()
-                     if e.name not in report_files() or e.is_symlink() or not e.is_file())
-    if foreign:
-        raise UserError(f"--out {target} holds files that are not part of a report ({', '.join(foreign[:3])}); "
-                        "choose an empty or new directory")
+    return entry.is_file(follow_symlinks=False) and entry.name in report_files()
 
 
 @dataclass(frozen=True)
@@ -68,8 +62,7 @@ def report(programs: str | os.PathLike, out: str | os.PathLike, *, frames: str |
     with ProgramsDB(programs) as db:  # ProgramsError (exit 2) before anything is written
         if db.rows == 0:
             raise UserError(f"{programs} has no rows: nothing to report (did `r2s run` process any frame?)")
-        check_replaceable(target)
-        with staged_directory(target) as stage:
+        with staged_directory(target, _report_file, REPORT) as stage:
             write_report(programs, stage, frames=frames, max_table_rows=max_table_rows, db=db, extra=extra)
         overview = db.overview
         parts = [f"{overview.frames} frames", f"{len(overview.configs)} config{'s' * (len(overview.configs) != 1)}"]

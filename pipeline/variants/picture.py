@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 from pipeline.errors import UserError
-from pipeline.outputs import check_apart
+from pipeline.outputs import check_apart, writing
 from pipeline.variants.render import FORMATS, View, draw, save
 from pipeline.variants.sample import ProgressReport, SampleOptions, sample_program
 from synth.config import SynthConfig, config_from_mapping
@@ -66,7 +66,8 @@ scene in messages). Returns the path written. Bad input raises an InputError
     if matches is not None:
         names = sorted({name for name, _ in bound})
         subtitle = "; ".join(filter(None, (subtitle, f"bound by the match in {Path(matches).name}: {', '.join(names)}")))
-    save(draw(View(scene, program, drawn, subtitle, bound)), out)
+    with writing(out):
+        save(draw(View(scene, program, drawn, subtitle, bound)), out)
     return out
 
 
