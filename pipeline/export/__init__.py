@@ -8,7 +8,8 @@ TARGETS = ("scenarionet", "openscenario")
 
 def slug(text: str) -> str:
     """A frame id as a file-name part (scenario and file names): each run of characters other than letters,
-    digits, '.' and '-' as one '_'."""
+    digits, '.' and '-' as one '_', and none of '.', '-', '_' first (a name starting with '.' is hidden, one
+    starting with '-' reads as an option) nor '_' last."""
     import re
 
-    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_") or "scene"
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).lstrip("._-").rstrip("_") or "scene"

@@ -73,11 +73,14 @@ def variant_files(paths: list[str]) -> list[Path]:
             raise UserError(f"variant {p} does not exist")
         if len(out) > MAX_VARIANTS:
             raise UserError(f"more than {MAX_VARIANTS:,} variants")
-    stems = {}
+    written: dict[str, Path] = {}
     for f in out:
-        if f.stem in stems:
-            raise UserError(f"two variants are named {f.stem} ({stems[f.stem]} and {f}): their scenarios would clash")
-        stems[f.stem] = f
+        # the names their scenarios are written under, as a filesystem that ignores case would compare them
+        name = slug(f.stem).casefold()
+        if name in written:
+            raise UserError(f"the variants {written[name]} and {f} would both be written as {slug(f.stem)!r} "
+                            "(file names are kept to letters, digits, '.' and '-'): rename one")
+        written[name] = f
     return out
 
 
