@@ -521,6 +521,7 @@ def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: floa
 ROAD_KEYS = ("map_id", "features")
 FEATURE_KEYS = ("id", "kind", "polygon", "line", "left", "right", "successors", "predecessors", "is_intersection")
 MAX_FEATURES = 100_000
+MAX_FEATURE_ID_LENGTH = 256  # a feature id names an OpenDRIVE road (r2s export): printable, as a frame id is
 
 
 def road_to_dict(road: RoadMap) -> dict:
@@ -552,6 +553,9 @@ def road_from_dict(raw: object) -> RoadMap:
     for i, d in enumerate(feats):
         if not isinstance(d, dict) or not isinstance(d.get("id"), str) or not isinstance(d.get("kind"), str):
             raise MapError(f"road feature {i} must be an object with an id and a kind (strings)")
+        if not 0 < len(d["id"]) <= MAX_FEATURE_ID_LENGTH or not d["id"].isprintable():
+            raise MapError(f"road feature {i}: id {d['id'][:40]!r} is not a printable string of 1 to "
+                           f"{MAX_FEATURE_ID_LENGTH} characters")
         unknown = sorted(set(d) - set(FEATURE_KEYS))
         if unknown:
             raise MapError(f"road feature {d['id']!r} has unknown key {unknown[0]!r} (keys: {', '.join(FEATURE_KEYS)})")

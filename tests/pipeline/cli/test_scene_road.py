@@ -83,6 +83,9 @@ def test_synthesis_reads_a_scene_with_a_road_and_a_bad_road_is_one_line(excerpt_
         ({**lane, "left": "no-such-lane"}, "which is not a lane of the map"),
         ({**lane, "colour": "red"}, "unknown key 'colour'"),
         ({**lane, "polygon": [[0, 0], [1, "x"], [2, 0]]}, "number pairs"),
+        # ids name OpenDRIVE roads (r2s export): printable, as frame ids, so XML can hold them
+        *[({**lane, "id": bad_id}, "is not a printable string of 1 to 256")
+          for bad_id in ("lane\x01", "lane\ufffe", "lane\ud800", "", "x" * 257)],
     ]:
         bad = {**doc, "road": {**doc["road"], "features": [broken if f is lane else f
                                                            for f in doc["road"]["features"]]}}
