@@ -20,6 +20,7 @@ from __future__ import annotations
 import datetime
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,7 @@ MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a mean lane width outside these is a
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance
 VENDOR = "r2sgen"  # the .xodr header's vendor; the .xosc's FileHeader author starts with it too
+NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")  # outside XML 1.0's Char
 SIGNATURE = f'="{VENDOR}'.encode()  # how an earlier export's file is told from a user's (OpenScenarioTarget.owns)
 # Scenic class -> (what it is in OpenSCENARIO, its category)
 CATEGORIES: dict[str, tuple[str, str]] = {
@@ -47,6 +49,13 @@ CATEGORIES: dict[str, tuple[str, str]] = {
     "PushableObject": ("misc", "obstacle"), "Debris": ("misc", "obstacle"), "BicycleRack": ("misc", "obstacle"),
     "Object": ("misc", "obstacle"),
 }
+
+
+def xml_text(text: str) -> str:
+    """Text as XML 1.0 can hold it: each character it cannot (control characters, lone surrogates as a file name
+    undecodable in UTF-8 gives them, U+FFFE, U+FFFF) as its Python escape (\\x01, \\udcff): a file name or a path
+    in a note must not make the file one no XML parser reads."""
+    return NOT_XML.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
 
 
 def lane_width(polygon, line) -> float:
@@ -102,7 +111,7 @@ def road_network(road: RoadMap, name: str):
         lanes.add_lanesection(section)
         lanes.add_laneoffset(xodr.LaneOffset(0, width / 2.0))  # lane -1 centred on the centre line
         road_id += 1
-        r = xodr.Road(road_id, plan, lanes, name=f.feature_id)
+        r = xodr.Road(road_id, plan, lanes, name=xml_text(f.feature_id))
         r.add_elevation(0, 0, 0, 0, 0)  # flat: scene JSON is 2D (the schema wants an elevation in the profile)
         odr.add_road(r)
     return odr, road_id
@@ -181,7 +190,7 @@ class _Writer:
         what = "the recorded frame" if item.variant is None else f"variant {item.variant}"
         note = f"{what} of {self.recorded_frame}" + (f", program {self.options.program_file}"
                                                        if self.options.program_file else "")
-        sc = scenario(item.scene, item.name, world, self.road_file, self.options.steps, note)
+        sc = scenario(item.scene, item.name, world, self.road_file, self.options.steps, xml_text(note))
         write_xml(sc.get_element(), self.folder / f"{item.name}.xosc")
 
     def close(self) -> None:

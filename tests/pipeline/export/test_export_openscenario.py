@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -171,3 +172,31 @@ def test_the_checker_harness_sees_a_broken_file(recorded, tmp_path):
     tree.write(broken)
     issues = asam_issues(broken)
     assert any(checker == "check_asam_xodr_xml_valid_schema" for checker, _, _ in issues), issues
+
+
+def test_names_xml_cannot_hold_are_escaped_in_the_notes(recorded, tmp_path):
+    """Variant file names and a --program path with a control character, U+FFFE or bytes that are not UTF-8 (a
+    lone surrogate in Python) are written as escapes: every file parses as XML and passes ASAM's checkers."""
+    scene_file, variants = recorded["scene-0061/0"]
+    folder = os.fsencode(tmp_path / "variants")
+    os.mkdir(folder)
+    names = [b"ctl\x01.json", b"nc\xef\xbf\xbe.json", b"bytes\xff.json"]
+    for name, sample in zip(names, sorted(variants.iterdir())):
+        with open(os.path.join(folder, name), "wb") as f:
+            f.write(sample.read_bytes())
+    program = os.path.join(os.fsencode(tmp_path), b"p\x02\xfe.scenic")
+    with open(program, "wb") as f:
+        f.write(scene_file.with_name("scene.scenic").read_bytes())
+    out = tmp_path / "osc"
+    res = run_r2s("export", str(scene_file), os.fsdecode(folder), "--to", "openscenario", "--out", str(out),
+                  "--program", os.fsdecode(program))
+    assert res.returncode == 0, res.stderr
+    authors = []
+    for f in sorted(out.iterdir()):
+        root = ET.parse(f).getroot()  # raises on a character XML 1.0 cannot hold
+        if f.suffix == ".xosc":
+            authors.append(root.find("FileHeader").get("author"))
+        assert asam_issues(f) == [], f.name
+    assert len(authors) == 4 and all("program p\\x02\\udcfe.scenic" in a for a in authors)
+    assert {"variant ctl\\x01.json", "variant nc\\ufffe.json", "variant bytes\\udcff.json"} <= {
+        a.split(" of ")[0].split(": ")[1] for a in authors}
