@@ -24,9 +24,10 @@ import re
 from pathlib import Path
 from typing import Any
 
+from pipeline.errors import UserError
 from pipeline.export import slug
 from pipeline.export.scenarionet import HEIGHTS, STEP_S
-from synth.roadmap import LANE, RoadMap
+from synth.roadmap import LANE, MapFeature, RoadMap
 from synth.scene import Scene
 from synth.version import __version__
 from synth.world import WorldPose, in_world, road_in_world
@@ -36,6 +37,9 @@ DATE = datetime.datetime(2000, 1, 1)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a mean lane width outside these is a degenerate polygon, clamped
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance
+# Line geometries in one .xodr at most: each is ~190 bytes of XML and ~1.6 KB while scenariogeneration builds it
+# (10^6 took 1.6 GB and 54 s for a 186 MB file); real roads within 50 m of ego have up to ~1,100 (nuScenes-mini).
+MAX_GEOMETRIES = 100_000
 VENDOR = "r2sgen"  # the .xodr header's vendor; the .xosc's FileHeader author starts with it too
 NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")  # outside XML 1.0's Char
 SIGNATURE = f'="{VENDOR}'.encode()  # how an earlier export's file is told from a user's (OpenScenarioTarget.owns)
@@ -84,19 +88,19 @@ def straight_runs(line) -> list[tuple[tuple[float, float], tuple[float, float]]]
     return runs
 
 
-def road_network(road: RoadMap, name: str):
-    """The OpenDRIVE road network (scenariogeneration's OpenDrive) of a road in the world frame: one road per
-    lane whose centre line has a segment (the module docstring says what is approximated)."""
+def lane_runs(road: RoadMap) -> list[tuple[MapFeature, list]]:
+    """The lanes of a road whose centre line has a segment, each with its line geometries (straight_runs)."""
+    lanes = [(f, straight_runs(f.line)) for f in road.features if f.kind == LANE]
+    return [(f, runs) for f, runs in lanes if runs]
+
+
+def road_network(lanes: list[tuple[MapFeature, list]], name: str):
+    """The OpenDRIVE road network (scenariogeneration's OpenDrive) of a road's lanes in the world frame
+    (lane_runs): one road per lane (the module docstring says what is approximated)."""
     from scenariogeneration import xodr
 
     odr = xodr.OpenDrive(name, revMinor="7")  # 1.7: the newest every ASAM check applies to
-    road_id = 0
-    for f in road.features:
-        if f.kind != LANE:
-            continue
-        segments = straight_runs(f.line)
-        if not segments:
-            continue
+    for road_id, (f, segments) in enumerate(lanes, start=1):
         plan = xodr.PlanView()
         for (x0, y0), (x1, y1) in segments:
             plan.add_fixed_geometry(xodr.Line(math.dist((x0, y0), (x1, y1))), x0, y0, math.atan2(y1 - y0, x1 - x0))
@@ -107,14 +111,13 @@ def road_network(road: RoadMap, name: str):
         lane = xodr.Lane(xodr.LaneType.driving, a=width)
         lane.add_roadmark(xodr.RoadMark(xodr.RoadMarkType.solid))
         section.add_right_lane(lane)
-        lanes = xodr.Lanes()
-        lanes.add_lanesection(section)
-        lanes.add_laneoffset(xodr.LaneOffset(0, width / 2.0))  # lane -1 centred on the centre line
-        road_id += 1
-        r = xodr.Road(road_id, plan, lanes, name=xml_text(f.feature_id))
+        profile = xodr.Lanes()
+        profile.add_lanesection(section)
+        profile.add_laneoffset(xodr.LaneOffset(0, width / 2.0))  # lane -1 centred on the centre line
+        r = xodr.Road(road_id, plan, profile, name=xml_text(f.feature_id))
         r.add_elevation(0, 0, 0, 0, 0)  # flat: scene JSON is 2D (the schema wants an elevation in the profile)
         odr.add_road(r)
-    return odr, road_id
+    return odr
 
 
 def write_xml(element, path: Path) -> None:
@@ -166,8 +169,6 @@ class _Writer:
         try:
             import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
         except ImportError:
-            from pipeline.errors import UserError
-
             raise UserError("--to openscenario needs scenariogeneration (pip install scenariogeneration==0.16.7)") \
                 from None
         self.folder = folder
@@ -175,11 +176,15 @@ class _Writer:
         self.recorded_frame = recorded.frame_id
         self.road_file = f"{slug(recorded.frame_id)}.xodr"
         world = recorded.world or WorldPose.identity()
-        odr, n = road_network(road_in_world(world, recorded.road), slug(recorded.frame_id))
-        if n == 0:
-            from pipeline.errors import UserError
-
+        lanes = lane_runs(road_in_world(world, recorded.road))
+        if not lanes:
             raise UserError(f"the scene {recorded.frame_id!r} has no lane with a centre line: OpenDRIVE needs a road")
+        geometries = sum(len(runs) for _, runs in lanes)
+        if geometries > MAX_GEOMETRIES:
+            raise UserError(f"the road of the scene {recorded.frame_id!r} would be {geometries:,} OpenDRIVE line "
+                            f"geometries, more than {MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export "
+                            "a scene with a smaller road (r2s scene --radius)")
+        odr = road_network(lanes, slug(recorded.frame_id))
         element = odr.get_element()
         header = element.find("header")
         header.set("date", DATE.isoformat())
