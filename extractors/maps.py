@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +22,7 @@ import pyarrow.parquet as pq
 from extractors.frame_hash import RowBytes
 from extractors.frames_schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
+from storage.folders import check_replaceable, replace_with
 from synth.roadmap import MapError, MapFeature, RoadMap, points
 
 _COORDS = pa.list_(pa.float64())
@@ -98,23 +98,30 @@ def maps_writer(path: str | os.PathLike) -> Iterator[MapsWriter]:
         Path(path).unlink(missing_ok=True)
 
 
-def check_maps_target(target: Path) -> None:
-    """Refuse to replace a `target` maps folder that holds anything but maps parts (it is not ours)."""
-    if target.exists() and (not target.is_dir() or any(
-            not (p.name.startswith("part-") and p.suffix == ".parquet") for p in target.iterdir())):
-        raise FramesError(f"{target} exists and is not a maps folder written by r2s extract; move it away")
+MAPS_PARTS = "maps parts"
+
+
+def _maps_part(entry: os.DirEntry) -> bool:
+    return entry.is_file(follow_symlinks=False) and entry.name.startswith("part-") and entry.name.endswith(".parquet")
+
+
+def check_maps_target(target: Path) -> Path:
+    """The place of a `target` maps folder (links followed) that may be replaced: absent, or holding maps parts
+    only (storage.folders, the rule of every folder replaced whole); anything else is not ours: refused."""
+    try:
+        return check_replaceable(target, _maps_part, MAPS_PARTS)
+    except OSError as exc:
+        raise FramesError(f"{target} (the maps of the frames file) {exc.strerror}") from None
 
 
 def replace_maps(staged: Path, target: Path) -> None:
-    """Put a staged maps folder (absent: no map) in place of the maps of a frames file, `target` (F.maps),
+    """Put a staged maps folder (absent or empty: no map) in place of the maps of a frames file, `target` (F.maps),
     removing maps an earlier extraction left there; a target that holds anything but maps parts is refused."""
     check_maps_target(target)
-    if target.exists():
-        retired = target.with_name(f".{target.name}.{os.getpid()}.old")
-        os.replace(target, retired)
-        shutil.rmtree(retired, ignore_errors=True)
-    if staged.is_dir() and any(staged.iterdir()):
-        os.replace(staged, target)
+    try:
+        replace_with(staged if staged.is_dir() and any(staged.iterdir()) else None, target, _maps_part, MAPS_PARTS)
+    except OSError as exc:  # a file put there meanwhile (kept), a rename that failed (the old maps put back)
+        raise FramesError(f"cannot replace {target}: {exc.strerror or exc}") from None
 
 
 def read_maps(path: str | os.PathLike, map_ids: set[str] | None = None) -> Iterator[RoadMap]:

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import errno
 import os
+import secrets
 import shutil
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from storage.atomic import place, temp_directory
+from storage.atomic import place, temp_directory, temp_prefix
 
 Owns = Callable[[os.DirEntry], bool]  # whether an entry (never a link: those are refused before) is the writer's
 
@@ -47,7 +48,7 @@ def check_replaceable(target: str | os.PathLike, owns: Owns, what: str) -> Path:
     if foreign:
         more = f", and {len(foreign) - 3} more" if len(foreign) > 3 else ""
         raise NotReplaceable(errno.ENOTEMPTY, f"holds files that are not {what} ({', '.join(foreign[:3])}{more}); "
-                             "choose an empty or new directory", given)
+                             "move them or choose another folder", given)
     return real
 
 
@@ -59,20 +60,31 @@ def only_files(names: Callable[[str], bool]) -> Owns:
 @contextmanager
 def replaced_directory(target: str | os.PathLike, owns: Owns, what: str) -> Iterator[Path]:
     """Yield an empty directory beside the place of `target`; when the block ends normally it takes that place
-    (check_replaceable, before the block and again before the swap). Raises OSError (refusals included)."""
-    real = check_replaceable(target, owns, what)
-    stage = temp_directory(real)
-    retired = stage.with_name(stage.name + ".old")
+    (replace_with). Raises OSError (refusals included)."""
+    stage = temp_directory(check_replaceable(target, owns, what))
     try:
         yield stage
-        if check_replaceable(target, owns, what).exists():
-            os.replace(real, retired)  # rename aside first: rename(2) will not replace a non-empty directory
-        try:
-            os.replace(stage, real)
-        except OSError:
-            if retired.exists():
-                os.replace(retired, real)  # the old folder back: a failed swap loses nothing
-            raise
+        replace_with(stage, target, owns, what)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+
+
+def replace_with(stage: Path | None, target: str | os.PathLike, owns: Owns, what: str) -> None:
+    """Put the directory `stage` (beside it; None: nothing) in the place of `target`, which check_replaceable
+    allows (checked now, so files put there since an earlier check are kept); the old folder is removed, or put
+    back when the swap fails."""
+    real = check_replaceable(target, owns, what)
+    # named as a temporary of the target: one a crash leaves is removed by the next write (remove_stale)
+    retired = real.with_name(f"{temp_prefix(real)}{secrets.token_hex(4)}.tmp.old")
+    try:
+        if real.exists():
+            os.replace(real, retired)  # rename aside first: rename(2) will not replace a non-empty directory
+        if stage is not None:
+            try:
+                os.replace(stage, real)
+            except OSError:
+                if retired.exists():
+                    os.replace(retired, real)  # the old folder back: a failed swap loses nothing
+                raise
+    finally:
         shutil.rmtree(retired, ignore_errors=True)

@@ -115,8 +115,8 @@ def _extract_file(src: Source, input_path: str, out: str, options: ExtractOption
     """One frames file, written as the frames stream, and its maps beside it (F.maps/), staged until the frames
     are written."""
     target = maps_dir(out)
-    check_maps_target(target)
-    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    real = check_maps_target(target)
+    staged = real.with_name(f".{real.name}.{os.getpid()}.tmp")  # beside its place: a link's folder is replaced
     try:
         with frames_writer(out) as written, maps_writer(staged / "part-000000.parquet") as maps:
             bar = tqdm(src.extract(input_path, options, tally, maps=maps.add), desc=f"extract {src.name}",

@@ -36,6 +36,7 @@ from extractors.frames_dataset import FramesDataset
 from extractors.frames_schema import ROAD_COLUMNS
 from extractors.maps import maps_dir, read_maps
 from pipeline.errors import UserError
+from pipeline.outputs import output_place
 from pipeline.query.events import events_select
 from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, without_lanes
 from pipeline.query.notes import absent_types_note
@@ -319,7 +320,7 @@ def query_frames(frames: str | os.PathLike, pattern: Pattern | TemporalPattern, 
     # Lane clauses (in any step) and `changing lanes` read the lane relations of the frames' maps.
     sets = _lane_sets(frames, dataset) if pattern.uses_lanes else None
     select = events_select(min_duration_s) if events else matches_select(all_bindings)
-    out = Path(out)
+    out = output_place(out)  # a link is written through: the folders made and the spill are beside its file
     created = []
     try:
         for folder in _parents(out):

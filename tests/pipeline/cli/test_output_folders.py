@@ -8,11 +8,15 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
 
 from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support.faults import r2s_with_fault
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
@@ -135,3 +139,50 @@ def test_an_earlier_export_of_the_other_target_is_replaced_and_foreign_scenarios
     (tmp_path / "db" / "theirs.xosc").write_text((tmp_path / "db" / "theirs.xosc").read_text()
                                                  .replace('author="r2sgen', 'author="someone'))
     assert_one_line_error(_r2s("export {scene} --to scenarionet", inputs, "db", tmp_path), contains="theirs.xosc")
+
+
+@pytest.mark.parametrize("command", ["scene {frames} scene-0061/0", "synth {scene}", "render {scene}",
+                                     f"query {{frames}} {ROOT / 'data' / 'patterns' / 'queue-of-three.dsl'}"])
+def test_a_loop_of_links_for_one_file_is_one_line(command, inputs, tmp_path):
+    (tmp_path / "a.png").symlink_to("b.png")
+    (tmp_path / "b.png").symlink_to("a.png")
+    assert_one_line_error(_r2s(command, inputs, "a.png", tmp_path), contains="loop of symbolic links")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.png"]
+
+
+def test_the_maps_beside_a_frames_file_are_replaced_through_their_link(tmp_path):
+    """r2s extract --out F.parquet replaces F.maps/ (the maps of its scenarios): a link there is written through
+    and stays; a user's file in the folder it points to is refused and kept."""
+    command = f"extract scenarionet {EXCERPT}"
+    res = _r2s(command, {}, "f.parquet", tmp_path)
+    assert res.returncode == 0, res.stderr
+    (tmp_path / "f.maps").rename(tmp_path / "real")
+    (tmp_path / "f.maps").symlink_to("real")
+    for jobs in ("1", "2"):
+        res = run_r2s(*command.split(), "--out", "f.parquet", "--jobs", jobs, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["f.maps", "f.parquet", "real"]
+        assert os.readlink(tmp_path / "f.maps") == "real" and list((tmp_path / "real").glob("part-*.parquet"))
+    (tmp_path / "real" / "notes.txt").write_text("keep")
+    assert_one_line_error(_r2s(command, {}, "f.parquet", tmp_path), contains="notes.txt")
+    assert (tmp_path / "real" / "notes.txt").read_text() == "keep"
+
+
+def test_a_run_through_a_link_holds_the_lock_of_the_folder_it_writes(inputs, tmp_path):
+    """Two runs on one folder, one naming it through a link: the second is refused (their locks were two files)."""
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to("real")
+    first = subprocess.Popen(r2s_with_fault("sleep=120@*", "run", str(inputs["frames"]), "--out",
+                                            str(tmp_path / "link"), "--jobs", "1"),
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        lock = tmp_path / ".real.lock"
+        deadline = time.monotonic() + 60
+        while not lock.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert lock.exists()
+        second = run_r2s("run", str(inputs["frames"]), "--out", str(tmp_path / "real"))
+        assert_one_line_error(second, 2, contains=f"another r2s run (pid {first.pid} on ")
+    finally:
+        os.killpg(first.pid, signal.SIGKILL)
+        first.wait(timeout=30)
