@@ -1,6 +1,7 @@
 """How every verb writes its output: never over one of its inputs, and never half of it.
 
-`check_apart`: what every verb that writes checks of its output before any work: it must not be one of its inputs.
+`check_apart`: what every verb that writes checks of its output before any work: it must not be one of its inputs,
+a loop of symbolic links or below a file.
 
 A verb writes its output by replacing it whole (a temporary file or directory beside it, then a rename), so an
 output that is an input destroys the input, and an output inside an input directory (a frames or programs
@@ -41,6 +42,7 @@ def check_apart(out: str | os.PathLike, inputs: Iterable[tuple[str, str | os.Pat
     None, "-" (standard input) and URLs are skipped. A verb that writes one file refuses a directory itself."""
     if not _is_path(out):
         return
+    output_place(out, flag)  # a loop of links, a file where a folder must be: refused before any work
     dst = _real(out)
     for what, path in inputs:
         if not _is_path(path):

@@ -29,10 +29,14 @@ HOST_TAG = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # a pid 
 
 def place(target: str | os.PathLike) -> Path:
     """Where a write of `target` lands: its absolute path with every symbolic link followed (a link that points
-    nowhere yet: where it points). A loop of links is an OSError (ELOOP), as opening it would be."""
+    nowhere yet: where it points). A loop of links is an OSError (ELOOP), as opening it would be, and a path
+    below a file a NotADirectoryError (a write would fail there after all the work)."""
     real = Path(os.path.realpath(target))
     if real.is_symlink():  # realpath leaves a link it cannot resolve: a loop
         raise OSError(errno.ELOOP, "is a loop of symbolic links", os.fspath(target))
+    above = next(p for p in real.parents if p.exists())  # the folders below it are made by the write
+    if not above.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, f"is inside {above}, which is not a directory", os.fspath(target))
     return real
 
 

@@ -33,7 +33,8 @@ _NO_LOCKS = {errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL}
 
 
 def lock_path(out: str | os.PathLike) -> Path:
-    out = Path(os.path.abspath(out))
+    # beside the output's real place: runs naming it through a link and by its path take one lock
+    out = Path(os.path.realpath(out))
     return out.parent / f".{out.name}.lock"
 
 

@@ -115,7 +115,7 @@ class RunStore:
         and merge under each other."""
         from pipeline.batch.lock import OutputLock
 
-        self._lock = OutputLock(output_place(self.out))  # one lock for the output however a link names it
+        self._lock = OutputLock(self.out)
         self._lock.acquire()
 
     def unlock(self) -> None:

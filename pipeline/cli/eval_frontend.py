@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from extractors.frames import read_frames
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
-    from pipeline.outputs import check_apart, output_place
+    from pipeline.outputs import check_apart, output_place, writing
     from storage.atomic import write_text_atomic
 
     if not (math.isfinite(args.max_distance) and args.max_distance > 0):
@@ -44,10 +44,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.pred} and {args.gt} have no frames")
     doc = metrics(ev)
     method = args.name or Path(args.pred).stem
-    folder.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(folder / "metrics.json", json.dumps({"method": method, **doc}, indent=1, allow_nan=False) + "\n")
-    write_text_atomic(folder / "table.md", table_md(doc, method))
-    plot(ev, doc, method, folder / "recall_by_range.png")
+    with writing(out):
+        folder.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(folder / "metrics.json", json.dumps({"method": method, **doc}, indent=1, allow_nan=False)
+                          + "\n")
+        write_text_atomic(folder / "table.md", table_md(doc, method))
+        plot(ev, doc, method, folder / "recall_by_range.png")
     o = doc["overall"]
     print(f"{method}: {len(ev.frames)} frames, TP {o['tp']} FP {o['fp']} FN {o['fn']}, F1 "
           f"{'-' if o['f1'] is None else format(o['f1'], '.3f')}; wrote {out}/metrics.json, table.md, recall_by_range.png")

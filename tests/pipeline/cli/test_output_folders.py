@@ -186,3 +186,14 @@ def test_a_run_through_a_link_holds_the_lock_of_the_folder_it_writes(inputs, tmp
     finally:
         os.killpg(first.pid, signal.SIGKILL)
         first.wait(timeout=30)
+
+
+@pytest.mark.parametrize("command, out", [
+    *[(c, "x") for c, _ in (*REPLACING.values(), *ADDING.values())],
+    ("scene {frames} scene-0061/0", "x.json"), ("synth {scene}", "x.dsl"), ("render {scene}", "x.png"),
+    (f"query {{frames}} {ROOT / 'data' / 'patterns' / 'queue-of-three.dsl'}", "x.parquet"),
+    (f"extract scenarionet {EXCERPT}", "x.parquet")])
+def test_an_output_below_a_file_is_one_line_before_any_work(command, out, inputs, tmp_path):
+    (tmp_path / "file").write_text("keep")
+    assert_one_line_error(_r2s(command, inputs, f"file/{out}", tmp_path), contains="which is not a directory")
+    assert _tree(tmp_path) == {"file": b"keep"}
