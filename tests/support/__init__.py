@@ -75,6 +75,16 @@ def run_r2s(*args: str, input: str | None = None, cwd: Path | None = None, timeo
     )
 
 
+def wait_for_file(path: Path, timeout: float = 60) -> bool:
+    """Whether `path` exists within `timeout` seconds (a process started in the background made it)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return path.exists()
+
+
 def assert_one_line_error(proc, code: int = 2, contains: str | None = None) -> None:
     """Bad input: the given exit code, exactly one line on stderr, no traceback, nothing on stdout."""
     assert proc.returncode == code, (proc.returncode, proc.stderr)

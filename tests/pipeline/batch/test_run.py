@@ -24,7 +24,7 @@ from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check
 from synth.version import ROWS_VERSION
-from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support import ROOT, assert_one_line_error, run_r2s, wait_for_file
 from tests.support.faults import fault, r2s_with_fault
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
@@ -254,10 +254,7 @@ def test_the_lock_dies_with_its_run_and_the_next_run_takes_it(small_frames, tmp_
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         lock = tmp_path / ".programs.lock"
-        deadline = time.monotonic() + 60
-        while not lock.exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert lock.exists() and f'"pid": {proc.pid}' in lock.read_text()
+        assert wait_for_file(lock) and f'"pid": {proc.pid}' in lock.read_text()
         proc.kill()
         proc.wait(timeout=30)
     finally:

@@ -10,12 +10,11 @@ import os
 import shutil
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
 
-from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support import ROOT, assert_one_line_error, run_r2s, wait_for_file
 from tests.support.faults import r2s_with_fault
 
 EXCERPT = ROOT / "data" / "nuscenes-mini-excerpt" / "scenarionet"
@@ -176,11 +175,7 @@ def test_a_run_through_a_link_holds_the_lock_of_the_folder_it_writes(inputs, tmp
                                             str(tmp_path / "link"), "--jobs", "1"),
                              cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        lock = tmp_path / ".real.lock"
-        deadline = time.monotonic() + 60
-        while not lock.exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert lock.exists()
+        assert wait_for_file(tmp_path / ".real.lock")
         second = run_r2s("run", str(inputs["frames"]), "--out", str(tmp_path / "real"))
         assert_one_line_error(second, 2, contains=f"another r2s run (pid {first.pid} on ")
     finally:
