@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +32,9 @@ from extractors.base import (
     MapSink,
     RecordedObject,
     Source,
-    gc_paused,
     prefetch_facts,
     quaternion_yaw,
+    recorded_road,
     require_path,
     vehicle_to_ego,
 )
@@ -45,13 +46,17 @@ from synth.lane_facts import RoadIndex
 from synth.roadmap import (
     CROSSWALK,
     DRIVABLE_AREA,
+    DROPPED_BROKEN,
+    DROPPED_LINKS,
     LANE,
     FloatPairs,
     MapError,
     MapFeature,
+    MapRepairs,
     RoadMap,
     links_within,
     open_ring,
+    packed_subset,
     points,
 )
 
@@ -190,13 +195,8 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
     before the log's frames, which carry their lane facts where the ego poses place the boxes in the city."""
     builder = FrameBuilder("argoverse2", TAXONOMY, options, tally)
     for f in annotation_files(require_path(input_path, "Argoverse 2 input")):
-        road = None
-        if maps is not None and (archive := map_file(f.parent)) is not None:
-            try:
-                with gc_paused():
-                    road = RoadIndex(read_map(archive, f.parent.name))
-            except MapError as exc:
-                raise MapError(f"{archive}: {exc}") from None
+        road = log_road(f.parent, options.strict_maps, tally) if maps is not None else None
+        if road is not None:
             maps(road.road)
         yield from log_frames(f, read_annotations(f), builder, read_poses(f), road)
 
@@ -263,50 +263,94 @@ MAP_GLOB = "log_map_archive_*.json"
 MAX_MAP_BYTES = 256 << 20
 
 
-def map_file(log_dir: Path) -> Path | None:
-    """The log's map archive (map/log_map_archive_*.json; the forecasting release puts it beside the scenario)."""
+def map_files(log_dir: Path) -> list[Path]:
+    """The log's map archives (map/log_map_archive_*.json; the forecasting release puts it beside the scenario): a
+    log has one; none where its release ships no map (the scenario-mining logs)."""
     for where in (log_dir / "map", log_dir):
         found = sorted(where.glob(MAP_GLOB)) if where.is_dir() else []
-        if len(found) > 1:
-            raise MapError(f"{where} holds {len(found)} map archives ({MAP_GLOB}); a log has one")
         if found:
-            return found[0]
-    return None
+            return found
+    return []
 
 
-def read_map(path: Path, map_id: str) -> RoadMap:
-    """The map of a log's map archive; a MapError (its message without the path: extract names the archive) for
-    a file that is not one, or a map that breaks a rule of RoadMap.of."""
+def log_road(log_dir: Path, strict: bool, tally: ExtractTally | None) -> RoadIndex | None:
+    """The log's map (map id = the log id), indexed for lane facts, by the rule of every recorded map
+    (extractors.base.recorded_road): None without an archive (no word: a release without maps); an archive
+    that cannot be used at all, or two archives, leave the frames without road columns (a line naming it), or
+    with `strict` are a MapError."""
+    found = map_files(log_dir)
+    if not found:
+        return None
+
+    def read(repairs: MapRepairs) -> RoadMap:
+        if len(found) > 1:
+            raise MapError(f"{len(found)} map archives ({MAP_GLOB}); a log has one")
+        return read_map(found[0], log_dir.name, repairs)
+
+    return recorded_road(found[0] if len(found) == 1 else found[0].parent, read, strict, tally)
+
+
+def read_map(path: Path, map_id: str, repairs: MapRepairs | None = None) -> RoadMap:
+    """The map of a log's map archive. A feature that breaks a rule (a lane segment, crossing or drivable area
+    with a field missing or of the wrong type, a coordinate that is not a finite number, an id that is not an
+    integer, a boundary of fewer than two distinct points, a polygon that is not simple) is dropped, and a link
+    that names no lane (not an integer, the lane itself, a lane the map does not keep) dropped, the lane kept:
+    each counted in `repairs`, which refuses instead when strict (the default). A MapError (its message without
+    the path: the caller names the archive) for an archive that cannot be used at all (_archive)."""
+    repairs = repairs if repairs is not None else MapRepairs(strict=True)
+    data = _archive(path)
+    features = _lanes(map_id, list(data["lane_segments"].values()), repairs)
+    features += _each(map_id, "crosswalk", (data.get("pedestrian_crossings") or {}).values(), _crossing, repairs)
+    features += _each(map_id, "drivable area", (data.get("drivable_areas") or {}).values(), _area, repairs)
+    return RoadMap.of(map_id, links_within(features, neighbours=True), repairs)
+
+
+SECTIONS = ("lane_segments", "pedestrian_crossings", "drivable_areas")
+# Integer literals of more digits than this are read as the float they overflow to (inf), a coordinate or id
+# that breaks a rule of one feature, where Python's int would refuse the whole archive (its 4,300-digit limit).
+MAX_DIGITS = 4000
+
+
+def _archive(path: Path) -> dict:
+    """An archive's JSON: an object whose lane_segments is an object (pedestrian_crossings, drivable_areas
+    objects too, where present), else a MapError: the archive cannot be used at all. NaN, Infinity and numbers
+    beyond a float are read as floats (not finite), for the features that hold them to be dropped."""
     try:
         # a FIFO or a device is refused, never read forever; never more than MAX_MAP_BYTES + 1 bytes
-        data = json.loads(read_regular(path, MAX_MAP_BYTES).decode("utf-8"), parse_constant=_no_constant)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = json.loads(read_regular(path, MAX_MAP_BYTES).decode("utf-8"), parse_constant=float,
+                          parse_int=_integer)
+    except OSError as exc:
+        raise MapError(f"not a readable Argoverse 2 map archive ({exc.strerror or exc})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise MapError(f"not a readable Argoverse 2 map archive ({str(exc)[:100]})") from None
-    except ValueError as exc:  # NaN / Infinity, an integer of more than 4300 digits
-        raise MapError(str(exc)) from None
     except RecursionError:  # an archive is four levels deep: the parser's stack ends before anything real
         raise MapError("not an Argoverse 2 map archive: its JSON is nested too deeply") from None
     if not isinstance(data, dict) or not isinstance(data.get("lane_segments"), dict):
-        raise MapError("not an Argoverse 2 map archive (no lane_segments)")
-    try:
-        features = _lanes(map_id, list(data["lane_segments"].values()))
-        features += [_crossing(map_id, v) for v in (data.get("pedestrian_crossings") or {}).values()]
-        features += [_area(map_id, v) for v in (data.get("drivable_areas") or {}).values()]
-    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
-        if isinstance(exc, MapError):
-            raise
-        # OverflowError: an integer coordinate beyond a float (JSON's 1 followed by 400 zeros)
-        raise MapError(f"a map element lacks a field or has the wrong type ({type(exc).__name__}: "
-                       f"{str(exc)[:80]})") from None
-    return RoadMap.of(map_id, links_within(features, neighbours=True))
+        raise MapError("not an Argoverse 2 map archive (no lane_segments object)")
+    wrong = [k for k in SECTIONS[1:] if data.get(k) is not None and not isinstance(data[k], dict)]
+    if wrong:
+        raise MapError(f"not an Argoverse 2 map archive ({wrong[0]} is not an object)")
+    return data
 
 
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"the map holds {name}, which is not a number")
+def _integer(text: str) -> int | float:
+    return int(text) if len(text) <= MAX_DIGITS else float(text)
 
 
-def _xy(pts: list[dict]) -> np.ndarray:
-    return np.array([[float(p["x"]), float(p["y"])] for p in pts], dtype=float).reshape(-1, 2)
+def _each(map_id: str, kind: str, values: Iterable[Any], read: Callable[[str, Any], Any],
+          repairs: MapRepairs) -> list:
+    """read(map_id, v) of every element; one that breaks a rule (a MapError, or a field missing or of the wrong
+    type) is dropped and counted in `repairs` (or refused, if it is strict)."""
+    out = []
+    for v in values:
+        try:
+            out.append(read(map_id, v))
+        except MapError as exc:
+            repairs.broken(DROPPED_BROKEN, str(exc))
+        except (KeyError, TypeError, AttributeError, ValueError, OverflowError) as exc:
+            repairs.broken(DROPPED_BROKEN, f"map {map_id!r}: a {kind} lacks a field or has the wrong type "
+                           f"({type(exc).__name__}: {str(exc)[:80]})")
+    return out
 
 
 def _resample(line: np.ndarray, n: int) -> np.ndarray:
@@ -332,43 +376,159 @@ def _id(v: Any) -> str:
     """A map element's id as text: Argoverse 2 writes integers (an integral float or decimal text is read as one);
     anything else, 1e400 (a float overflowing to inf) or 1.5 among them, is a MapError, never truncated."""
     if isinstance(v, float) and not (math.isfinite(v) and v.is_integer()) or isinstance(v, bool):
-        raise MapError(f"a map element's id {v!r} is not an integer (Argoverse 2 ids are integers)")
-    return str(int(v))
+        raise MapError(f"a map element's id {_shown(v)} is not an integer (Argoverse 2 ids are integers)")
+    try:
+        return str(int(v))
+    except (TypeError, ValueError, OverflowError):
+        raise MapError(f"a map element's id {_shown(v)} is not an integer (Argoverse 2 ids are integers)") from None
 
 
-def _pairs(pts: list[dict]) -> list[tuple[float, float]]:
-    return [(float(p["x"]), float(p["y"])) for p in pts]
+def _shown(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _lanes(map_id: str, segments: list[dict]) -> list[MapFeature]:
-    """The lanes of a map's lane segments, their centre lines computed for all lanes at once (_centres)."""
-    bounds = []
-    for v in segments:
-        left, right = _pairs(v["left_lane_boundary"]), _pairs(v["right_lane_boundary"])
-        if len(left) < 2 or len(right) < 2:
-            raise MapError(f"map {map_id!r}: lane {_id(v['id'])!r} has a boundary of fewer than two points")
-        bounds.append((left, right))
-    centres = _centres([b[0] for b in bounds], [b[1] for b in bounds])
-    return [MapFeature.fast(
-        map_id, _id(v["id"]), LANE, polygon=open_ring(FloatPairs(right + left[::-1])), line=centre,
-        source_type=str(v.get("lane_type", "")),
-        left=None if v.get("left_neighbor_id") is None else _id(v["left_neighbor_id"]),
-        right=None if v.get("right_neighbor_id") is None else _id(v["right_neighbor_id"]),
-        successors=tuple(_id(s) for s in v.get("successors") or ()),
-        predecessors=tuple(_id(s) for s in v.get("predecessors") or ()),
-        is_intersection=bool(v.get("is_intersection", False)))
-        for v, (left, right), centre in zip(segments, bounds, centres)]
+def _raw(pts: Any) -> list[tuple[Any, Any]]:
+    """A boundary's (x, y) values as the archive writes them (checked to be numbers by _numbers)."""
+    return [(p["x"], p["y"]) for p in pts]
+
+
+def _numbers(lines: list[list[tuple[Any, Any]]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """Lines of raw (x, y) values packed as floats (points, each line's count), if every value is a finite number
+    (an int or a float, never a bool or text); else None."""
+    values = list(chain.from_iterable(chain.from_iterable(lines)))
+    if not set(map(type, values)) <= {float, int}:
+        return None
+    try:
+        flat = np.array(values, dtype=float)
+    except OverflowError:  # an int beyond a float
+        return None
+    if not np.isfinite(flat).all():
+        return None
+    return flat.reshape(-1, 2), np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+
+
+def _line(where: str, pts: Any) -> np.ndarray:
+    """One boundary, edge or area boundary as an (N, 2) float array; MapError for a value that is not a finite
+    number, naming it."""
+    raw = _raw(pts)
+    got = _numbers([raw])
+    if got is None:
+        bad = next(p for p in raw if _numbers([[p]]) is None)
+        raise MapError(f"{where} has a point that is not two finite numbers ({_shown(bad)})")
+    return got[0]
+
+
+def _lanes(map_id: str, segments: list[Any], repairs: MapRepairs) -> list[MapFeature]:
+    """The lanes of a map's lane segments, their centre lines computed for all lanes at once (_centres); a segment
+    that breaks a rule is dropped (counted in `repairs`). The common case checks every coordinate in one pass."""
+    read = _each(map_id, "lane", segments, lambda _, v: (
+        v, _id(v["id"]), _raw(v["left_lane_boundary"]), _raw(v["right_lane_boundary"]), _lane_type(v)), repairs)
+    got = _numbers([r[2] for r in read] + [r[3] for r in read])
+    if got is None:  # a value that is not a finite number: find its lane (and any other), drop it
+        read = _each(map_id, "lane", read, _numbers_checked, repairs)
+        got = _numbers([r[2] for r in read] + [r[3] for r in read])
+    xy, counts = got
+    two = _two_distinct(xy, counts)
+    ok = two[:len(read)] & two[len(read):]
+    if not ok.all():
+        for i in np.flatnonzero(~ok).tolist():
+            repairs.broken(DROPPED_BROKEN, f"map {map_id!r}: lane {read[i][1]!r} has a boundary of fewer than two "
+                           "distinct points")
+        read = [r for r, k in zip(read, ok.tolist()) if k]
+        xy, counts = packed_subset((xy, counts), np.concatenate([ok, ok]))
+    centres = _packed_centres(xy, counts)
+    pts = list(zip(xy[:, 0].tolist(), xy[:, 1].tolist()))  # the boundaries' own floats, for the polygons
+    ends = np.cumsum(counts).tolist()
+    starts = [e - c for e, c in zip(ends, counts.tolist())]
+    n = len(read)
+    out = []
+    for i, ((v, fid, _, _, source_type), centre) in enumerate(zip(read, centres)):
+        left, right = pts[starts[i]:ends[i]], pts[starts[n + i]:ends[n + i]]
+        out.append(MapFeature.fast(
+            map_id, fid, LANE, polygon=open_ring(FloatPairs(right + left[::-1])), line=centre,
+            source_type=source_type,
+            left=_link(map_id, fid, v.get("left_neighbor_id"), "left neighbour", repairs),
+            right=_link(map_id, fid, v.get("right_neighbor_id"), "right neighbour", repairs),
+            successors=_links(map_id, fid, v.get("successors"), "successor", repairs),
+            predecessors=_links(map_id, fid, v.get("predecessors"), "predecessor", repairs),
+            is_intersection=bool(v.get("is_intersection", False))))
+    return out
+
+
+def _numbers_checked(map_id: str, r: tuple) -> tuple:
+    """A lane as _lanes reads it, if both its boundaries are finite numbers (else a MapError naming the point)."""
+    for side in (2, 3):
+        _line(f"map {map_id!r}: lane {r[1]!r}", r[side])
+    return r
+
+
+def _lane_type(v: dict) -> str:
+    t = v.get("lane_type", "")
+    if not isinstance(t, str) or not _writable(t):
+        raise MapError(f"a lane's lane_type {_shown(t)} is not text (VEHICLE, BIKE, BUS)")
+    return t
+
+
+def _writable(text: str) -> bool:
+    """Whether UTF-8 can write the text (JSON may hold a lone surrogate, which no Parquet file can)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _two_distinct(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """For each packed line, whether it has two distinct points (one unlike its first)."""
+    line = np.repeat(np.arange(len(counts)), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    unlike = (xy != xy[first]).any(axis=1)
+    return np.bincount(line, weights=unlike, minlength=len(counts)) > 0
+
+
+def _link(map_id: str, fid: str, value: Any, what: str, repairs: MapRepairs) -> str | None:
+    """A lane's neighbour (null: none); one that is not an id is dropped, counted."""
+    if value is None:
+        return None
+    try:
+        return _id(value)
+    except MapError:
+        repairs.broken(DROPPED_LINKS, f"map {map_id!r}: lane {fid!r} has {what} {_shown(value)}, which is not a "
+                       "lane id (an integer)")
+        return None
+
+
+def _links(map_id: str, fid: str, value: Any, what: str, repairs: MapRepairs) -> tuple[str, ...]:
+    """A lane's successors or predecessors (a list of ids); an item that is not an id is dropped, counted."""
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        repairs.broken(DROPPED_LINKS, f"map {map_id!r}: lane {fid!r} has {what}s {_shown(value)}, not a list of ids")
+        return ()
+    ids = (_link(map_id, fid, x, what, repairs) if x is not None else _nothing(map_id, fid, what, repairs)
+           for x in value)
+    return tuple(i for i in ids if i is not None)
+
+
+def _nothing(map_id: str, fid: str, what: str, repairs: MapRepairs) -> None:
+    repairs.broken(DROPPED_LINKS, f"map {map_id!r}: lane {fid!r} has a {what} null, which names no lane")
 
 
 def _centres(lefts: list[list[tuple[float, float]]], rights: list[list[tuple[float, float]]]) -> list[FloatPairs]:
     """Each lane's centre line: (_resample(left, n) + _resample(right, n)) / 2, n the larger point count, for all
     lanes at once, with the same arithmetic (the polygon keeps the boundaries' own floats)."""
-    if not lefts:
-        return []
     lines = lefts + rights
-    counts = np.array([len(line) for line in lines], dtype=np.int64)
     xy = np.array([p for line in lines for p in line], dtype=float).reshape(-1, 2)
-    n = np.maximum(counts[:len(lefts)], counts[len(lefts):])
+    return _packed_centres(xy, np.array([len(line) for line in lines], dtype=np.int64))
+
+
+def _packed_centres(xy: np.ndarray, counts: np.ndarray) -> list[FloatPairs]:
+    """_centres of packed lines: the lanes' left boundaries, then their right boundaries in the same order."""
+    lanes = len(counts) // 2
+    if not lanes:
+        return []
+    n = np.maximum(counts[:lanes], counts[lanes:])
     ns = np.concatenate([n, n])
     both = _resample_many(xy, counts, ns)
     half = int(n.sum())
@@ -467,17 +627,20 @@ def _resample_many(xy: np.ndarray, counts: np.ndarray, ns: np.ndarray) -> np.nda
 
 
 def _crossing(map_id: str, v: dict) -> MapFeature:
-    e1, e2 = _xy(v["edge1"]), _xy(v["edge2"])
+    fid = _id(v["id"])
+    where = f"map {map_id!r}: crosswalk {fid!r}"
+    e1, e2 = _line(where, v["edge1"]), _line(where, v["edge2"])
     if len(e1) != 2 or len(e2) != 2:
-        raise MapError(f"map {map_id!r}: crosswalk {_id(v['id'])!r} has edges that are not two points each")
+        raise MapError(f"{where} has edges that are not two points each")
     ring = np.array([e1[0], e1[1], e2[1], e2[0]])
-    return MapFeature(map_id, _id(v["id"]), CROSSWALK, polygon=open_ring(points(ring[:, 0], ring[:, 1])),
+    return MapFeature(map_id, fid, CROSSWALK, polygon=open_ring(points(ring[:, 0], ring[:, 1])),
                       source_type="PEDESTRIAN_CROSSING")
 
 
 def _area(map_id: str, v: dict) -> MapFeature:
-    ring = _xy(v["area_boundary"])
-    return MapFeature(map_id, _id(v["id"]), DRIVABLE_AREA, polygon=open_ring(points(ring[:, 0], ring[:, 1])),
+    fid = _id(v["id"])
+    ring = _line(f"map {map_id!r}: drivable area {fid!r}", v["area_boundary"])
+    return MapFeature(map_id, fid, DRIVABLE_AREA, polygon=open_ring(points(ring[:, 0], ring[:, 1])),
                       source_type="DRIVABLE_AREA")
 
 

@@ -37,7 +37,7 @@ from extractors.naming import SceneNames
 from storage.regular_files import check_regular
 from synth.geometry import normalize
 from synth.lane_facts import RoadIndex
-from synth.roadmap import RoadMap
+from synth.roadmap import MapError, MapRepairs, RoadMap
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 # Where a source hands the map of each scenario it reads (before that scenario's frames).
@@ -375,6 +375,31 @@ def gc_paused() -> Iterator[None]:
     finally:
         if was:
             gc.enable()
+
+
+def recorded_road(where: Path, read: Callable[[MapRepairs], RoadMap | None], strict: bool,
+                  tally: ExtractTally | None) -> RoadIndex | None:
+    """The map a recording carries (a ScenarioNet scenario's, an Argoverse 2 log's), read by the source's `read`
+    and indexed for lane facts; None when it has none. docs/formats.md's rule, for every source: a map never costs
+    the tracks. `read` drops a feature that breaks a rule into its MapRepairs, counted in the tally's `map
+    repairs`; a MapError out of it means the map cannot be used at all: its frames are extracted without road
+    columns, with one line naming `where`, counted as unusable. With `strict` (--strict-maps) both are a MapError
+    naming `where`: one line, exit 2."""
+    repairs = MapRepairs(strict)
+    try:
+        with gc_paused():
+            road = read(repairs)
+            index = RoadIndex(road) if road is not None else None
+    except MapError as exc:
+        if strict:
+            raise MapError(f"{where}: {exc}") from None
+        if tally is not None:
+            tally.map_unusable(f"r2s extract: {where}: its map cannot be used ({exc}); its frames are extracted "
+                               "without road columns (--strict-maps refuses it instead)")
+        return None
+    if tally is not None:
+        tally.map_repairs.update(repairs.counts)
+    return index
 
 
 def _facts_args(worlds: list[tuple[float, float, float]]) -> tuple[list[float], list[float], list[float]]:

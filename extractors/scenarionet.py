@@ -34,6 +34,7 @@ from extractors.base import (
     gc_paused,
     global_to_ego,
     prefetch_facts,
+    recorded_road,
     require_path,
 )
 from extractors.categories import Taxonomy
@@ -284,26 +285,14 @@ def scenario_road(path: Path, sd: Any, scene: str, strict: bool = True,
     """The scenario's map, indexed for lane facts; None when it has none (no or empty map_features). What the
     reading repaired or dropped is counted in the tally. A map that cannot be used at all (map_features not a
     dict of features) is a MapError when `strict` (--strict-maps), else None, with a line that says so: a map
-    never costs the tracks."""
+    never costs the tracks (extractors.base.recorded_road, as for every source)."""
     features = sd.get("map_features") if isinstance(sd, dict) else None
     if features is None or (isinstance(features, (dict, list, tuple)) and not features):
         return None
     meta = sd.get("metadata")
     dataset = meta.get("dataset") if isinstance(meta, dict) else None
     dataset = dataset.lower() if isinstance(dataset, str) else ""
-    repairs = MapRepairs(strict)
-    try:
-        road = scenario_map(scene, features, dataset, repairs)
-    except MapError as exc:
-        if strict:
-            raise MapError(f"{path}: {exc}") from None
-        if tally is not None:
-            tally.map_unusable(f"r2s extract: {path}: its map cannot be used ({exc}); its frames are extracted "
-                               "without road columns (--strict-maps refuses such a scenario)")
-        return None
-    if tally is not None:
-        tally.map_repairs.update(repairs.counts)
-    return RoadIndex(road) if road is not None else None
+    return recorded_road(path, lambda repairs: scenario_map(scene, features, dataset, repairs), strict, tally)
 
 
 def scenario_frames(
