@@ -411,7 +411,11 @@ def _numbers(lines: list[list[tuple[Any, Any]]]) -> tuple[np.ndarray, np.ndarray
 def _line(where: str, pts: Any) -> np.ndarray:
     """One boundary, edge or area boundary as an (N, 2) float array; MapError for a value that is not a finite
     number, naming it."""
-    raw = _raw(pts)
+    return _checked(where, _raw(pts))
+
+
+def _checked(where: str, raw: list[tuple[Any, Any]]) -> np.ndarray:
+    """Raw (x, y) values as an (N, 2) float array; MapError for a value that is not a finite number."""
     got = _numbers([raw])
     if got is None:
         bad = next(p for p in raw if _numbers([[p]]) is None)
@@ -459,7 +463,7 @@ def _lanes(map_id: str, segments: list[Any], repairs: MapRepairs) -> list[MapFea
 def _numbers_checked(map_id: str, r: tuple) -> tuple:
     """A lane as _lanes reads it, if both its boundaries are finite numbers (else a MapError naming the point)."""
     for side in (2, 3):
-        _line(f"map {map_id!r}: lane {r[1]!r}", r[side])
+        _checked(f"map {map_id!r}: lane {r[1]!r}", r[side])
     return r
 
 

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.ipc  # noqa: F401 (pa.ipc)
 import pytest
 
 from tests.support import SHARED
@@ -73,15 +75,24 @@ def test_a_lane_boundary_of_50000_points_extracts_in_memory_bounded_by_the_map(t
     assert lanes.set_index("feature_id").line_x[BUSY_LANE].size == POINTS
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda t: t.replace(f'"id": {BUSY_LANE},', '"id": 1e400,', 1), "id inf is not an integer"),
-    (lambda t: t.replace(f'"id": {BUSY_LANE},', '"id": 4.5,', 1), "id 4.5 is not an integer"),
-    (lambda t: t.replace('"x": ', '"x": 1' + "0" * 400 + ', "was_x": ', 1), "OverflowError"),
-    (lambda t: t[:-1] + ', "deep": ' + "[" * 100_000 + "]" * 100_000 + "}", "nested too deeply"),
+@pytest.mark.parametrize("edit, message, repair", [
+    (lambda t: t.replace(f'"id": {BUSY_LANE},', '"id": 1e400,', 1), "id inf is not an integer", "features breaking"),
+    (lambda t: t.replace(f'"id": {BUSY_LANE},', '"id": 4.5,', 1), "id 4.5 is not an integer", "features breaking"),
+    (lambda t: t.replace('"x": ', '"x": 1' + "0" * 400 + ', "was_x": ', 1), "not two finite numbers",
+     "features breaking"),
+    (lambda t: t.replace('"x": ', '"x": 1' + "0" * 5000 + ', "was_x": ', 1), "not two finite numbers",
+     "features breaking"),
+    (lambda t: t[:-1] + ', "deep": ' + "[" * 100_000 + "]" * 100_000 + "}", "nested too deeply", "maps unusable"),
 ])
-def test_a_hostile_map_archive_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, edit, message):
+def test_a_hostile_map_archive_is_one_line_exit_2_with_strict_maps_and_else_costs_no_track(tmp_path, capsys, edit,
+                                                                                          message, repair):
     log = _log_with_map(tmp_path, edit)
     out = tmp_path / "out" / "frames.parquet"
-    res = r2s(capsys, "extract", "argoverse2", str(log.parent), "--out", str(out))
+    res = r2s(capsys, "extract", "argoverse2", str(log.parent), "--out", str(out), "--strict-maps")
     assert_refused(res, out, message)
     assert "log_map_archive_" in res.stderr and res.stderr.count("log_map_archive_") == 1  # the archive, once
+    # without --strict-maps: the feature dropped and counted, or the map unusable: every frame extracted
+    res = r2s(capsys, "extract", "argoverse2", str(log.parent), "--out", str(out))
+    assert res.returncode == 0 and repair in res.stderr.splitlines()[-1], res.stderr
+    stamps = pa.ipc.open_file(str(log / "annotations.feather")).read_all().column("timestamp_ns").unique()
+    assert pd.read_parquet(out).frame_id.nunique() == len(stamps)
