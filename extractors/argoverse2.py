@@ -36,6 +36,7 @@ from extractors.base import (
     quaternion_yaw,
     recorded_road,
     require_path,
+    utf8_writable,
     vehicle_to_ego,
 )
 from extractors.categories import Taxonomy
@@ -469,18 +470,9 @@ def _numbers_checked(map_id: str, r: tuple) -> tuple:
 
 def _lane_type(v: dict) -> str:
     t = v.get("lane_type", "")
-    if not isinstance(t, str) or not _writable(t):
+    if not isinstance(t, str) or not utf8_writable(t):
         raise MapError(f"a lane's lane_type {_shown(t)} is not text (VEHICLE, BIKE, BUS)")
     return t
-
-
-def _writable(text: str) -> bool:
-    """Whether UTF-8 can write the text (JSON may hold a lone surrogate, which no Parquet file can)."""
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
 
 
 def _two_distinct(xy: np.ndarray, counts: np.ndarray) -> np.ndarray:

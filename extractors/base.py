@@ -377,6 +377,16 @@ def gc_paused() -> Iterator[None]:
             gc.enable()
 
 
+def utf8_writable(text: str) -> bool:
+    """Whether UTF-8 (Parquet's strings, a terminal) can write a string: a pickle or a JSON file may hold lone
+    surrogates."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def recorded_road(where: Path, read: Callable[[MapRepairs], RoadMap | None], strict: bool,
                   tally: ExtractTally | None) -> RoadIndex | None:
     """The map a recording carries (a ScenarioNet scenario's, an Argoverse 2 log's), read by the source's `read`

@@ -37,6 +37,7 @@ from extractors.base import (
     recorded_road,
     require_path,
 )
+from extractors.base import utf8_writable as _writable
 from extractors.categories import Taxonomy
 from extractors.safe_pickle import load_pickle
 from extractors.sniff import Look
@@ -200,15 +201,6 @@ def _shown(value: Any) -> str:
     if isinstance(value, (str, float, bool, type(None))) or (isinstance(value, int) and value.bit_length() < 64):
         return repr(value)[:80]
     return _kind(value)
-
-
-def _writable(text: str) -> bool:
-    """Whether UTF-8 (Parquet's strings, a terminal) can write a string: a pickle may hold lone surrogates."""
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
 
 
 def _as_id(value: Any) -> str | None:

@@ -43,6 +43,18 @@ def _refused(proc, out: Path, contains: str) -> None:
     assert not any(out.parent.iterdir())
 
 
+def _alike_both_ways(log: Path, tmp_path: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The log's frames and maps, extracted alike with and without --strict-maps, nothing repaired."""
+    got = []
+    for more in ((), ("--strict-maps",)):
+        out = tmp_path / f"out{len(got)}.parquet"
+        proc = _extract(log, out, *more)
+        assert proc.returncode == 0 and "map repairs" not in proc.stderr, proc.stderr
+        got.append((pd.read_parquet(out), pd.read_parquet(out.with_suffix(".maps"))))
+    assert got[0][0].equals(got[1][0]) and got[0][1].equals(got[1][1])
+    return got[0]
+
+
 def _edited(edit) -> dict:
     m = copy.deepcopy(log_map())
     edit(m)
@@ -117,15 +129,7 @@ def test_a_feature_breaking_a_rule_is_dropped_and_counted_or_refused_with_strict
 
 
 def test_the_map_as_written_extracts_alike_with_and_without_strict_maps(tmp_path):
-    log = write_log(tmp_path / "in")
-    got = []
-    for more in ((), ("--strict-maps",)):
-        out = tmp_path / f"out{len(got)}.parquet"
-        proc = _extract(log, out, *more)
-        assert proc.returncode == 0 and "map repairs" not in proc.stderr, proc.stderr
-        got.append((pd.read_parquet(out), pd.read_parquet(out.with_suffix(".maps"))))
-    assert got[0][0].equals(got[1][0]) and got[0][1].equals(got[1][1])
-    frames = got[0][0]
+    frames, _ = _alike_both_ways(write_log(tmp_path / "in"), tmp_path)
     # the log's road as written: ego and car in lane 10, the pedestrian in lane 12, nobody off road
     assert set(frames[frames.entity_id != "pedestrian1"].lane) == {"10"}
     assert set(frames[frames.entity_id == "pedestrian1"].lane) == {"12"} and not frames.off_road.any()
@@ -213,15 +217,9 @@ def _shared_log(tmp_path: Path, edit=None) -> Path:
 @needs_shared
 def test_the_real_log_extracts_alike_with_and_without_strict_maps_every_feature_kept(tmp_path):
     log = _shared_log(tmp_path)
-    got = []
-    for more in ((), ("--strict-maps",)):
-        out = tmp_path / f"out{len(got)}.parquet"
-        proc = _extract(log, out, *more)
-        assert proc.returncode == 0 and "map repairs" not in proc.stderr, proc.stderr
-        got.append((pd.read_parquet(out), pd.read_parquet(out.with_suffix(".maps"))))
-    assert got[0][0].equals(got[1][0]) and got[0][1].equals(got[1][1])
+    _, maps = _alike_both_ways(log, tmp_path)
     data = json.loads(archive_of(log).read_text())
-    assert len(got[0][1]) == sum(len(data[k]) for k in ("lane_segments", "pedestrian_crossings", "drivable_areas"))
+    assert len(maps) == sum(len(data[k]) for k in ("lane_segments", "pedestrian_crossings", "drivable_areas"))
 
 
 @needs_shared
