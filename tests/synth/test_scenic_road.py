@@ -174,10 +174,11 @@ def test_a_real_road_from_r2s_scene_compiles_and_samples(tmp_path):
 
 
 def test_feature_ids_of_any_characters_are_read_back_as_they_are():
-    """Ids are data: quotes (the literal's own ''' among them), backslashes, a newline, non-ASCII."""
+    """Ids are data: quotes (the literal's own ''' among them), backslashes, spaces, non-ASCII. (Ids are printable
+    text since they name OpenDRIVE roads: a newline or U+2028 in one is refused, test_scene_road.py.)"""
     import scenic
 
-    odd = ["x'''y", 'a"b', "back\\slash", "line\nbreak", "caf\u00e9 \u2028", "'", "\\"]
+    odd = ["x'''y", 'a"b', "back\\slash", "line break", "caf\u00e9 \u00e0\u4e2d", "'", "\\"]
     doc = {**SCENE, "road": {"map_id": "m'''\\", "features": [
         {"id": fid, "kind": "crosswalk", "polygon": _box(k, 20, k + 1, 21)} for k, fid in enumerate(odd)]}}
     text = _text(doc)
