@@ -77,6 +77,13 @@ def _text_digest(data: bytes, out: Path) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def _stderr_digest(data: bytes, out: Path) -> str:
+    """stderr without the lines that show a measurement: progress lines appear only when a run is slow."""
+    lines = data.decode("utf-8", errors="replace").replace("\r", "\n").splitlines()
+    kept = [ln for ln in lines if not any(p.search(ln) for p, _ in MEASURED_TEXT)]
+    return _text_digest("\n".join(kept).encode(), out)
+
+
 def _parquet_digest(path: Path) -> str:
     import pyarrow.parquet as pq
 
@@ -146,7 +153,7 @@ def run(out: Path, r2s: str) -> int:
         proc = subprocess.run(argv, cwd=ROOT, capture_output=True)
         print(f"{name}: exit {proc.returncode}", file=sys.stderr)
         streams[name] = {"exit": proc.returncode, "stdout": _text_digest(proc.stdout, out),
-                         "stderr": _text_digest(proc.stderr, out)}
+                         "stderr": _stderr_digest(proc.stderr, out)}
         if proc.returncode:
             print(proc.stderr.decode()[-2000:], file=sys.stderr)
     doc = {"commands": streams, "files": digest_tree(out)}
