@@ -104,7 +104,7 @@ corpus: setup
 	@echo "corpus done: $(OUT)/programs/ (a Parquet dataset), report at $(OUT)/report/report.html"
 
 lint: setup
-	$(VENV)/bin/ruff check synth storage extractors pipeline bench tests
+	$(VENV)/bin/ruff check synth storage frames extractors pipeline bench tests
 
 clean:
 	rm -rf $(DEMO) .pytest_cache .hypothesis

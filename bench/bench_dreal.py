@@ -34,7 +34,7 @@ sys.path.insert(0, str(HERE))
 from bench_ablation import N_MAX, N_MIN, QUICK_N_MAX, one_frame_per_n  # noqa: E402
 from common import machine, write_results  # noqa: E402
 
-from extractors.frames import iter_scenes, read_frames  # noqa: E402
+from frames.rows import iter_scenes, read_frames  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
 from synth.scene import Scene  # noqa: E402
 from synth.smt import SolverUnavailable  # noqa: E402

@@ -27,8 +27,8 @@ from common import best, machine, write_results  # noqa: E402
 
 
 def coordinator(path: Path, repeat: int) -> dict:
-    from extractors.frame_hash import FrameHasher
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
+    from frames.frame_hash import FrameHasher
 
     dataset = FramesDataset.open(path)
     plain = best(lambda: dataset.check(), repeat)
@@ -47,7 +47,7 @@ def coordinator(path: Path, repeat: int) -> dict:
 
 
 def workers(path: Path, repeat: int, chunks: int = 200, size: int = 32) -> dict:
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
     from pipeline.batch.task import ChunkTask
     from storage.parquet import read_rows
     from synth.config import SynthConfig

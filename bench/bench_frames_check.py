@@ -39,9 +39,9 @@ MODES = (("rules only", None, False), ("run", False, False), ("run --lanes, rows
 
 
 def measure(frames: Path, repeat: int) -> list[dict]:
-    from extractors.frame_hash import Coverage, FrameHasher
-    from extractors.frames_dataset import CHECK_COLUMNS, FramesDataset
-    from extractors.maps import map_digests, maps_dir
+    from frames.dataset import CHECK_COLUMNS, FramesDataset
+    from frames.frame_hash import Coverage, FrameHasher
+    from frames.maps import map_digests, maps_dir
 
     dataset = FramesDataset.open(frames)
     out = []
@@ -73,7 +73,7 @@ def map_per_scene(frames: Path) -> None:
     a map as r2s extract writes them, in 4 files."""
     import duckdb
 
-    from extractors.maps import maps_dir
+    from frames.maps import maps_dir
 
     con = duckdb.connect(config={"threads": os.cpu_count() or 1})
     con.execute("SET enable_progress_bar = false")
@@ -110,7 +110,7 @@ def main() -> int:
         copies, rows = replicate(log, args.frames, frames, parts=4)
         if args.map_per_scene:
             map_per_scene(frames)
-        from extractors.frames_dataset import FramesDataset
+        from frames.dataset import FramesDataset
 
         n = FramesDataset.open(frames).check().frames
         print(f"{name}: {n:,} frames ({copies:,} copies), {rows:,} rows", flush=True)

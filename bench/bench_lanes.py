@@ -2,7 +2,7 @@
 
 1. Synthesis: every frame of recordings extracted with their maps (the shipped nuScenes excerpt; with
    ../shared/data, its nuScenes-mini ScenarioNet scenes and the Argoverse 2 test log), each as the scene `r2s scene`
-   writes (its road within 50 m of ego, extractors.maps.FrameRoads), synthesized with the default configuration
+   writes (its road within 50 m of ego, frames.maps.FrameRoads), synthesized with the default configuration
    and with lanes on, the two in turn in one warmed process: median and slowest wall time of `synthesize`, and
    their ratio (target: with lanes at most 2x).
 2. Queries: the Argoverse 2 log extracted with its map (the shared test log, else the shipped nuScenes excerpt)
@@ -60,8 +60,8 @@ def extract(source: str, path: Path, out: Path, *extra: str) -> None:
 def scenes_of(frames: Path) -> list:
     import pandas as pd
 
-    from extractors.frames import frame_to_scene
-    from extractors.maps import FrameRoads, maps_dir
+    from frames.maps import FrameRoads, maps_dir
+    from frames.rows import frame_to_scene
 
     roads = FrameRoads(maps_dir(frames))
     out = []
@@ -101,7 +101,7 @@ def replicate(log: Path, n_frames: int, out: Path, parts: int) -> tuple[int, int
     """n_frames frames: copies of the log's frames, each copy a scene of its own naming the same map."""
     import duckdb
 
-    from extractors.maps import maps_dir
+    from frames.maps import maps_dir
 
     con = duckdb.connect(config={"threads": os.cpu_count() or 1})
     con.execute("SET enable_progress_bar = false")
@@ -127,7 +127,7 @@ def replicate(log: Path, n_frames: int, out: Path, parts: int) -> tuple[int, int
 def one(frames: str, pattern: str) -> None:
     """Child process: one query; prints its summary and peak RSS as JSON."""
     from pipeline.query.mining import query_frames
-    from synth.pattern import parse_pattern
+    from synth.patterns.one_frame import parse_pattern
 
     with tempfile.TemporaryDirectory(prefix="r2s-bench-lanes-out-") as tmp:
         s = query_frames(frames, parse_pattern(Path(pattern).read_text()), Path(tmp) / "out.parquet",

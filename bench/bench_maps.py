@@ -159,7 +159,7 @@ def widening_free() -> dict:
 def width() -> dict:
     from extractors.safe_pickle import load_pickle
     from extractors.scenarionet import scenario_map
-    from synth.lane_geometry import halfway, width_at
+    from synth.road.lane_geometry import halfway, width_at
 
     widths = []
     for f in sorted(SCENARIONET.glob("*.pkl")):
@@ -218,7 +218,7 @@ def main() -> None:
               + ", ".join(f"{name} {100 * r['ratio']:.0f}% (CPU {100 * r['ratio_cpu']:.0f}%)" for name, r in e.items())
               + ". (nuScenes: most of the time without maps is unpickling the scenarios, which maps do not add to.) "
               "Waymo (10 Hz, 91 or 198 steps, ~230 lanes a scenario, every one given as a centre line and widths) "
-              "spends most of its map time widening its lanes into polygons (synth.lane_geometry.lane_polygons: "
+              "spends most of its map time widening its lanes into polygons (synth.road.lane_geometry.lane_polygons: "
               "GEOS's buffer, and for the 40% of lanes whose two sides differ two single-sided buffers and their "
               "union), then indexing the map and deciding the facts."
               + (f" Were widening free (its polygons replayed from a first run: the bound of any faster widening), "
@@ -241,7 +241,7 @@ def main() -> None:
     lines += ["", "## 3. Width of the nuScenes lanes that have a polygon", "",
               f"{w['lanes']} lanes of the six nuScenes-mini scenarios: median {w['median_m']:.2f} m (10th / 90th "
               f"percentile {w['p10_m']:.2f} / {w['p90_m']:.2f} m): the default width of a lane given without "
-              "polygon or width (synth.lane_geometry.DEFAULT_LANE_WIDTH).", ""]
+              "polygon or width (synth.road.lane_geometry.DEFAULT_LANE_WIDTH).", ""]
     write_results("maps", result, "\n".join(lines))
 
 

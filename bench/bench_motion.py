@@ -27,8 +27,8 @@ from realdata import SHARED  # noqa: E402
 
 from extractors.base import ExtractOptions  # noqa: E402
 from extractors.categories import ALL  # noqa: E402
-from extractors.frames import iter_scenes  # noqa: E402
 from extractors.scenarionet import extract  # noqa: E402
+from frames.rows import iter_scenes  # noqa: E402
 from synth.config import SynthConfig  # noqa: E402
 from synth.parts import MOTION  # noqa: E402
 from synth.scene import VEHICLE_CLASSES, Scene  # noqa: E402

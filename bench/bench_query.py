@@ -5,7 +5,7 @@ replicated under distinct frame ids, rows in their original order: 200,000 frame
 1,000,000 frames (41 M rows) as a dataset of ten part files. Each query runs in a fresh process through
 pipeline.query.mining.query_frames (what `r2s query` runs, minus argument parsing), timed by wall clock, with its peak RSS.
 The two-name pattern of the target is data/patterns/pedestrian-beside-vehicle.dsl; the one- and three-name shipped
-patterns run at 200,000 frames too. The baseline is synth.pattern.matches (backtracking, each statement checked by
+patterns run at 200,000 frames too. The baseline is synth.patterns.one_frame.matches (backtracking, each statement checked by
 synth.semantics as soon as its name is bound) on frames read with pandas and built into scenes, over a subset,
 extrapolated linearly; its matches are checked against the engine's on that subset. Writes bench/results/query.json
 and query.md. The machine is shared: the load average is recorded before and after.
@@ -27,7 +27,7 @@ sys.path.insert(0, str(HERE))
 
 from common import machine, peak_rss_mb, run_child, write_results  # noqa: E402
 
-from synth.temporal import is_temporal  # noqa: E402
+from synth.patterns.temporal import is_temporal  # noqa: E402
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 PATTERNS = ROOT / "data" / "patterns"
@@ -71,7 +71,7 @@ def replicate(n_frames: int, out: Path, parts: int = 1) -> int:
 def one(frames: str, pattern: str, threads: int | None, memory_mb: int | None) -> None:
     """Child process: one query; prints its summary and peak RSS as JSON."""
     from pipeline.query.mining import query_frames
-    from synth.pattern import parse_pattern
+    from synth.patterns.one_frame import parse_pattern
 
     with tempfile.TemporaryDirectory(prefix="r2s-bench-query-out-") as tmp:
         s = query_frames(frames, parse_pattern(Path(pattern).read_text()), Path(tmp) / "matches.parquet",
@@ -95,9 +95,9 @@ def run_query(frames: Path, pattern: Path, threads: int | None = None, memory_mb
 
 
 def python_baseline(frames: Path, pattern: Path) -> dict:
-    """Plain Python: read the frames with pandas, build scenes, backtrack with synth.pattern.matches."""
-    from extractors.frames import iter_scenes, read_frames
-    from synth.pattern import matches, parse_pattern
+    """Plain Python: read the frames with pandas, build scenes, backtrack with synth.patterns.one_frame.matches."""
+    from frames.rows import iter_scenes, read_frames
+    from synth.patterns.one_frame import matches, parse_pattern
 
     pat = parse_pattern(pattern.read_text())
     t0 = time.perf_counter()
@@ -113,7 +113,7 @@ def engine_bindings(frames: Path, pattern: Path) -> dict:
     import pyarrow.parquet as pq
 
     from pipeline.query.mining import query_frames
-    from synth.pattern import parse_pattern
+    from synth.patterns.one_frame import parse_pattern
 
     pat = parse_pattern(pattern.read_text())
     with tempfile.TemporaryDirectory(prefix="r2s-bench-query-out-") as tmp:
@@ -194,7 +194,7 @@ def markdown(p: dict) -> str:
         md.append(f"| {r['n_frames']:,} | {r['rows']:,} | {r['pattern']} ({names}) | "
                   f"{str(r['memory_limit_mb']) + ' MB' if r['memory_limit_mb'] else 'default'} | {r['wall_s']:.1f} | "
                   f"{r['matched']:,} | {r['bindings']:,} | {r['checked_exactly']} | {r['peak_rss_mb']:.0f} |")
-    md += ["", f"Plain Python backtracking (synth.pattern.matches, frames read with pandas and built into scenes) on "
+    md += ["", f"Plain Python backtracking (synth.patterns.one_frame.matches, frames read with pandas and built into scenes) on "
            f"{b['frames']:,} frames of the two-name pattern: {b['total_s']:.1f} s ({b['read_and_build_s']:.1f} s "
            f"reading and building scenes, {b['match_s']:.1f} s matching), {b['per_frame_ms']:.2f} ms a frame; same "
            f"matches as the engine: **{b['agrees_with_engine']}**.", ""]

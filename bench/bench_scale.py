@@ -39,7 +39,7 @@ from realdata import SHARED  # noqa: E402
 
 SHIPPED = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"
 SCENARIONET = SHARED / "data" / "nuscenes-mini" / "scenarionet"
-ROW_GROUP_ROWS = 64_000  # as extractors.writer writes them
+ROW_GROUP_ROWS = 64_000  # as frames.writer writes them
 TARGETS = {"rss_ratio": 1.5, "rss_mb": 1024, "rate_ratio": 0.8, "overhead_ms": 0.2, "report_s": 180, "report_mb": 2048,
            "extract_speedup": 1.8}
 

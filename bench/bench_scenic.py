@@ -95,7 +95,7 @@ def main() -> int:
         rows["collisions allowed" if allow else "collisions as in the recording (default)"] = median_of(runs)
     cli_s = statistics.median(cli_run(result, scene) for _ in range(REPEATS))
 
-    from synth.overlap import scene_overlaps
+    from synth.variants.overlap import scene_overlaps
     from tests.support import shipped_frames
 
     scale = []

@@ -68,7 +68,7 @@ def replicate(n_frames: int, out: Path, parts: int) -> tuple[int, int]:
 def one(frames: str, pattern: str, events: bool, memory_mb: int | None) -> None:
     """Child process: one query; prints its summary and peak RSS as JSON."""
     from pipeline.query.mining import query_frames
-    from synth.temporal import parse_query_pattern
+    from synth.patterns.temporal import parse_query_pattern
 
     with tempfile.TemporaryDirectory(prefix="r2s-bench-temporal-out-") as tmp:
         s = query_frames(frames, parse_query_pattern(Path(pattern).read_text()), Path(tmp) / "out.parquet",

@@ -45,7 +45,7 @@ MIXING_N = (10, 30, 56, 100, 141)
 
 
 def keyframes():
-    from extractors.frames import iter_scenes, read_frames
+    from frames.rows import iter_scenes, read_frames
 
     return list(iter_scenes(read_frames(SHIPPED)))
 
@@ -63,9 +63,9 @@ def overlapping(scene) -> set[frozenset[str]]:
 
 
 def sample_frame(scene, result, workdir: Path) -> dict:
-    from synth.gibbs import rejection_odds
     from synth.scene import scene_from_dict
     from synth.semantics import check
+    from synth.variants.gibbs import rejection_odds
 
     prog = workdir / "p.scenic"
     prog.write_text(result.scenic)
@@ -129,8 +129,8 @@ def mixing(scenes, sweeps: int) -> list[dict]:
     import numpy as np
 
     from synth.config import SynthConfig
-    from synth.gibbs import DEFAULT_THIN, Chain
     from synth.synthesize import synthesize
+    from synth.variants.gibbs import DEFAULT_THIN, Chain
     from tests.support.distribution import autocorrelation_times
 
     rows = []
@@ -215,7 +215,7 @@ def markdown(payload: dict) -> str:
            "marginals), 400 draws a side: Scenic's rejection sampler against the chain thinned by twice its largest "
            "measured autocorrelation time. Same distribution if the smallest p-value stays above 0.01 / m "
            "(Bonferroni); with 400 a side a marginal whose CDFs differ by more than ~0.15 is caught "
-           "(tests/support/distribution.py; tests/synth/test_variants.py shows a half-width sector and an ignored rule are).", "",
+           "(tests/support/distribution.py; tests/synth/variants/test_variants.py shows a half-width sector and an ignored rule are).", "",
            "| frame | N | m | smallest p | threshold | same | thin (sweeps) | tau max | Scenic iterations per scene |",
            "|---|---|---|---|---|---|---|---|---|"]
     for r in payload["distribution"]:

@@ -3,11 +3,11 @@ and window.md.
 
 Frames: the shipped nuScenes-mini keyframes (data/nuscenes-mini-keyframes: 6 scenes at 2 Hz) and the shipped
 Argoverse 2 log excerpt (data/argoverse2-log-excerpt: one log at 10 Hz). Each scene is tiled into windows of 1 s
-and of 2 s (synth.window.tile: consecutive, not overlapping, no gap limit) and each window synthesized with the
+and of 2 s (synth.window.program.tile: consecutive, not overlapping, no gap limit) and each window synthesized with the
 default configuration (auto, hybrid, z3 certification, frame by frame); every frame is also synthesized alone.
 With lanes (`--lanes`): the same recordings extracted with their maps (the shipped files carry none), from
 ../shared/data (nuScenes-mini through ScenarioNet: the same 242 keyframes; the Argoverse 2 log: the same 156
-frames), each frame with the road `r2s scene` gives it (extractors.maps.FrameRoads); without ../shared/data, the
+frames), each frame with the road `r2s scene` gives it (frames.maps.FrameRoads); without ../shared/data, the
 shipped nuScenes excerpt with its maps (data/nuscenes-mini-excerpt) stands in.
 Reported per dataset and window: CPU time per window (this process's: z3 runs in it) against the CPU time of
 its frames alone (CPU seconds, not wall clock: the machine is shared), the window's cost
@@ -33,9 +33,9 @@ sys.path.insert(0, str(HERE))
 
 from common import machine, write_results  # noqa: E402
 
-from extractors.frames import frame_to_scene  # noqa: E402
+from frames.rows import frame_to_scene  # noqa: E402
 from synth import SynthConfig, synthesize, synthesize_window, tile  # noqa: E402
-from synth.window import check_window  # noqa: E402
+from synth.window.program import check_window  # noqa: E402
 
 DATASETS = {
     "nuScenes-mini keyframes (2 Hz)": ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet",
@@ -66,7 +66,7 @@ def scenes_of(path: Path, roads: bool = False):
     `roads`: each frame with the road r2s scene gives it, from the maps beside the frames)."""
     import pandas as pd
 
-    from extractors.maps import FrameRoads, maps_dir
+    from frames.maps import FrameRoads, maps_dir
 
     found = FrameRoads(maps_dir(path)) if roads else None
     df = pd.read_parquet(path)
@@ -167,7 +167,7 @@ def main() -> None:
              f"Machine: {m['cpu']} ({m['cores']} cores), commit {m['commit']}, {m['date']}; load average "
              f"{load0:.2f} at the start, {load1:.2f} at the end; total {total:.0f} s. Command: "
              "`.venv/bin/python bench/bench_window.py`.", "",
-             "Each scene tiled into consecutive windows of W seconds (synth.window.tile), each window synthesized "
+             "Each scene tiled into consecutive windows of W seconds (synth.window.program.tile), each window synthesized "
              "with the default configuration (auto, hybrid, z3 certification frame by frame), every frame also "
              "synthesized alone; times are CPU seconds of this process (z3 runs in it), as the machine is shared. Cost: the window program's against the largest of its frames' own optimal costs "
              "(a lower bound on it). Identical: the share of consecutive windows of a scene with the same program "

@@ -29,13 +29,13 @@ SCENARIONET = SHARED / "data" / "nuscenes-mini" / "scenarionet"
 
 
 def _scene_dicts(frames) -> list[dict]:
-    from extractors.frames import iter_scenes
+    from frames.rows import iter_scenes
 
     return [s.to_dict() for s in iter_scenes(frames)]
 
 
 def keyframes() -> list[dict]:
-    from extractors.frames import read_frames
+    from frames.rows import read_frames
 
     return _scene_dicts(read_frames(KEYFRAMES))
 

@@ -29,6 +29,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    Look,
     MapSink,
     RecordedObject,
     Source,
@@ -40,11 +41,10 @@ from extractors.base import (
     vehicle_to_ego,
 )
 from extractors.categories import Taxonomy
-from extractors.sniff import Look
 from extractors.speed import speeds_by_track, track_speeds
 from storage.regular_files import open_regular, read_regular
-from synth.lane_facts import RoadIndex
-from synth.roadmap import (
+from synth.road.lane_facts import RoadIndex
+from synth.road.roadmap import (
     CROSSWALK,
     DRIVABLE_AREA,
     DROPPED_BROKEN,

@@ -8,7 +8,7 @@ own `r2s extract` options), how it cuts an input into pieces for `--jobs` (`unit
 tally=None, maps=None) -> Iterator[list[row dict]]`, one list of frames rows per frame, built with
 `FrameBuilder.frame(...)` so that the ego-frame transform, category selection, radius, entity cap and lane facts
 are the same for all sources. A source whose recordings carry a map hands each scenario's RoadMap to `maps` (a
-callable; extractors.maps writes them) before that scenario's frames, which name it. What a
+callable; frames.maps writes them) before that scenario's frames, which name it. What a
 run leaves out (a duplicate scenario, an object of a type no map knows) is counted in the ExtractTally, whose
 summary is the last line of `r2s extract`. Problems with the input raise ExtractError (a FramesError: one line,
 exit 2). docs/layout.md has the recipe for a new source.
@@ -27,24 +27,31 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from extractors.categories import ALL, UNKNOWN_CLASS, CategorySelection, Taxonomy
-from extractors.frames import FramesError, _dim, frame_rows, known_speed
-from extractors.naming import SceneNames
+from frames.naming import SceneNames
+from frames.rows import FramesError, _dim, frame_rows, known_speed
 from storage.regular_files import check_regular
 from synth.geometry import normalize
-from synth.lane_facts import RoadIndex
-from synth.roadmap import MapError, MapRepairs, RoadMap
+from synth.road.lane_facts import RoadIndex
+from synth.road.roadmap import MapError, MapRepairs, RoadMap
 from synth.scene import DEFAULT_MAX_ENTITIES
 
 # Where a source hands the map of each scenario it reads (before that scenario's frames).
 MapSink = Callable[[RoadMap], None]
 
-if TYPE_CHECKING:
-    from extractors.sniff import Look
+
+@dataclass(frozen=True)
+class Look:
+    """What an input looks like to a source (its look_at_file, look_at_entry; extractors.sniff asks them all). Here,
+    beside Source, so that the sources, sniff and registry import it without a circle through sniff."""
+
+    source: str  # the r2s extract SOURCE that reads it
+    what: str  # what it looks like, for the user
+    path: str  # the INPUT to give that source
 
 
 class ExtractError(FramesError):
@@ -164,7 +171,7 @@ class ExtractTally:
     unknown_kept: Counter = field(default_factory=Counter)  # raw -> objects typed UNKNOWN_CLASS
     unknown_left_out: Counter = field(default_factory=Counter)  # raw -> objects left out
     categories_left_out: Counter = field(default_factory=Counter)  # Scenic class -> boxes --categories left out
-    map_repairs: Counter = field(default_factory=Counter)  # repair kind (synth.roadmap.MapRepairs) -> how many
+    map_repairs: Counter = field(default_factory=Counter)  # repair kind (synth.road.roadmap.MapRepairs) -> how many
     maps_unusable: int = 0  # scenarios whose map could not be used: their frames have no road columns
     _scene: str | None = field(default=None, repr=False, compare=False)
 
@@ -250,7 +257,7 @@ def quaternion_yaw(w: Any, x: Any, y: Any, z: Any) -> np.ndarray:
 @dataclass(frozen=True)
 class FrameBuilder:
     """Turns one frame's boxes into frames rows: category selection, radius, cap, and ids stable across a scene
-    (extractors.naming: frames are built in order, one scene after another, so the builder keeps the scene's
+    (frames.naming: frames are built in order, one scene after another, so the builder keeps the scene's
     numbering)."""
 
     source: str

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractTally, MapSink, Source, files_with_suffix, require_path
+from extractors.base import ExtractError, ExtractTally, Look, MapSink, Source, files_with_suffix, require_path
 from extractors.messages import (
     LogOptions,
     PoseTrack,
@@ -25,7 +25,7 @@ from extractors.messages import (
     message_frames,
     pose_samples,
 )
-from extractors.sniff import Look, head
+from extractors.sniff import head
 from storage.regular_files import open_regular
 
 DESCRIPTION = "MCAP files with foxglove.SceneUpdate (protobuf / JSON) or ROS 2 Detection3DArray / MarkerArray"

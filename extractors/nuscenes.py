@@ -26,6 +26,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    Look,
     MapSink,
     RecordedObject,
     Source,
@@ -35,7 +36,6 @@ from extractors.base import (
     require_path,
 )
 from extractors.categories import Taxonomy
-from extractors.sniff import Look
 from storage.regular_files import check_regular
 
 DESCRIPTION = "nuScenes dataroot (JSON tables of --version) through nuscenes-devkit"

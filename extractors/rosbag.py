@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from extractors import messages
-from extractors.base import ExtractError, ExtractTally, MapSink, Source, require_path
+from extractors.base import ExtractError, ExtractTally, Look, MapSink, Source, require_path
 from extractors.mcap import check_mcap
 from extractors.messages import (
     LogOptions,
@@ -26,7 +26,7 @@ from extractors.messages import (
     message_frames,
     pose_samples,
 )
-from extractors.sniff import Look, head
+from extractors.sniff import head
 from storage.regular_files import check_regular
 
 DESCRIPTION = "ROS 1 .bag or ROS 2 bag directory (sqlite3 / mcap storage) through rosbags"

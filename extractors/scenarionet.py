@@ -28,6 +28,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    Look,
     MapSink,
     RecordedObject,
     Source,
@@ -40,10 +41,9 @@ from extractors.base import (
 from extractors.base import utf8_writable as _writable
 from extractors.categories import Taxonomy
 from extractors.safe_pickle import load_pickle
-from extractors.sniff import Look
-from synth.lane_facts import RoadIndex
-from synth.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH, lane_polygons, neighbours
-from synth.roadmap import (
+from synth.road.lane_facts import RoadIndex
+from synth.road.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH, lane_polygons, neighbours
+from synth.road.roadmap import (
     CROSSWALK,
     DROPPED_BROKEN,
     DROPPED_LINKS,
@@ -417,7 +417,7 @@ def _timestamp_us(ts: Any, step: int) -> int | None:
 # signs, speed bumps, driveways, sidewalks: ROAD_EDGE_SIDEWALK is a polygon) are not kept. A lane without a
 # polygon gets one from its centre line and its per-vertex `width` (N, 2: left, right; a value of 0 or out of
 # [MIN_HALF_WIDTH, MAX_HALF_WIDTH] is unknown: the other side's there, else the default; the means of each side)
-# (synth.lane_geometry). A lane is an intersection lane if its type is LANE_SURFACE_UNSTRUCTURE, or, in
+# (synth.road.lane_geometry). A lane is an intersection lane if its type is LANE_SURFACE_UNSTRUCTURE, or, in
 # nuScenes-derived scenarios, if it has no polygon: ScenarioNet's nuScenes converter writes polygons for nuScenes
 # lanes and none for lane connectors, the lanes through intersections. Successors / predecessors are `exit_lanes` /
 # `entry_lanes` (links that leave the converter's crop of the map are dropped); neighbours are the first

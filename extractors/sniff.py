@@ -9,22 +9,15 @@ up to MAX_DEPTH levels down (a ScenarioNet database or an Argoverse 2 split can 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
 
+from extractors.base import Look
 from extractors.registry import sources
 from storage.regular_files import open_regular
 
 MAX_ENTRIES = 2000
 MAX_DEPTH = 4
-
-
-@dataclass(frozen=True)
-class Look:
-    source: str  # the r2s extract SOURCE that reads it
-    what: str  # what it looks like, for the user
-    path: str  # the INPUT to give that source
 
 
 def head(path: Path, n: int = 32) -> bytes:

@@ -38,7 +38,7 @@ class ProgramsError(InputError, ValueError):
 
 def result_row(result: Any, frame_hash: str | None = None) -> dict[str, Any]:
     """A programs row from a synth.synthesize.SynthResult (its config's hash is the row's config_hash);
-    `frame_hash`: the hash of the frame's rows it was computed from (extractors.frame_hash), None when it did not
+    `frame_hash`: the hash of the frame's rows it was computed from (frames.frame_hash), None when it did not
     come from a frames file."""
     return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"},
             **_run_fields(None, result.config, frame_hash)}

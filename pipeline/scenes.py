@@ -4,7 +4,7 @@ row dicts, as `rows.to_dict("records")` gives them), validated as a file is.
 
 Only the frame's own rows are read from a file (row-group statistics skip the rest of a large dataset) and
 checked. A frame that names a map gets its road: the map features within `radius` of ego, from the maps beside
-the frames (extractors.maps), brought into the frame's ego frame by the ego's place in the map (its map_x, map_y,
+the frames (frames.maps), brought into the frame's ego frame by the ego's place in the map (its map_x, map_y,
 map_heading), and each entity its lane facts."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import sys
 import pandas as pd
 import pyarrow as pa
 
-from extractors.frames import frame_to_scene, to_table, validate_frames
+from frames.rows import frame_to_scene, to_table, validate_frames
 from pipeline.errors import UserError
 from synth.scene import Scene
 
@@ -63,7 +63,7 @@ def _rows(frames) -> pd.DataFrame:
 
 
 def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
 
     dataset = FramesDataset.open(frames)
     table = dataset.find(frame_id)
@@ -76,7 +76,7 @@ def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
 
 def _road(frames: str, rows: pd.DataFrame, radius: float):
     """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
-    from extractors.maps import FrameRoads, maps_dir
+    from frames.maps import FrameRoads, maps_dir
 
     road, missing = FrameRoads(maps_dir(frames), radius).road(rows)
     if missing is not None:

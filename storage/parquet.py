@@ -1,7 +1,7 @@
 """Parquet datasets as files on a filesystem: where their files are, their footers, and rows read by range.
 
 A dataset is one Parquet file or a directory of them, on a local path or a URL (s3://, gs://, any fsspec
-protocol). Nothing here knows a schema: the frames and programs readers (extractors.frames_dataset,
+protocol). Nothing here knows a schema: the frames and programs readers (frames.dataset,
 pipeline.programs) say which columns they expect and which error class names a bad file.
 """
 

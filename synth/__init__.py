@@ -9,7 +9,7 @@ Nothing in this package reads files or datasets; callers hand it values and get 
     result = synthesize(scene)
     print(result.program)                  # car1 = new Car ahead of ego by Range(5.5, 10.5), facing away from ego
     check(result.program, scene).ok        # True: the program contains the scene
-    synthesize_window([scene, scene2])     # one program for consecutive frames of a scene (synth.window)
+    synthesize_window([scene, scene2])     # one program for consecutive frames of a scene (synth.window.program)
 
 Importing the package loads only the scene and configuration modules; the DSL, the oracles, the solver and the
 search load on first use (`Program`, `parse_program`, `check` by name, the rest inside synthesize).
@@ -30,12 +30,12 @@ _LAZY = {
     "parse_program": "synth.dsl",
     "check": "synth.semantics",
     "CheckResult": "synth.semantics",
-    "synthesize_window": "synth.window",
-    "check_window": "synth.window",
-    "frame_program": "synth.window",
-    "tile": "synth.window",
-    "WindowResult": "synth.window",
-    "WindowError": "synth.window",
+    "synthesize_window": "synth.window.program",
+    "check_window": "synth.window.program",
+    "frame_program": "synth.window.program",
+    "tile": "synth.window.program",
+    "WindowResult": "synth.window.program",
+    "WindowError": "synth.window.program",
 }
 
 __all__ = [

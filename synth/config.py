@@ -26,7 +26,7 @@ STRATEGIES = (
     "monolithic",
 )
 ORACLES = ("hybrid", "smt", "closed-form")
-# The variant chain's (synth.gibbs) defaults, here because `r2s sample --help` shows them and gibbs loads numpy.
+# The variant chain's (synth.variants.gibbs) defaults, here because `r2s sample --help` shows them and gibbs loads numpy.
 DEFAULT_BURN_IN = 20  # sweeps from the recorded scene to the first variant
 DEFAULT_THIN = 10  # sweeps between variants
 SOLVERS = ("z3", "dreal")

@@ -2,7 +2,7 @@
 
 Every clause kind (synth.parts) says what Scenic draws for it (Clause.draws): a box of parameters in Scenic's
 own parameterisation of the emitted text, and the maps between those parameters and the entity's fields.
-synth.parameters assembles a program's draws; synth.gibbs and synth.collision_rule read them. Angles are degrees
+synth.variants.parameters assembles a program's draws; synth.variants.gibbs and synth.variants.collision_rule read them. Angles are degrees
 here (Scenic draws radians; a uniform draw is the same distribution in either unit).
 
 - `evaluate`: the entity's fields from its parameters and its reference's (and its own earlier clauses') values;
@@ -10,12 +10,12 @@ here (Scenic draws radians; a uniform draw is the same distribution in either un
   back as parameters), possibly outside the box (`clipped`, `inside`);
 - `area`: the plane area (or angle) a unit box of parameters covers at p, relative to the entity's field: the
   Jacobian of the map from parameters to placement, which a move that re-expresses a placed entity in new
-  parameters must weigh (synth.gibbs);
+  parameters must weigh (synth.variants.gibbs);
 - `reach`: a sound bound on every value the clause can take over the whole box, given its reference's bound: a
-  disc for the centre, an arc for the heading (synth.collision_rule keeps only the pairs of boxes that can meet);
+  disc for the centre, an arc for the heading (synth.variants.collision_rule keeps only the pairs of boxes that can meet);
 - `allowed`: a requirement beyond the box (`requires`), which the emitted text states as a `require` line: Scenic
   rejects a scene that fails it, the chain a move. It sees the entity's pose, its reference's, and the scene's
-  road (synth.scene_road.SceneRoad: the lane facts of a pose), so a clause can keep its entity in a region.
+  road (synth.variants.scene_road.SceneRoad: the lane facts of a pose), so a clause can keep its entity in a region.
 
 A `Requirement` is a clause that draws nothing and only constrains (a lane clause: its entity's centre in a
 region of the recorded road): an empty box, and reads of both poses so that every move of either asks it again.
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 if TYPE_CHECKING:
-    from synth.scene_road import SceneRoad
+    from synth.variants.scene_road import SceneRoad
 
 # Bounds are widened by this much (metres, degrees) so float rounding can never put a value outside them.
 REACH_SLACK = 1e-6

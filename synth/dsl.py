@@ -56,7 +56,7 @@ class Statement:
         if unknown:
             raise TypeError(f"Statement: no part named {unknown[0]!r}")
         # A program's statement carries every required part (the parser and Alg. 4 see to it); a pattern's may
-        # leave one out, which means "any" (synth.pattern).
+        # leave one out, which means "any" (synth.patterns.one_frame).
         object.__setattr__(self, "id", id)
         object.__setattr__(self, "type", type)
         object.__setattr__(self, "parts", tuple(sorted(((n, c) for n, c in given.items() if c is not None),
@@ -117,7 +117,7 @@ MAX_STATEMENTS = 10_000
 
 def parse_statements(text: str, types: Collection[str], reader=None, first_line: int = 1) -> tuple[Statement, ...]:
     """The statements of DSL text whose TYPEs are drawn from `types` (programs: the entity types; patterns,
-    synth.pattern, add their type classes and read their lines with their own `reader`, called as _statement
+    synth.patterns.one_frame, add their type classes and read their lines with their own `reader`, called as _statement
     is). Errors name the line (the text's first is `first_line`) and column."""
     declared: set[str] = set()
     statements = []
@@ -129,7 +129,7 @@ def parse_statements(text: str, types: Collection[str], reader=None, first_line:
             raise DslError(f"line {lineno}: statement {MAX_STATEMENTS + 1:,}, more than the bound of "
                            f"{MAX_STATEMENTS:,} (docs/cli.md, Inputs and their bounds)")
         st = (reader or _statement)(Line(line, lineno), declared, types)
-        if st.id != EGO_ID:  # a pattern's line about ego (synth.pattern) declares nothing
+        if st.id != EGO_ID:  # a pattern's line about ego (synth.patterns.one_frame) declares nothing
             declared.add(st.id)
         statements.append(st)
     return tuple(statements)

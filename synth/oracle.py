@@ -36,7 +36,7 @@ class RelationOracle:
     parts: tuple[Part, ...] = ()
     # The paper's M_smt: (relation, target index, reference index) -> does the relation hold.
     cache: dict[tuple[str, int, int], bool] = field(default_factory=dict)
-    # A window's oracle (synth.window): each entity's poses in the frames it is in, over which its fallback is weighed.
+    # A window's oracle (synth.window.program): each entity's poses in the frames it is in, over which its fallback is weighed.
     poses: Mapping[str, tuple[Entity, ...]] | None = None
 
     @property
@@ -80,7 +80,7 @@ class RelationOracle:
         """Does relation `code` of part k hold between r and e, not only the one the table records? A disjoint
         part's relations exclude each other but for one that needs no reference (Part.refless), recorded in ego's
         row over the others (stationary over `moving like ego`): only there is another one asked; a part whose
-        relations are not disjoint (Part.disjoint: lanes) is asked wherever one holds (synth.window needs it, as
+        relations are not disjoint (Part.disjoint: lanes) is asked wherever one holds (synth.window.program needs it, as
         a window's frames may agree on a relation the table does not record)."""
         part = self.parts[k]
         found = self.relation(k, r, e)

@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 from synth.errors import InputError
 
 if TYPE_CHECKING:
-    from synth.lane_relations import LaneGraph
-    from synth.roadmap import RoadMap
+    from synth.road.lane_relations import LaneGraph
+    from synth.road.roadmap import RoadMap
     from synth.world import WorldPose
 
 # Scenic classes an entity may have, with typical (length, width) in metres for when a source has no box.
@@ -44,7 +44,7 @@ ENTITY_TYPES: Mapping[str, tuple[float, float]] = {
     "Object": (1.0, 1.0),
 }
 
-# The classes `--categories vehicles` keeps, and what the pattern type `Vehicle` matches (synth.pattern).
+# The classes `--categories vehicles` keeps, and what the pattern type `Vehicle` matches (synth.patterns.one_frame).
 VEHICLE_CLASSES = frozenset(
     {"Car", "Truck", "Bus", "Motorcycle", "Bicycle", "Trailer", "ConstructionVehicle", "EmergencyVehicle"}
 )
@@ -145,14 +145,14 @@ class Entity:
     # Magnitude of the ground velocity (m/s, >= 0); None where the source does not know it (motion needs it).
     speed: float | None = None
     speed_sigma: float | None = None  # m/s, each side (robust synthesis with motion)
-    # Where it is on the recorded road (docs/formats.md, "Lane facts"; synth.lane_facts), as extraction decided
+    # Where it is on the recorded road (docs/formats.md, "Lane facts"; synth.road.lane_facts), as extraction decided
     # exactly in the map's frame; None where the scene has no map or the source did not place this entity.
     lanes: tuple[str, ...] | None = None
     lane: str | None = None
     in_intersection: bool | None = None
     on_crosswalk: bool | None = None
     off_road: bool | None = None
-    # The lane graph of its scene's road (synth.lane_relations), set by Scene for each entity of a scene with a
+    # The lane graph of its scene's road (synth.road.lane_relations), set by Scene for each entity of a scene with a
     # road: how a LANE clause naming this entity as its reference reads the lanes related to its lane. Neither
     # scene JSON nor compared: a fact of the scene, not of the entity.
     lane_graph: LaneGraph | None = field(default=None, compare=False, repr=False)
@@ -189,7 +189,7 @@ class Scene:
             raise SceneError("a scene needs exactly one entity with id 'ego'")
         if self.road is not None and any(e.lane_graph is None or e.lane_graph.road is not self.road
                                          for e in self.entities):
-            from synth.lane_relations import LaneGraph  # numpy: loaded only for a scene with a road
+            from synth.road.lane_relations import LaneGraph  # numpy: loaded only for a scene with a road
 
             graph = LaneGraph(self.road)
             object.__setattr__(self, "entities", tuple(replace(e, lane_graph=graph) for e in self.entities))
@@ -227,7 +227,7 @@ class Scene:
         if self.world is not None:
             doc["world"] = self.world.to_dict()
         if self.road is not None:
-            from synth.roadmap import road_to_dict  # numpy: loaded only for a scene with a road
+            from synth.road.roadmap import road_to_dict  # numpy: loaded only for a scene with a road
 
             doc["road"] = road_to_dict(self.road)
         return doc
@@ -382,7 +382,7 @@ def scene_from_dict(raw: Any, max_entities: int = DEFAULT_MAX_ENTITIES) -> Scene
 
 
 def _read_road(value: Any) -> RoadMap:
-    from synth.roadmap import road_from_dict  # numpy: loaded only for a scene with a road
+    from synth.road.roadmap import road_from_dict  # numpy: loaded only for a scene with a road
 
     return road_from_dict(value)
 

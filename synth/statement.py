@@ -85,7 +85,7 @@ def build_program(oracle: RelationOracle, order: tuple[int, ...], config: SynthC
 def write_statements(oracle: RelationOracle, order: tuple[int, ...], choices: list[tuple[Choice, ...]],
                      config: SynthConfig) -> list[Statement]:
     """Alg. 4's statements for `order` once its references are chosen (one (reference, code) per part and entity,
-    oracle indices): each clause with its Ranges measured on the oracle's scene. A window (synth.window) chooses
+    oracle indices): each clause with its Ranges measured on the oracle's scene. A window (synth.window.program) chooses
     its references on the window's table and writes each frame's statements here."""
     ents = oracle.entities()
     parts = oracle.parts

@@ -132,10 +132,10 @@ def synthesize(scene: Scene | Mapping[str, Any], config: SynthConfig | Mapping[s
     bug, never a silent result). Deterministic: the same scene and config give the same program and Scenic text.
     """
     from synth.dsl import fmt_number
-    from synth.emit_scenic import render_scenic
     from synth.oracle import make_oracle
     from synth.parts import MOTION
     from synth.robust import is_robust
+    from synth.scenic.emit import render_scenic
     from synth.search import Budget, CostModel, search
     from synth.smt.certify import certify
     from synth.statement import build_program

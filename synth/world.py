@@ -21,7 +21,7 @@ from synth.errors import InputError
 from synth.geometry import normalize
 
 if TYPE_CHECKING:
-    from synth.roadmap import Points, RoadMap
+    from synth.road.roadmap import Points, RoadMap
 
 WORLD_KEYS = ("source", "scene", "frame_index", "map_id", "x", "y", "heading")
 MAX_WORLD_COORDINATE = 1e9  # metres: UTM northings are ~5e6; beyond 1e9 a float's step is past a millimetre
@@ -110,7 +110,7 @@ def in_world(pose: WorldPose, e: Placed) -> WorldEntity:
 
 def road_in_world(pose: WorldPose, road: RoadMap) -> RoadMap:
     """A scene's road (in its ego frame) back in the world frame."""
-    from synth.roadmap import RoadMap
+    from synth.road.roadmap import RoadMap
 
     return RoadMap.of(road.map_id, [replace(f, polygon=pose.points(f.polygon), line=pose.points(f.line))
                                     for f in road.features])

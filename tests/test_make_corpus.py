@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from extractors.frames import read_frames
+from frames.rows import read_frames
 from pipeline.programs import read_programs
 from tests.support import ROOT
 

@@ -2,12 +2,12 @@
 the input's pieces (Source.units) extracted in parallel worker
 processes, each into its own part file, written atomically.
 
-The parts (and the maps of their scenarios, in _maps/: extractors.maps) are staged in a hidden directory beside
+The parts (and the maps of their scenarios, in _maps/: frames.maps) are staged in a hidden directory beside
 the output and take its place only when every piece is done
 and the whole dataset passed the frames check (a frame id given by two pieces is refused, as one writer would
 refuse it): a failure or a kill leaves the previous output or none, never part of one. Parts are named by the
 piece's position in the input, so the output is the same whatever the order pieces finish in. Memory: each
-worker streams its frames into its part in row groups (extractors.writer); the coordinator holds a count.
+worker streams its frames into its part in row groups (frames.writer); the coordinator holds a count.
 """
 
 from __future__ import annotations
@@ -28,13 +28,13 @@ from tqdm import tqdm
 
 from extractors.base import ExtractOptions, ExtractTally, Source
 from extractors.categories import CategorySelection
-from extractors.frames import FramesError
-from extractors.frames_dataset import FramesDataset
-from extractors.frames_schema import MAPS_DIR
-from extractors.maps import check_maps_target, maps_dir, maps_writer, replace_maps
 from extractors.registry import source as source_named
 from extractors.sniff import wrong_source_hint
-from extractors.writer import frames_writer
+from frames.dataset import FramesDataset
+from frames.maps import check_maps_target, maps_dir, maps_writer, replace_maps
+from frames.rows import FramesError
+from frames.schema import MAPS_DIR
+from frames.writer import frames_writer
 from pipeline.batch.parent import watch_parent
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart, check_folder, scratch_beside, staged_directory
@@ -244,7 +244,7 @@ def _keep_first_scenes(results: list[UnitResult], units: list[str], stage: Path,
 
 
 def _check(stage: Path, kept: list[UnitResult]) -> None:
-    """Frame ids unique across the parts. Each part was validated as it was written (extractors.writer), so only
+    """Frame ids unique across the parts. Each part was validated as it was written (frames.writer), so only
     the workers' frame-id hashes are compared here; re-reading every part cost the coordinator ~3 s per 50,000
     frames, alone while the workers wait. A clash is then named by the full check of the staged dataset."""
     hi, _ = FrameIndex.of(r.frame_hashes for r in kept).duplicated()

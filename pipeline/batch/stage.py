@@ -74,7 +74,7 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
 
     options.check()
     if options.window is not None:
-        from synth.window import check_window_config
+        from synth.window.program import check_window_config
 
         check_window_config(config)
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
@@ -110,7 +110,7 @@ class _Run:
     unit = "frames"  # what a row is of (log lines, the summary)
 
     def go(self) -> Summary:
-        from extractors.frames_dataset import FramesDataset
+        from frames.dataset import FramesDataset
         from pipeline.batch.store import RunStore
 
         store = RunStore(self.out, self.schema)
@@ -134,7 +134,7 @@ class _Run:
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         """Check the input (streaming) and say what rows the run makes: how many, the index of their keys (frame
         ids), their keys with what each is computed from (the rows' hash: store.plan), and the config hash."""
-        from extractors.frame_hash import FrameHasher
+        from frames.frame_hash import FrameHasher
 
         hasher = FrameHasher(coverage=self._coverage(dataset))  # every frame hashed in the checking pass
         checked = dataset.check(hasher, road=self._maps(dataset) is not None)
@@ -142,11 +142,11 @@ class _Run:
         return n_frames, index, hasher.keys(), self.config.hash
 
     def _coverage(self, dataset):
-        """What a stored row must have been computed from to be kept (extractors.frame_hash.Coverage): the frame's
+        """What a stored row must have been computed from to be kept (frames.frame_hash.Coverage): the frame's
         rows, and with each frame's road (--lanes) its road columns and the content of every map, each map read
         and hashed once here."""
-        from extractors.frame_hash import Coverage
-        from extractors.maps import map_digests
+        from frames.frame_hash import Coverage
+        from frames.maps import map_digests
 
         maps = self._maps(dataset)
         return Coverage() if maps is None else Coverage.with_road(map_digests(maps))
@@ -207,7 +207,7 @@ class _Run:
     def _maps(self, dataset) -> str | None:
         """With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only):
         the workers then read the road columns too (FramesPart.read_columns), and the check decodes them."""
-        from extractors.maps import maps_dir
+        from frames.maps import maps_dir
 
         return str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
 
@@ -309,7 +309,7 @@ class _WindowRun(_Run):
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         import pyarrow as pa
 
-        from extractors.frame_hash import FrameHasher, frame_keys, from_hex
+        from frames.frame_hash import FrameHasher, frame_keys, from_hex
         from pipeline.batch.windows import plan_windows
         from storage.frame_index import FrameIndex
 

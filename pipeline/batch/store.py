@@ -11,7 +11,7 @@ A kill at any moment leaves only whole files. On start, the rows already there a
 a time (frame_id, config_hash, version, frame_hash: column projection), hashed (storage.frame_index), and sorted
 out: the last row of a frame wins (output file, then parts in order); rows of frames not in the input, written by
 another version or synthesis revision (version, synth.version.ROWS_VERSION), computed from other rows of the frame
-or another road (frame_hash, extractors.frame_hash) or with another config are dropped (their files rewritten
+or another road (frame_hash, frames.frame_hash) or with another config are dropped (their files rewritten
 without them, atomically), and the frames left are done. So a resumed run computes each frame once, reuses a
 program only for the same rows, road, code and config, and the output holds every frame of the input exactly once
 when the run ends.
@@ -33,7 +33,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from extractors.frame_hash import frame_keys, from_hex
+from frames.frame_hash import frame_keys, from_hex
 from pipeline.errors import UserError
 from pipeline.outputs import output_place
 from pipeline.programs import (
@@ -138,7 +138,7 @@ class RunStore:
 
     def plan(self, frames: FrameIndex, contents: FrameIndex, config_hash: str, version: str) -> ResumePlan:
         """What the rows already written mean for this run (see the module docstring). `frames`: the input's
-        frame ids; `contents`: its frames with what they are computed from (extractors.frame_hash.FrameHasher.keys);
+        frame ids; `contents`: its frames with what they are computed from (frames.frame_hash.FrameHasher.keys);
         `version`: what this run's rows record (synth.version.ROWS_VERSION)."""
         his, los, src, rows, same, current, fresh, hashed = [], [], [], [], [], [], [], []
         warnings = []

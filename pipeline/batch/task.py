@@ -1,6 +1,6 @@
 """The worker side of `r2s run`: a chunk of frames in (a file and a row range), one programs row per frame out.
 
-A chunk task reads its own rows (extractors.frames_dataset.read_frame_rows: a file and a row range, through the
+A chunk task reads its own rows (frames.dataset.read_frame_rows: a file and a row range, through the
 checks of every reader of frames), so frame data never passes through the process that plans the run, on one machine or on a cluster. Each frame runs under its own time and memory
 limits (run_frame), and becomes a row whatever happens to it; only a dead worker loses rows. Before each frame
 the task writes the frame's index to its progress marker, so that when a worker dies the run knows which frame
@@ -24,10 +24,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from extractors.frame_hash import Coverage, frame_hashes_of, to_hex
-from extractors.frames import FramesError, frame_to_scene
-from extractors.frames_dataset import read_frame_rows
-from extractors.maps import FrameRoads
+from frames.dataset import read_frame_rows
+from frames.frame_hash import Coverage, frame_hashes_of, to_hex
+from frames.maps import FrameRoads
+from frames.rows import FramesError, frame_to_scene
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.errors import InternalError
@@ -54,7 +54,7 @@ class FrameTask:
     # threaded dask worker shares its process with other frames (or with the run itself).
     hard_cap: bool = False
     synthesizer: Synthesizer | None = None  # None: synth.synthesize
-    frame_hash: str | None = None  # the hash of the rows the scene came from (extractors.frame_hash)
+    frame_hash: str | None = None  # the hash of the rows the scene came from (frames.frame_hash)
 
 
 class Units:
@@ -90,7 +90,7 @@ class ChunkTask(Units):
     hard_cap: bool = False
     synthesizer: Synthesizer | None = None  # None: synth.synthesize
     progress_dir: str | None = None  # where the marker goes; None: progress is not tracked (remote workers)
-    maps: str | None = None  # with lanes: the maps beside the frames (extractors.maps), whence each frame's road
+    maps: str | None = None  # with lanes: the maps beside the frames (frames.maps), whence each frame's road
 
     @property
     def frame_ids(self) -> list[str]:
@@ -99,7 +99,7 @@ class ChunkTask(Units):
     def read(self, roads: FrameRoads | None = None) -> tuple[pa.Table, int, list[str]]:
         """The rows of the chunk's span (whole frames, from its first frame's first row to its last frame's last
         row), the span's first row, and the hash of each of the chunk's frames' rows in its order
-        (extractors.frame_hash): a row records what it was computed from, as the worker read it; with `roads` (the
+        (frames.frame_hash): a row records what it was computed from, as the worker read it; with `roads` (the
         maps the frames' roads come from: --lanes), the maps they name too."""
         first = min(f[1] for f in self.frames)
         stop = max(f[1] + f[2] for f in self.frames)
@@ -181,7 +181,7 @@ def run_chunk(task: ChunkTask) -> pa.Table:
 
 
 def hash_rows(rows: pa.Table, starts: np.ndarray, roads: FrameRoads | None) -> tuple[np.ndarray, np.ndarray]:
-    """extractors.frame_hash.frame_hashes_of of rows a worker read, covering what the run's check hashed: with roads
+    """frames.frame_hash.frame_hashes_of of rows a worker read, covering what the run's check hashed: with roads
     (--lanes), the content of every map the rows name as this worker reads it (FrameRoads.digest). Rows or maps that
     the check passed and that cannot be hashed now changed since: a ChunkInvalid."""
     try:

@@ -3,7 +3,7 @@
 A window task is to windows what a chunk task (pipeline.batch.task) is to frames, with the same members the pool
 asks of a task (key, units in `frames`, singles, split_at, marker, run, lost_rows), so the pool's rules (at most
 `jobs` in flight, a dead worker's suspects retried one at a time, the wall-clock guard) hold unit by unit. Each
-window reads its frames' rows, hashes them as read (what its row records), and runs synth.window under the
+window reads its frames' rows, hashes them as read (what its row records), and runs synth.window.program under the
 frame's limits (the time limit bounds its search, the memory cap its worker).
 """
 
@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from extractors.frames import FramesError, frame_to_scene
-from extractors.frames_dataset import read_frame_rows
-from extractors.maps import FrameRoads
+from frames.dataset import read_frame_rows
+from frames.maps import FrameRoads
+from frames.rows import FramesError, frame_to_scene
 from pipeline.batch.task import (
     ChunkInvalid,
     ChunkUnreadable,
@@ -33,7 +33,7 @@ from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.search.budget import peak_rss_mb
-from synth.window import synthesize_window
+from synth.window.program import synthesize_window
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
-"""`r2s run --window W`: one program per window of consecutive frames of a scene (synth.window), in the batch
+"""`r2s run --window W`: one program per window of consecutive frames of a scene (synth.window.program), in the batch
 stage's workers, parts, resume and progress.
 
 The coordinator reads four short columns of every frame (frame_id, scene, frame_index, timestamp_us) once, after
 the check, and keeps per frame its place (file, first row, rows), its scene and timestamp and its rows' hash
-(extractors.frame_hash, from the checking pass): ~100 bytes a frame, never a frame's rows. It orders each scene's
-frames by frame_index, cuts them into windows (synth.window.tile) and hands windows to the workers
+(frames.frame_hash, from the checking pass): ~100 bytes a frame, never a frame's rows. It orders each scene's
+frames by frame_index, cuts them into windows (synth.window.program.tile) and hands windows to the workers
 (pipeline.batch.window_task), which read their frames' rows themselves. A window's row is keyed by its first frame
 (frame_id) and records the hash of all its frames' rows (frame_hash), so a resumed run
 keeps a window's program only for the same frames with the same rows, and the config hash covers the window
@@ -57,7 +57,7 @@ class WindowSpec:
         return None if seconds is None else max(1, round(seconds * 1e6))
 
     def tile(self, timestamps_us) -> list[tuple[int, int]]:
-        from synth.window import tile
+        from synth.window.program import tile
 
         return tile(timestamps_us, self.us(self.window_s), self.us(self.stride_s), self.us(self.max_gap_s))
 
@@ -91,7 +91,7 @@ class WindowUnit(NamedTuple):
 
 def window_hash(unit: WindowUnit, frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
     """What a window's row is computed from: its scene and first and last timestamps (the row records them), its
-    frames (ids, in order) with their rows' hashes (extractors.frame_hash); 32 hex digits, as a frame's hash. (The
+    frames (ids, in order) with their rows' hashes (frames.frame_hash); 32 hex digits, as a frame's hash. (The
     window options are in the config hash.)"""
     h = hashlib.blake2b(digest_size=16)
     h.update(f"{unit.scene}\0{unit.first_timestamp_us}\0{unit.last_timestamp_us}".encode())

@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from extractors.frames import read_frames
+    from frames.rows import read_frames
     from pipeline.evaluation.frontend import evaluate, metrics, objects_by_frame, table_md
     from pipeline.evaluation.plot import plot
     from pipeline.outputs import check_apart, output_place, writing

@@ -45,9 +45,9 @@ def read_program(path: str):
 
 def read_pattern(path: str):
     """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables, or a temporal
-    pattern (steps, durations, behaviours: synth.temporal)."""
+    pattern (steps, durations, behaviours: synth.patterns.temporal)."""
     from synth.dsl import DslError
-    from synth.temporal import parse_query_pattern
+    from synth.patterns.temporal import parse_query_pattern
 
     try:
         return parse_query_pattern(read_text_file(path, "pattern"))

@@ -15,7 +15,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("frames", help="frames Parquet file or directory (from r2s extract)")
     p.add_argument("frame_id", help="frame id, e.g. scene-0061/3")
     p.add_argument("--out", metavar="F", help="write the JSON to this file (atomically) instead of stdout")
-    # the default is extractors.maps.SCENE_RADIUS (the roads r2s run --lanes synthesizes on), written out here so
+    # the default is frames.maps.SCENE_RADIUS (the roads r2s run --lanes synthesizes on), written out here so
     # that `r2s scene --help` does not load pyarrow
     p.add_argument("--radius", type=float, default=50.0, metavar="M",
                    help="the road: map features within M metres of ego (default 50, r2s extract's radius)")

@@ -1,6 +1,6 @@
 """`r2s synth SCENE.json`: one scene in, its minimum-cost program out (DSL, Scenic or JSON). Several scene JSON
 files (frames of one scene, in time order): one program over the clip, which holds in each of them
-(synth.window)."""
+(synth.window.program)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     if len(scenes) == 1:
         result = synthesize(scenes[0], config)
     else:
-        from synth.window import synthesize_window
+        from synth.window.program import synthesize_window
 
         result = synthesize_window(scenes, config)
     if args.format == "json":

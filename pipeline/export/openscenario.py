@@ -27,7 +27,7 @@ from typing import Any
 from pipeline.errors import UserError
 from pipeline.export import slug
 from pipeline.export.scenarionet import HEIGHTS, STEP_S
-from synth.roadmap import LANE, MapFeature, RoadMap
+from synth.road.roadmap import LANE, MapFeature, RoadMap
 from synth.scene import Scene
 from synth.version import __version__
 from synth.world import WorldPose, in_world, road_in_world

@@ -20,7 +20,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, LANE, ROAD_LINE, RoadMap
+from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, LANE, ROAD_LINE, RoadMap
 from synth.scene import ENTITY_TYPES, Scene
 from synth.version import __version__
 from synth.world import WorldPose, in_world, road_in_world

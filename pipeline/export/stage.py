@@ -18,7 +18,7 @@ from typing import Protocol
 
 from pipeline.errors import UserError
 from pipeline.export import TARGETS, slug
-from synth.roadmap import RoadMap
+from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose
 

@@ -3,7 +3,7 @@ lanes each lane relates to, computed once per map from the maps beside the frame
 
 A query's frame is a scene whose road is its whole map (not the crop `r2s scene` writes): the LANE clauses read
 each entity's lane facts (the frames' columns lane, lanes, in_intersection, on_crosswalk, off_road) and, for the
-four relations, the lanes related to the reference's lane by synth.lane_relations on that map. Those sets are
+four relations, the lanes related to the reference's lane by synth.road.lane_relations on that map. Those sets are
 rows of a small table, `r2s_lane_sets` (map_id, lane, and one list of lane ids per relation), joined to every
 frames row by (map_id, lane); a relation is then `list_contains(ref.rel_same, e.lane)`, the checker's own
 lookup. Every lane condition is exact (its candidate and sure conditions are one), so the Python re-check of the
@@ -18,13 +18,13 @@ import pyarrow as pa
 
 from synth.config import SynthConfig
 from synth.dsl import Statement
-from synth.lane_relations import SIDES, LaneGraph
 from synth.parts.lane import Anywhere, InLane, LaneFact, LaneRelation
-from synth.pattern import Pattern
-from synth.roadmap import RoadMap
+from synth.patterns.one_frame import Pattern
+from synth.road.lane_relations import SIDES, LaneGraph
+from synth.road.roadmap import RoadMap
 
 LANE_SETS = "r2s_lane_sets"
-# The frames' road columns a lane pattern reads (extractors.frames_schema.ROAD_COLUMNS), and the relation lists.
+# The frames' road columns a lane pattern reads (frames.schema.ROAD_COLUMNS), and the relation lists.
 FACT_COLUMNS = ("map_id", "lane", "lanes", "in_intersection", "on_crosswalk", "off_road")
 RELATION_COLUMNS = tuple(f"rel_{side}" for side in SIDES)
 LANE_PART = "lane"
@@ -41,7 +41,7 @@ def without_lanes(pattern: Pattern) -> Pattern:
 
 def lane_sets(roads: Iterable[RoadMap]) -> pa.Table:
     """One row per lane of each map: the lanes a target's lane must be in for each relation with a reference in
-    this lane (synth.lane_relations.LaneGraph.related), sorted."""
+    this lane (synth.road.lane_relations.LaneGraph.related), sorted."""
     cols: dict[str, list] = {"map_id": [], "lane": [], **{c: [] for c in RELATION_COLUMNS}}
     for road in roads:
         graph = LaneGraph(road)

@@ -1,7 +1,7 @@
-"""Scenario mining: every frame of a frames dataset that matches a pattern (synth.pattern), through DuckDB.
+"""Scenario mining: every frame of a frames dataset that matches a pattern (synth.patterns.one_frame), through DuckDB.
 
 The pattern becomes one query (pipeline.query.sql); this module owns the I/O around it: the input (a frames file or
-dataset, checked by extractors.frames_dataset as every verb checks it), the DuckDB session (threads, memory limit,
+dataset, checked by frames.dataset as every verb checks it), the DuckDB session (threads, memory limit,
 a spill directory), the exact re-check of near-boundary bindings in Python, and the atomic, streaming write of
 matches.parquet.
 
@@ -31,10 +31,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-from extractors.frames import FramesError, write_frames
-from extractors.frames_dataset import FramesDataset
-from extractors.frames_schema import ROAD_COLUMNS
-from extractors.maps import maps_dir, read_maps
+from frames.dataset import FramesDataset
+from frames.maps import maps_dir, read_maps
+from frames.rows import FramesError, write_frames
+from frames.schema import ROAD_COLUMNS
 from pipeline.errors import UserError
 from pipeline.outputs import output_place
 from pipeline.query.events import events_select
@@ -56,9 +56,9 @@ from pipeline.query.temporal import estimate_query as temporal_estimate_query
 from pipeline.query.temporal import prepare
 from storage.atomic import atomic_path
 from synth.config import SynthConfig
-from synth.pattern import MAX_NAMES, Pattern, binding_holds, matched_types
+from synth.patterns.one_frame import MAX_NAMES, Pattern, binding_holds, matched_types
+from synth.patterns.temporal import MAX_STEPS, TURNING, TemporalPattern, parse_query_pattern
 from synth.scene import EGO_ID, Entity
-from synth.temporal import MAX_STEPS, TURNING, TemporalPattern, parse_query_pattern
 
 BATCH_ROWS = 65536
 LOG_EVERY_S = 30.0
@@ -69,7 +69,7 @@ LOG_EVERY_S = 30.0
 # MAX_FRAME_BINDINGS in a frame or MAX_BINDINGS in all (about 10 minutes of DuckDB on 2 cores at the ~1.5 million
 # a second measured for unrelated names). DuckDB plans every name as a join, so their number is bounded too; the
 # spill under the memory limit is capped.
-MAX_PATTERN_NAMES = MAX_NAMES  # synth.pattern refuses more as it reads them; a Pattern built in code is checked here
+MAX_PATTERN_NAMES = MAX_NAMES  # synth.patterns.one_frame refuses more as it reads them; a Pattern built in code is checked here
 MAX_FRAME_BINDINGS = 10**6
 MAX_BINDINGS = 10**9
 SPILL_LIMIT_MB = 8192

@@ -10,7 +10,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from synth.pattern import Pattern, matched_types
+from synth.patterns.one_frame import Pattern, matched_types
 
 ARGS_SUFFIX = ".args"  # `make corpus`: OUT/frames.args beside OUT/frames
 MAX_ARGS_BYTES = 4096

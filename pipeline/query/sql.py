@@ -48,7 +48,7 @@ from synth.dsl import (
     Stationary,
 )
 from synth.parts.motion import SPEED_EPS
-from synth.pattern import Pattern, WithinDistance, matched_types
+from synth.patterns.one_frame import Pattern, WithinDistance, matched_types
 from synth.scene import EGO_ID
 from synth.semantics import ANGLE_EPS, LENGTH_EPS
 

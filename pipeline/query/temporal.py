@@ -1,4 +1,4 @@
-"""Temporal patterns over a frames dataset (synth.temporal; the definition is docs/dsl.md, "Temporal patterns"),
+"""Temporal patterns over a frames dataset (synth.patterns.temporal; the definition is docs/dsl.md, "Temporal patterns"),
 as DuckDB statements run one after another in the query's session.
 
 1. Each step is a one-frame pattern: its bindings in every frame come from the one-frame query
@@ -33,9 +33,8 @@ from pipeline.query.sql import (
 )
 from synth.config import SynthConfig
 from synth.parts.motion import SPEED_EPS
-from synth.pattern import Pattern
-from synth.scene import EGO_ID
-from synth.temporal import (
+from synth.patterns.one_frame import Pattern
+from synth.patterns.temporal import (
     LANE_CHANGE_WINDOW_US,
     MOVING_SPEED,
     SPEED_CHANGE,
@@ -46,6 +45,7 @@ from synth.temporal import (
     Step,
     TemporalPattern,
 )
+from synth.scene import EGO_ID
 
 POSITIONS = "r2s_fpos"
 BEHAVIOUR_TABLE = "r2s_behaviour"
@@ -87,10 +87,10 @@ WINDOWS = {"change": _window(SPEED_CHANGE_WINDOW_US), "stop": _window(STOP_WINDO
 
 
 def behaviours(config: SynthConfig) -> dict[str, Behaviour]:
-    """Every behaviour's reading (synth.temporal.BEHAVIOURS; docs/dsl.md defines them). Exact: for the speed
+    """Every behaviour's reading (synth.patterns.temporal.BEHAVIOURS; docs/dsl.md defines them). Exact: for the speed
     behaviours the extreme speed of the window decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff
     some v' has `v - v' >= A`; headings wrap, so turning compares every earlier finite heading of the window (a
-    list) by synth.temporal.turn_of's operations on map_heading (r2s_norm is synth.geometry.normalize);
+    list) by synth.patterns.temporal.turn_of's operations on map_heading (r2s_norm is synth.geometry.normalize);
     changing lanes collects the earlier in-lane rows' relation lists of the same map (`rel_left`, `rel_right` of
     pipeline.query.lanes, LaneGraph.related of their lane), so the test is the list lookup of `in lane left of`."""
     turn = "r2s_norm(map_heading - q + 180.0) - 180.0"

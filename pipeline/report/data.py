@@ -56,7 +56,7 @@ class DataLook:
 def load_frames(db: ProgramsDB, frames: str) -> tuple[list[str], bool]:
     """Table `d` in the programs' DuckDB: every non-ego box of the frames with its distance to its frame's ego (and
     speed, NULL where the frames have none). Returns the frames' files and whether any speed is known."""
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
 
     dataset = FramesDataset.open(frames)
     files = [p.path for p in dataset.parts]

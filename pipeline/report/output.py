@@ -75,10 +75,10 @@ def report(programs: str | os.PathLike, out: str | os.PathLike, *, frames: str |
 def _query_sections(query, name: str, frames: str | None, top: int) -> tuple:
     if query is None:
         return ()
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
     from pipeline.report.query_section import query_section
     from synth.dsl import DslError
-    from synth.temporal import parse_query_pattern
+    from synth.patterns.temporal import parse_query_pattern
 
     if frames is None:
         raise UserError("--query needs --frames: the frames the programs came from, where the pattern is matched")

@@ -17,7 +17,7 @@ from pipeline.query.mining import query_frames
 from pipeline.report.document import MISSING, Details, ReportContext, Section, SectionBuilder, Table, render_command
 from pipeline.report.stats import programs_text
 from synth.config import SynthConfig
-from synth.pattern import Pattern
+from synth.patterns.one_frame import Pattern
 
 
 @dataclass(frozen=True)

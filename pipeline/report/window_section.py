@@ -79,7 +79,7 @@ def stability(ctx: ReportContext) -> tuple:
 
 
 def costs(ctx: ReportContext, frames: str | None, frame_programs: str) -> tuple:
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
     from pipeline.programs import programs_files
 
     if frames is None:

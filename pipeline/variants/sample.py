@@ -2,22 +2,22 @@
 
 Shared by `r2s sample` and `r2s render --samples`. Both samplers draw from one distribution: the program's
 Ranges as Scenic draws them, conditioned on the collision rule (two boxes may overlap only if they overlap in the
-recording; synth.collision_rule), which the emitted text states as requirements.
+recording; synth.variants.collision_rule), which the emitted text states as requirements.
 
-- `gibbs` (the default): Metropolis-within-Gibbs over the program's parameters (synth.gibbs), started at the
+- `gibbs` (the default): Metropolis-within-Gibbs over the program's parameters (synth.variants.gibbs), started at the
   recorded scene. Pure Python and numpy, no Scenic import; 5 variants of every shipped keyframe (up to 141
   entities) in seconds. It reads the program, the scene and the tolerances from the text's `# r2s-source`
   record, after checking that the text is exactly what the emitter writes from that record.
 - `scenic`: the official compiler (scenic 3.1.1) compiles the text and rejection-samples whole scenes. Exact and
   independent, but its acceptance falls exponentially with the number of entities: the reference for small
-  scenes (tests/synth/test_variants.py compares the two), and the only sampler for a hand-edited text (--trusted).
+  scenes (tests/synth/variants/test_variants.py compares the two), and the only sampler for a hand-edited text (--trusted).
 
 Scenic draws from Python's `random` and numpy's global generators; both are seeded for a run and restored
 afterwards, so the same text and seed give the same scenes in any process, and a caller's own random state is
 left as it was. The chain has its own generator, seeded by the seed.
 
 Text given by a user is a program: compiling it runs it (Scenic is Python). So a Scenic file is compiled only
-if the emitter renders it again byte for byte from its own `# r2s-source` record (synth.emit_scenic): an edited
+if the emitter renders it again byte for byte from its own `# r2s-source` record (synth.scenic.emit): an edited
 or foreign file is refused before anything runs, unless the caller says it is trusted (`r2s sample --trusted`).
 The DSL route (`sample_program`) takes a validated DSL program and scene instead. Every variant, from either
 sampler, is checked against the DSL semantics before it is returned.
@@ -40,7 +40,9 @@ from pipeline.errors import SamplingError, UserError
 from pipeline.variants import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
 from synth.config import SynthConfig
 from synth.dsl import Program
-from synth.emit_scenic import (
+from synth.geometry import normalize
+from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
+from synth.scenic.emit import (
     COLLISIONS_PARAM,
     FRAME_PARAM,
     MIN_DISTANCE,
@@ -50,11 +52,9 @@ from synth.emit_scenic import (
     rebuild_from_source,
     render_scenic,
 )
-from synth.geometry import normalize
-from synth.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
-from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
-from synth.scene_road import SceneRoad
 from synth.semantics import check
+from synth.variants.gibbs import ChainSettings, NoVariant, rejection_odds, sample_variants
+from synth.variants.scene_road import SceneRoad
 
 
 class ScenicProgramError(UserError):
@@ -73,7 +73,7 @@ class SampleOptions:
     max_iterations: int = DEFAULT_MAX_ITERATIONS  # per scene (scenic)
     allow_collisions: bool = False
     sampler: str | None = None  # None: gibbs for r2sgen's own text, scenic for a trusted hand-edited one
-    burn_in: int | None = None  # sweeps (gibbs); None: synth.gibbs's default
+    burn_in: int | None = None  # sweeps (gibbs); None: synth.variants.gibbs's default
     thin: int | None = None
 
     def __post_init__(self) -> None:

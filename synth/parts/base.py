@@ -174,7 +174,7 @@ class Part(Relations, Measured):
     def robust_clause(self, code: int, target: Entity, ref: Entity, config: SynthConfig) -> Clause:
         """The same with Ranges that cover every perturbation (robust synthesis)."""
 
-    # ------------------------------------------------------------------------------- windows (synth.window)
+    # ------------------------------------------------------------------------------- windows (synth.window.program)
     def window_fallback_cost(self, frames: Sequence[Entity], config: SynthConfig) -> int:
         """What the part costs for an entity without a window witness, `frames` its poses in the frames of the
         window it is in: the cost of the clause `merged` then writes. By default the most a frame's fallback costs
@@ -285,7 +285,7 @@ class Clause(ABC):
 
     # ------------------------------------------------------------------------------- windows
     def widened(self, other: Clause) -> Clause | None:
-        """The clause a window writes for two of its frames' clauses (synth.window): the same form with each Range
+        """The clause a window writes for two of its frames' clauses (synth.window.program): the same form with each Range
         field the hull of both (every clause's semantics only grow with its Ranges, so it holds wherever either
         does); None where they differ in anything else (kind, reference, direction), which a window never joins."""
         if type(other) is not type(self):

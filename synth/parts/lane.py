@@ -11,14 +11,14 @@
     in lane "ID"               cost 2    e's lane is the lane ID of the map
     anywhere                   cost 2    no claim (robust synthesis, where the bounds leave the lane open)
 
-An entity's lane is its chosen lane (synth.lane_facts), decided exactly at extraction; the relations between
-lanes are facts of the map (synth.lane_relations). So every question is a lookup: the float table is the exact
+An entity's lane is its chosen lane (synth.road.lane_facts), decided exactly at extraction; the relations between
+lanes are facts of the map (synth.road.lane_relations). So every question is a lookup: the float table is the exact
 one, no pair is ever UNDECIDED and no solver is asked. Without a witness, an entity pays its cheapest true
 fact: 1 for the first of intersection, crosswalk, off road, off lane that holds, else 2 for its lane by id
 (Part.fallback_cost: the search weighs it). Robust: a relation holds only if it holds for every lane the
-entity (and its reference) may be in under the bounds (synth.lane_relations.places), and the fallback is the
+entity (and its reference) may be in under the bounds (synth.road.lane_relations.places), and the fallback is the
 first fact that holds wherever the entity may be, else its lane by id if it cannot leave it, else `anywhere`.
-Over a window (synth.window), two relations may hold at once (a merged lane is on both chains: disjoint = False),
+Over a window (synth.window.program), two relations may hold at once (a merged lane is on both chains: disjoint = False),
 and the fallback is decided on the entity's place in every frame it is in (window_fallback, merged).
 """
 
@@ -35,16 +35,16 @@ import numpy as np
 from synth.config import SynthConfig
 from synth.draws import Draws, Pose, Requirement
 from synth.errors import InputError
-from synth.lane_relations import RELATION_NAMES, SIDES, LaneGraph, Places, places
 from synth.parts.base import Clause, Part
 from synth.perturbation import Bounds, bounds_of
+from synth.road.lane_relations import RELATION_NAMES, SIDES, LaneGraph, Places, places
 from synth.scene import Entity, Scene
 from synth.syntax import DslError, Line
 from synth.tables import NONE, SceneArrays, no_self_witness
 
 if TYPE_CHECKING:
-    from synth.scene_road import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
+    from synth.variants.scene_road import SceneRoad
 
 # The facts a cost-1 clause names, in the order the fallback tries them (the Entity field or rule of each).
 FACTS = ("intersection", "crosswalk", "off road", "off lane")
@@ -106,7 +106,7 @@ class LaneClause(Clause):
         raise NotImplementedError
 
     # Scenic: the clause's text as a property of its object (a label), and a requirement over the road's regions
-    # (synth.scenic_road) that keeps it there; the sampler asks the same of every pose it tries (LaneDraws).
+    # (synth.scenic.road) that keeps it there; the sampler asks the same of every pose it tries (LaneDraws).
     def scenic(self, at: str) -> str:
         return json.dumps(str(self))  # a Python string literal (lane ids hold no quote or backslash)
 
@@ -130,7 +130,7 @@ def _robust_places(e: Entity, config: SynthConfig) -> Places:
 class LaneRelation(LaneClause):
     """`in lane of REF`, `in lane left of REF`, `in lane right of REF`, `in oncoming lane of REF`: cost 0."""
 
-    side: str  # one of synth.lane_relations.SIDES
+    side: str  # one of synth.road.lane_relations.SIDES
     ref: str
     cost = 0
     text = "{c.phrase} {c.ref}"
@@ -238,7 +238,7 @@ class Anywhere(LaneClause):
 @dataclass(frozen=True)
 class LaneDraws(Requirement):
     """What the sampler asks of a lane clause: nothing drawn; its entity (and its reference) placed where the
-    clause holds, by the clause's own semantics on the lane facts of the poses (synth.scene_road.SceneRoad)."""
+    clause holds, by the clause's own semantics on the lane facts of the poses (synth.variants.scene_road.SceneRoad)."""
 
     clause: LaneClause
     config: SynthConfig

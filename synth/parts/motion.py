@@ -32,8 +32,8 @@ from synth.syntax import Line, Range, fmt_number, printed
 from synth.tables import GUARD, NONE, UNDECIDED, SceneArrays, mark, no_self_witness
 
 if TYPE_CHECKING:
-    from synth.scene_road import SceneRoad
     from synth.smt.backend import ExactBackend, SolverBackend
+    from synth.variants.scene_road import SceneRoad
 
 MOTION_NAMES = ("stationary", "like")  # index = code in the tables
 STATIONARY, LIKE = 0, 1

@@ -59,7 +59,7 @@ DIRECTIONS: dict[str, tuple[str, float]] = {
     "right": ("right of", 270.0),
 }
 DIRECTION_NAMES = tuple(DIRECTIONS)  # ahead, left, behind, right: index = code in the tables
-MIN_DISTANCE = 0.05  # metres: a sector's distance is drawn from here at least (synth.emit_scenic says why)
+MIN_DISTANCE = 0.05  # metres: a sector's distance is drawn from here at least (synth.scenic.emit says why)
 LENGTH_EPS = 1e-9
 ANGLE_EPS = 1e-9
 
@@ -488,7 +488,7 @@ def sampled_distance(r: Range) -> tuple[float, float]:
 
 
 def _scenic_distance(r: Range) -> str:
-    """A sector's distance Range, kept off 0 where the bearing vanishes (see synth.emit_scenic)."""
+    """A sector's distance Range, kept off 0 where the bearing vanishes (see synth.scenic.emit)."""
     lo, hi = sampled_distance(r)
     if lo == r.lo:
         return str(r)

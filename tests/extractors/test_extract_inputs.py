@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from extractors.frames import read_frames
 from extractors.registry import SOURCES
 from extractors.registry import source as source_of
 from extractors.sniff import looks_like
+from frames.rows import read_frames
 from synth.scene import ENTITY_TYPES
 from tests.support import logs as fx
 from tests.support.extract import EXCERPT, assert_refused, r2s

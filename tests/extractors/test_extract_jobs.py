@@ -85,8 +85,8 @@ def test_frame_ids_are_compared_across_parts_by_the_workers_hashes(tmp_path):
 
     from extractors.base import ExtractOptions
     from extractors.categories import ALL
-    from extractors.frames import FramesError
     from extractors.registry import source
+    from frames.rows import FramesError
     from pipeline.batch.extract import _check, extract_unit
 
     stage = tmp_path / "stage"

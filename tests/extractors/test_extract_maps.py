@@ -14,9 +14,9 @@ import pandas as pd
 import pytest
 import shapely
 
-from extractors.maps import maps_dir, read_maps
 from extractors.safe_pickle import load_pickle
 from extractors.scenarionet import scenario_map
+from frames.maps import maps_dir, read_maps
 from tests.support import SHARED
 from tests.support.extract import EXCERPT, assert_refused, r2s
 

@@ -13,8 +13,8 @@ import pandas as pd
 
 from extractors.base import ExtractOptions
 from extractors.categories import ALL, CategorySelection
-from extractors.frames import read_frames
 from extractors.scenarionet import extract
+from frames.rows import read_frames
 from tests.support import run_r2s
 from tests.support.extract import EXCERPT, assert_refused, r2s
 

@@ -17,9 +17,9 @@ import pandas as pd
 import pytest
 
 from extractors.categories import ALL
-from extractors.frames import FramesError, read_frames
 from extractors.safe_pickle import load_pickle
 from extractors.scenarionet import extract
+from frames.rows import FramesError, read_frames
 from tests.support.extract import assert_refused, frames_of, r2s
 from tests.support.scenarionet_layouts import (
     MAPPING,

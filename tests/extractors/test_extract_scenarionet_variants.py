@@ -14,8 +14,8 @@ import pytest
 
 from extractors.base import MAX_NAMES, ExtractOptions, ExtractTally
 from extractors.categories import ALL, VEHICLES
-from extractors.frames import read_frames
 from extractors.scenarionet import extract
+from frames.rows import read_frames
 from tests.support.extract import frames_of, r2s
 from tests.support.scenarionet_layouts import (
     as_av2,

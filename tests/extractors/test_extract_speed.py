@@ -20,13 +20,13 @@ from hypothesis import strategies as st
 from extractors.argoverse2 import extract as extract_av2
 from extractors.base import ExtractOptions
 from extractors.categories import ALL, VEHICLES
-from extractors.frames import iter_scenes
 from extractors.mcap import extract as extract_mcap
 from extractors.nuscenes import extract as extract_nuscenes
 from extractors.rosbag import extract as extract_rosbag
 from extractors.scenarionet import extract as extract_scenarionet
 from extractors.scenarionet import scenario_frames
 from extractors.speed import MAX_GAP_S, track_speeds
+from frames.rows import iter_scenes
 from synth.config import SynthConfig
 from synth.dsl import parse_program
 from synth.semantics import check

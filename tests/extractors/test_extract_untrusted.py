@@ -14,8 +14,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import FramesError, read_frames
 from extractors.safe_pickle import load_pickle
+from frames.rows import FramesError, read_frames
 from tests.support.extract import EXCERPT, assert_refused, r2s
 
 SCENARIO = EXCERPT / "scenarionet" / "sd_nuscenes_v1.0-mini_scene-0796.pkl"
@@ -183,7 +183,7 @@ def test_outputs_get_the_permissions_of_a_plain_file(tmp_path):
      "twice"),
 ])
 def test_frames_with_smuggled_or_clashing_ids_are_refused_whole(tmp_path, capsys, change, message):
-    from extractors.frames import write_frames
+    from frames.rows import write_frames
 
     good = tmp_path / "frames.parquet"
     assert r2s(capsys, "extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(good)).returncode == 0
@@ -192,7 +192,7 @@ def test_frames_with_smuggled_or_clashing_ids_are_refused_whole(tmp_path, capsys
     path = tmp_path / "bad.parquet"
     import pyarrow.parquet as pq
 
-    from extractors.frames import FRAMES_SCHEMA
+    from frames.rows import FRAMES_SCHEMA
     pq.write_table(pa.Table.from_pandas(bad, schema=FRAMES_SCHEMA, preserve_index=False), path)
     with pytest.raises(FramesError, match=message):
         read_frames(path)

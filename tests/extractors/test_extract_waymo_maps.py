@@ -20,8 +20,8 @@ import pytest
 import shapely
 
 from extractors.scenarionet import scenario_map
-from synth.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH
-from synth.roadmap import MapRepairs
+from synth.road.lane_geometry import DEFAULT_LANE_WIDTH, MAX_HALF_WIDTH, MIN_HALF_WIDTH
+from synth.road.roadmap import MapRepairs
 from tests.support import SHARED, assert_one_line_error, run_r2s
 from tests.support.bounded import run_bounded
 from tests.support.waymo_maps import SCENE, waymo_scenario

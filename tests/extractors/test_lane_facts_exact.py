@@ -14,9 +14,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from extractors.maps import maps_dir, read_maps
-from synth.lane_facts import LaneFacts, PolygonIndex, RoadIndex, Segments, contains, lane_difference, local_direction
-from synth.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
+from frames.maps import maps_dir, read_maps
+from synth.road.lane_facts import (
+    LaneFacts,
+    PolygonIndex,
+    RoadIndex,
+    Segments,
+    contains,
+    lane_difference,
+    local_direction,
+)
+from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 from tests.support.extract import r2s
 from tests.support.polygons import rational_covers
 

@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 from joblib.externals.loky import get_reusable_executor
 
-from extractors.frames import read_frames
 from extractors.registry import SOURCES
+from frames.rows import read_frames
 from tests.support import ROOT
 from tests.support.extract import EXCERPT, assert_refused, r2s
 

@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 
 from extractors.base import ExtractOptions, FrameBuilder, RecordedObject
 from extractors.categories import ALL
-from extractors.frames import read_frames
 from extractors.nuscenes import TAXONOMY as NUSCENES
+from frames.rows import read_frames
 from tests.support.extract import EXCERPT, frames_of
 from tests.support.stable_ids import expected_ids
 

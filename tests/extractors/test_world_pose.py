@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 
 from extractors.base import global_to_ego
 from extractors.categories import ALL
-from extractors.frames import frame_to_scene, scene_to_rows
 from extractors.nuscenes import extract as extract_nuscenes
 from extractors.scenarionet import extract as extract_scenarionet
+from frames.rows import frame_to_scene, scene_to_rows
 from synth.scene import SceneError, scene_from_dict
 from synth.world import WorldPose
 from tests.support import run_r2s

@@ -32,8 +32,8 @@ from __future__ import annotations
 import math
 import random
 
-from synth.overlap import boxes_overlap
 from synth.scene import Scene, scene_from_dict
+from synth.variants.overlap import boxes_overlap
 
 # (length, width) in metres: min, quartiles and max of each type over the 242 shipped nuScenes-mini keyframes
 # (`df.groupby('type')[['length', 'width']].quantile([0, .25, .5, .75, 1])` on frames.parquet); a size is drawn

@@ -1,4 +1,4 @@
-"""Does the chain (synth.gibbs) draw Scenic's distribution? Shared by tests/synth/test_variants.py and
+"""Does the chain (synth.variants.gibbs) draw Scenic's distribution? Shared by tests/synth/variants/test_variants.py and
 bench/bench_variants.py.
 
 Two-sample Kolmogorov-Smirnov tests, one per marginal: every Range parameter (read back from the placed scenes
@@ -6,7 +6,7 @@ with the program's parameterisation) and every pairwise centre distance, N_DRAWS
 rejection sampler against the chain thinned by twice its largest measured integrated autocorrelation time (so its
 draws are near independent, as the test assumes). The familywise level is ALPHA, Bonferroni over the m marginals
 of a frame. Power: with 400 draws a side and m <= 60 the test rejects as soon as one marginal's CDFs differ by
-more than about 0.15 (the asymptotic Kolmogorov critical value, `ks_critical`); tests/synth/test_variants.py checks
+more than about 0.15 (the asymptotic Kolmogorov critical value, `ks_critical`); tests/synth/variants/test_variants.py checks
 that two plausible bugs are caught (a sector half-width of half what the program says; the collision rule
 ignored where it binds).
 """
@@ -21,9 +21,9 @@ import numpy as np
 
 from synth.config import SynthConfig
 from synth.dsl import parse_program
-from synth.gibbs import Chain, ChainSettings, autocorrelation_time, sample_variants
-from synth.parameters import parameterise
 from synth.scene import scene_from_dict
+from synth.variants.gibbs import Chain, ChainSettings, autocorrelation_time, sample_variants
+from synth.variants.parameters import parameterise
 
 N_DRAWS = 400
 ALPHA = 0.01

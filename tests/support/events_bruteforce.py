@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pandas as pd
 
-from extractors.frames import frame_to_scene
-from synth.pattern import Pattern
+from frames.rows import frame_to_scene
+from synth.patterns.one_frame import Pattern
 from tests.support.query_bruteforce import brute_matches
 
 

@@ -1,7 +1,7 @@
 """An independent reference for the LANE part (docs/dsl.md, "Lanes"): lane relations by enumerating walks and by
 GEOS geometry, the optimum by dynamic programming over subsets with the lane part's weights; and random roads.
 
-It shares nothing with synth.lane_relations, synth.parts or synth.search: chains are every simple walk spelled
+It shares nothing with synth.road.lane_relations, synth.parts or synth.search: chains are every simple walk spelled
 out (not Dijkstra), directions come from shapely's project / interpolate, probe containment from GEOS's covers.
 """
 
@@ -14,8 +14,8 @@ from dataclasses import replace
 import shapely
 
 from synth.config import SynthConfig
-from synth.lane_facts import RoadIndex
-from synth.roadmap import MapFeature, RoadMap
+from synth.road.lane_facts import RoadIndex
+from synth.road.roadmap import MapFeature, RoadMap
 from synth.scene import Entity, Scene, make_scene
 from tests.support.bruteforce import witnesses
 

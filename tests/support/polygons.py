@@ -1,5 +1,5 @@
 """An independent reference for point-in-polygon (docs/formats.md, "Lane facts"): everything in fractions, the
-crossing's x computed and compared (not the sign test synth.lane_facts uses)."""
+crossing's x computed and compared (not the sign test synth.road.lane_facts uses)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """An independent reference for pattern matching: every injective tuple of entities, each judged by `r2s check`.
 
-It shares nothing with pipeline.query.mining / pipeline.query.sql or with synth.pattern's matcher: for each tuple of
+It shares nothing with pipeline.query.mining / pipeline.query.sql or with synth.patterns.one_frame's matcher: for each tuple of
 non-ego entities of the right types (the type classes written out again here), the pattern is made a program with
 the bound entities' own types, the scene is cut to ego plus those entities renamed to the pattern's names, and
 synth.semantics.check (the checker `r2s check` runs) decides; tuples are extended one name at a time and a prefix
@@ -15,7 +15,7 @@ from dataclasses import replace
 
 from synth.config import SynthConfig
 from synth.dsl import Program
-from synth.pattern import Pattern
+from synth.patterns.one_frame import Pattern
 from synth.scene import Scene
 from synth.semantics import check, check_statement
 

@@ -1,5 +1,5 @@
 """The windows of frames extracted with their maps, each frame with the road `r2s scene` gives it: what the tests of
-programs over a window read real data through (tests/synth/test_window_lanes.py, test_window_road.py)."""
+programs over a window read real data through (tests/synth/window/test_window_lanes.py, test_window_road.py)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from synth.scene import Scene
 
 def road_windows(frames: Path, window_s: float, limit: int | None = None) -> list[list[Scene]]:
     """The windows (tile over the timestamps) of every scene of frames extracted with their maps, each frame with
-    the road `r2s scene` gives it (extractors.maps.FrameRoads)."""
+    the road `r2s scene` gives it (frames.maps.FrameRoads)."""
     import pandas as pd
 
-    from extractors.frames import frame_to_scene
-    from extractors.maps import FrameRoads, maps_dir
+    from frames.maps import FrameRoads, maps_dir
+    from frames.rows import frame_to_scene
 
     roads = FrameRoads(maps_dir(frames))
     out = []

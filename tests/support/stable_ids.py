@@ -1,4 +1,4 @@
-"""The stable-id rule of docs/formats.md, computed independently of extractors.naming: per scene, each track's
+"""The stable-id rule of docs/formats.md, computed independently of frames.naming: per scene, each track's
 first frame (by frame index) and its distance to ego there; tracks ranked by (first frame, distance, track id);
 the n-th track of a type (its type at first appearance) is `<type>n`."""
 

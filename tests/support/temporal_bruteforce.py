@@ -16,13 +16,10 @@ from dataclasses import replace
 
 import pandas as pd
 
-from extractors.frames import frame_to_scene
+from frames.rows import frame_to_scene
 from synth.config import SynthConfig
-from synth.lane_relations import LaneGraph
 from synth.parts.motion import SPEED_EPS
-from synth.roadmap import RoadMap
-from synth.scene import Scene
-from synth.temporal import (
+from synth.patterns.temporal import (
     LANE_CHANGE_WINDOW_US,
     MOVING_SPEED,
     SPEED_CHANGE,
@@ -33,6 +30,9 @@ from synth.temporal import (
     TemporalPattern,
     turn_of,
 )
+from synth.road.lane_relations import LaneGraph
+from synth.road.roadmap import RoadMap
+from synth.scene import Scene
 from tests.support.query_bruteforce import brute_matches
 
 EGO = ("ego",)  # ego's key among a frame's rows (never a track id, which is a string)

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from extractors.frames import read_frames
+from frames.rows import read_frames
 from pipeline.query.mining import query_frames
-from synth.temporal import parse_temporal
+from synth.patterns.temporal import parse_temporal
 
 
 def engine_temporal(frames_path: Path, text: str, out_dir: Path) -> dict:

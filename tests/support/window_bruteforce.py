@@ -1,6 +1,6 @@
 """An independent reference for programs over a window: the optimal window cost from the frames' own witnesses.
 
-It shares nothing with synth.window, synth.tables, synth.oracle or synth.search: each frame's witnesses are
+It shares nothing with synth.window.program, synth.tables, synth.oracle or synth.search: each frame's witnesses are
 recomputed as (reference, relation) pairs with float atan2 bearings and plain speed differences, as
 tests.support.bruteforce does; a (reference, relation) witnesses e for the window iff it does in every frame where
 e is present (which also says the reference is present there), and the optimum is the DP over

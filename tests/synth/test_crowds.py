@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from synth.overlap import scene_overlaps
+from synth.variants.overlap import scene_overlaps
 from tests.support.crowds import RADIUS, REAL_SIZES, crowd_scene, crowd_scene_dict, crowd_scenes
 
 

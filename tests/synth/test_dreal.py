@@ -16,7 +16,7 @@ import pytest
 
 import pipeline.batch.pool as pool
 import synth.smt.dreal_backend as dreal_backend
-from extractors.frames import iter_scenes, read_frames, write_frames
+from frames.rows import iter_scenes, read_frames, write_frames
 from pipeline.batch.stage import run_frames
 from pipeline.programs import read_programs
 from synth.config import SynthConfig

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from synth.dsl import MAX_STATEMENTS
-from synth.pattern import MAX_NAMES
+from synth.patterns.one_frame import MAX_NAMES
+from synth.patterns.temporal import MAX_DURATION_S, MAX_STEPS, parse_temporal
 from synth.syntax import MAX_LINE
-from synth.temporal import MAX_DURATION_S, MAX_STEPS, parse_temporal
 from tests.support import ROOT
 from tests.support.bounded import assert_refused, run_bounded
 

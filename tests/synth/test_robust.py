@@ -365,7 +365,7 @@ def test_entity_sigma_overrides_the_configured_uncertainty():
 
 
 def test_sigmas_in_scene_json_and_frames(tmp_path):
-    from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
+    from frames.rows import iter_scenes, read_frames, scene_to_rows, write_frames
 
     doc = {"frame_id": "f", "entities": [
         {"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0},

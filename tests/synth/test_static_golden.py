@@ -42,7 +42,7 @@ CASES = (
 
 
 def shipped_scenes() -> dict:
-    from extractors.frames import iter_scenes, read_frames
+    from frames.rows import iter_scenes, read_frames
 
     wanted = {f for f, _ in CASES}
     return {s.frame_id: s for s in iter_scenes(read_frames(FRAMES)) if s.frame_id in wanted}

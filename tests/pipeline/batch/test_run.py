@@ -14,7 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import frame_to_scene, read_frames, scene_to_rows, write_frames
+from frames.rows import frame_to_scene, read_frames, scene_to_rows, write_frames
 from pipeline.batch import pool as run_pool
 from pipeline.batch.pool import LokyPool, compute
 from pipeline.batch.rules import PartBuffer, summarize
@@ -361,7 +361,7 @@ def test_a_failing_frame_is_recorded_and_the_run_goes_on(small_frames, tmp_path,
 def _chunk_tasks(frames: Path, size: int, hook: str | None = None, progress: Path | None = None,
                  config: SynthConfig | None = None) -> list[ChunkTask]:
     """The run's own chunking of a frames file into tasks of `size` frames (progress markers in `progress`)."""
-    from extractors.frames_dataset import FramesDataset
+    from frames.dataset import FramesDataset
     from pipeline.batch.rules import chunks
 
     config = config or SynthConfig()
@@ -550,7 +550,7 @@ def _input(ids: list[str]):
     """The frame-id index and the content index of an input whose frames all have the rows hashed as SAME."""
     import pyarrow as pa
 
-    from extractors.frame_hash import frame_keys, from_hex
+    from frames.frame_hash import frame_keys, from_hex
     from storage.frame_index import FrameIndex, frame_hashes
 
     lane0, lane1, _ = from_hex(pa.array([SAME] * len(ids)))
@@ -602,7 +602,7 @@ def test_uncertainty_reaches_every_frame_and_its_config_hash(tmp_path):
     """`r2s run --uncertainty` gives each frame the robust program `r2s synth --uncertainty` gives it."""
     import pandas as pd
 
-    from extractors.frames import iter_scenes, read_frames
+    from frames.rows import iter_scenes, read_frames
     from synth.config import SynthConfig
     from synth.synthesize import synthesize
 

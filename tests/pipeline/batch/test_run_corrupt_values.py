@@ -7,7 +7,7 @@ The frames are the shipped excerpt as `r2s extract` writes it (part files of the
 dictionary-encoded, statistics, its maps in _maps/): the good parts as written, the last rewritten in three row
 groups, one value of its last row group made invalid UTF-8 in the bytes of its dictionary page, as a damaged disk
 or a hostile writer leaves it (that column is written uncompressed so its bytes can be patched, as in
-tests/extractors/test_frames_bounds.py, and without statistics so that the footer, which would hold the value as a
+tests/frames/test_frames_bounds.py, and without statistics so that the footer, which would hold the value as a
 least or greatest, stays intact)."""
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frame_hash import FrameHasher
-from extractors.frames_dataset import FramesDataset, read_frame_rows
-from extractors.frames_schema import EXTRACTED_SCHEMA, FramesError
-from extractors.maps import maps_dir
+from frames.dataset import FramesDataset, read_frame_rows
+from frames.frame_hash import FrameHasher
+from frames.maps import maps_dir
+from frames.schema import EXTRACTED_SCHEMA, FramesError
 from tests.support import assert_one_line_error, run_r2s
 
 TAIL = "~~ZQX~~"  # what makes the value unique in the file; its ZQX is patched into bytes that are not UTF-8

@@ -14,7 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import scene_to_rows, write_frames
+from frames.rows import scene_to_rows, write_frames
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.faults import r2s_with_fault, small_filesystem
 

@@ -15,7 +15,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.maps import maps_dir
+from frames.maps import maps_dir
 from synth.version import SYNTHESIS_REVISION, __version__
 from tests.support import ROOT, assert_one_line_error, run_r2s
 

@@ -1,5 +1,5 @@
 """`r2s run --window` as a user runs it: real frames (shipped nuScenes-mini keyframes and the Argoverse 2 log
-excerpt, cut short), real workers. Each row is checked against synth.window on the frames the row names, read
+excerpt, cut short), real workers. Each row is checked against synth.window.program on the frames the row names, read
 back independently, and every window program against the checker in each of its frames."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import frame_to_scene, read_frames, write_frames
-from extractors.frames_schema import ROAD_COLUMNS
+from frames.rows import frame_to_scene, read_frames, write_frames
+from frames.schema import ROAD_COLUMNS
 from pipeline.programs import read_programs
 from synth import check_window, synthesize_window, tile
 from synth.config import SynthConfig
@@ -39,7 +39,7 @@ def expected_windows(frames: Path, window_s: float, stride_s: float | None = Non
     `roads`: each frame with the road r2s scene gives it, from the maps beside the frames)."""
     import pandas as pd
 
-    from extractors.maps import FrameRoads, maps_dir
+    from frames.maps import FrameRoads, maps_dir
 
     df = pd.read_parquet(frames) if roads else read_frames(frames)
     found = FrameRoads(maps_dir(frames)) if roads else None
@@ -120,7 +120,7 @@ def test_resume_keeps_a_window_only_for_the_same_rows_and_options(clips, tmp_pat
 
 
 def test_window_runs_with_lanes_give_each_frame_its_road(excerpt_frames, tmp_path):
-    """`r2s run --window --lanes` on the shipped excerpt extracted with its maps: each row is synth.window's
+    """`r2s run --window --lanes` on the shipped excerpt extracted with its maps: each row is synth.window.program's
     program of its frames, each with the road r2s scene gives it, and holds in each of them; frames without a
     map are error rows that name the missing road, and the run goes on."""
     out = tmp_path / "lanes"

@@ -12,9 +12,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from extractors.frame_hash import FrameHasher
-from extractors.frames import read_frames, write_frames
-from extractors.frames_dataset import FramesDataset
+from frames.dataset import FramesDataset
+from frames.frame_hash import FrameHasher
+from frames.rows import read_frames, write_frames
 from pipeline.batch import windows
 from pipeline.batch.windows import WindowSpec, plan_windows
 from pipeline.errors import UserError
@@ -81,7 +81,7 @@ def test_the_bound_is_the_frames_over_all_windows(tmp_path, monkeypatch):
 def test_tiling_is_bisection():
     """200,000 frames, one window over them all, a new one at every frame: 2e10 steps frame by frame, under a
     second by bisection."""
-    code = ("from synth.window import tile\n"
+    code = ("from synth.window.program import tile\n"
             "w = tile(list(range(0, 20_000_000_000, 100_000)), 3_600_000_000, 1)\n"
             "assert len(w) == 200_000 and w[0] == (0, 35_999) and w[-1] == (199_999, 199_999)\n")
     result = run_bounded(command=[sys.executable, "-c", code], timeout=15, max_rss_mb=800)

@@ -12,7 +12,7 @@ import pytest
 
 from synth.config import SynthConfig
 from synth.dsl import DslError, parse_program
-from synth.pattern import parse_pattern
+from synth.patterns.one_frame import parse_pattern
 from synth.scene import MAX_COORDINATE, scene_from_dict
 from synth.synthesize import synthesize
 from tests.support import ROOT, assert_one_line_error, run_r2s
@@ -143,7 +143,7 @@ def test_a_road_coordinate_beyond_a_float_is_bad_input(scene_with_a_huge_road_co
 
 def test_a_temporal_pattern_ends_its_lines_as_the_dsl_does():
     """`then` on a line of its own only where the DSL ends lines: U+2028 is inside a line, as in any pattern."""
-    from synth.temporal import parse_query_pattern
+    from synth.patterns.temporal import parse_query_pattern
 
     with pytest.raises(DslError, match="line 1 column 12: unexpected character"):
         parse_query_pattern("c = new Car\u2028then\u2028c = new Car\n")

@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from extractors.maps import read_maps
-from synth.lane_facts import RoadIndex
+from frames.maps import read_maps
+from synth.road.lane_facts import RoadIndex
 from synth.scene import scene_from_json
 from tests.support import ROOT, assert_one_line_error, run_r2s
 

@@ -7,7 +7,7 @@ import json
 import pandas as pd
 import pytest
 
-from extractors.frames import scene_to_rows, write_frames
+from frames.rows import scene_to_rows, write_frames
 from pipeline.evaluation.frontend import Detected, assign, evaluate, metrics
 from synth.scene import Entity, make_scene
 from tests.support import assert_one_line_error, run_r2s
@@ -113,7 +113,7 @@ def test_bad_input_exits_2(files, tmp_path):
 
 def test_the_plot_is_byte_identical_across_runs(tmp_path):
     """Deterministic output: no matplotlib version or timestamp inside the PNG."""
-    from extractors.frames import scene_to_rows, write_frames
+    from frames.rows import scene_to_rows, write_frames
     from synth.scene import scene_from_dict
 
     scene = scene_from_dict({"frame_id": "s/0", "entities": [

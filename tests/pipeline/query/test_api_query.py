@@ -10,7 +10,7 @@ import sys
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import read_frames
+from frames.rows import read_frames
 from pipeline.errors import InputError
 from tests.support import ROOT, run_r2s
 

@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import read_frames, write_frames
+from frames.rows import read_frames, write_frames
 from pipeline.query.mining import query_frames
-from synth.pattern import parse_pattern
-from synth.temporal import is_temporal
+from synth.patterns.one_frame import parse_pattern
+from synth.patterns.temporal import is_temporal
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.events_bruteforce import brute_events
 

@@ -14,10 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
+from frames.rows import iter_scenes, read_frames, scene_to_rows, write_frames
 from synth.config import SynthConfig
 from synth.dsl import DslError
-from synth.pattern import matches, parse_pattern
+from synth.patterns.one_frame import matches, parse_pattern
 from synth.scene import Entity, Scene
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.query_bruteforce import brute_by_frame

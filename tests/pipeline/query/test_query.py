@@ -15,14 +15,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import iter_scenes, read_frames, scene_to_rows, write_frames
+from frames.rows import iter_scenes, read_frames, scene_to_rows, write_frames
 from pipeline.cli import main as cli_main
 from pipeline.query.mining import query_frames
 from synth.config import SynthConfig
 from synth.dsl import DslError
-from synth.pattern import matches, parse_pattern
+from synth.patterns.one_frame import matches, parse_pattern
+from synth.patterns.temporal import is_temporal
 from synth.scene import Entity, Scene
-from synth.temporal import is_temporal
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.query_bruteforce import brute_matches
 
@@ -98,7 +98,7 @@ def test_real_frames_match_exactly_as_the_brute_force(k, keyframe_scenes, keyfra
     assert want, "a pattern that matches nothing tests nothing"
     assert summary.frames_scanned == len(keyframe_scenes) and summary.frames_matched == len(want)
     assert summary.bindings == sum(map(len, want.values()))
-    # The definition in synth.pattern (backtracking) agrees as well, order included.
+    # The definition in synth.patterns.one_frame (backtracking) agrees as well, order included.
     pattern = parse_pattern(text)
     for s in keyframe_scenes:
         assert [tuple(b.values()) for b in matches(pattern, s)] == want.get(s.frame_id, [])

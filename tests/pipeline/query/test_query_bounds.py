@@ -15,13 +15,13 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import iter_scenes, read_frames
-from extractors.frames_dataset import FramesDataset
+from frames.dataset import FramesDataset
+from frames.rows import iter_scenes, read_frames
 from pipeline.query import mining
 from pipeline.query.sql import estimate_query
 from synth.config import SynthConfig
-from synth.pattern import parse_pattern
-from synth.temporal import is_temporal, parse_temporal
+from synth.patterns.one_frame import parse_pattern
+from synth.patterns.temporal import is_temporal, parse_temporal
 from tests.support import ROOT
 from tests.support.bounded import assert_refused, run_bounded
 from tests.support.query_bruteforce import brute_matches

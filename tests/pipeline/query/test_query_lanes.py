@@ -1,5 +1,5 @@
 """Lane clauses in queries (pipeline.query.lanes): the engine's matches are exactly the definition's
-(synth.pattern.matches on each frame as a scene whose road is its whole map) on the shipped nuScenes excerpt and
+(synth.patterns.one_frame.matches on each frame as a scene whose road is its whole map) on the shipped nuScenes excerpt and
 on the Argoverse 2 test log (../shared/data), for the shipped lane patterns and more; bad input is one line."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from extractors.frames import frame_to_scene
-from extractors.maps import maps_dir, read_maps
+from frames.maps import maps_dir, read_maps
+from frames.rows import frame_to_scene
 from pipeline.query import query
-from synth.pattern import matches, parse_pattern
-from synth.temporal import is_temporal
+from synth.patterns.one_frame import matches, parse_pattern
+from synth.patterns.temporal import is_temporal
 from tests.support import ROOT, SHARED, assert_one_line_error, run_r2s
 
 WAYMO = SHARED / "data" / "waymo" / "sd_waymo_v1.2_7e21cb7ea347ecaa.pkl"  # 147 tracks, as ScenarioNet converts them

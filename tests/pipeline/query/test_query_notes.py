@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pipeline.query.notes import missing_types
-from synth.pattern import VEHICLE, matched_types, parse_pattern
+from synth.patterns.one_frame import VEHICLE, matched_types, parse_pattern
 from synth.scene import ENTITY_TYPES
 from tests.support import ROOT
 from tests.support.bounded import run_bounded

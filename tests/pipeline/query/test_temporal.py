@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import FramesError, read_frames, write_frames
+from frames.rows import FramesError, read_frames, write_frames
 from pipeline.query.mining import query_frames
 from synth.dsl import DslError
-from synth.temporal import is_temporal, parse_query_pattern, parse_temporal
+from synth.patterns.temporal import is_temporal, parse_query_pattern, parse_temporal
 from tests.support import ROOT, assert_one_line_error, run_r2s
 from tests.support.extract import EXCERPT, frames_of
 from tests.support.temporal_bruteforce import brute_temporal
@@ -189,7 +189,7 @@ def test_behaviour_boundaries_by_hand(tmp_path, behaviour, speeds, extra, expect
 # ----------------------------------------------------------------------------------------- syntax and errors
 
 def test_plain_patterns_stay_one_frame_patterns():
-    from synth.pattern import Pattern
+    from synth.patterns.one_frame import Pattern
 
     assert isinstance(parse_query_pattern("p = new Object ahead of ego by Range(0, 5), facing toward ego\n"), Pattern)
     assert not is_temporal("p = new Object ahead of ego by Range(0, 5), facing toward ego, stationary\n")

@@ -16,11 +16,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from extractors.frames import FramesError, read_frames, write_frames
-from extractors.maps import maps_dir, maps_writer, read_maps
+from frames.maps import maps_dir, maps_writer, read_maps
+from frames.rows import FramesError, read_frames, write_frames
 from pipeline.query.mining import query_frames
 from synth.dsl import DslError
-from synth.temporal import is_temporal, parse_temporal
+from synth.patterns.temporal import is_temporal, parse_temporal
 from tests.support import ROOT, SHARED, assert_one_line_error, run_r2s
 from tests.support.lanes import random_road
 from tests.support.temporal_bruteforce import brute_temporal

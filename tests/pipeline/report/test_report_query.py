@@ -11,11 +11,11 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import scene_to_rows, write_frames
+from frames.rows import scene_to_rows, write_frames
 from pipeline.programs import programs_table, result_row
 from pipeline.report.document import md_html_text
 from synth.config import SynthConfig
-from synth.pattern import parse_pattern
+from synth.patterns.one_frame import parse_pattern
 from synth.synthesize import synthesize
 from tests.support import assert_one_line_error, run_r2s
 from tests.support.query_bruteforce import brute_matches
@@ -87,7 +87,7 @@ def table_rows(text: str, header: str) -> list[list[str]]:
 
 
 def test_events_are_the_brute_force_s(section, inputs):
-    from extractors.frames import read_frames
+    from frames.rows import read_frames
     from tests.support.events_bruteforce import brute_events
 
     events = brute_events(read_frames(inputs[0]), parse_pattern(FOLLOWING))

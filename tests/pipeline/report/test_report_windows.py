@@ -10,7 +10,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from extractors.frames import read_frames, write_frames
+from frames.rows import read_frames, write_frames
 from tests.support import ROOT, assert_one_line_error, run_r2s
 
 KEYFRAMES = ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"

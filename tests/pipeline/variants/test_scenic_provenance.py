@@ -11,7 +11,7 @@ import json
 import pytest
 
 from pipeline.variants.sample import ScenicProgramError, ensure_generated
-from synth.emit_scenic import SOURCE_PREFIX, NotGenerated, rebuild_from_source
+from synth.scenic.emit import SOURCE_PREFIX, NotGenerated, rebuild_from_source
 from synth.synthesize import synthesize
 from tests.support import assert_one_line_error, run_r2s
 
