@@ -196,18 +196,17 @@ def test_python_block_runs_as_written(page, k, tmp_path):
 
 def test_the_layout_map_names_every_room_and_module():
     """docs/layout.md is where a newcomer finds the room for a change (the README links it): it links every package
-    of the code and names every module of synth/, storage/, extractors/ and pipeline/'s rooms, so a move or a new module
+    of the code and names every module of synth/, storage/, frames/, extractors/ and pipeline/'s rooms, so a move or a new module
     that forgets the map fails here."""
     layout = ROOT / "docs" / "layout.md"
     text = layout.read_text()
     linked = {(layout.parent / t).resolve() for t in links(layout)}
     unlinked, unnamed = [], []
-    for folder in ("synth", "storage", "extractors", "pipeline"):
+    for folder in ("synth", "storage", "frames", "extractors", "pipeline"):
         for init in sorted((ROOT / folder).rglob("__init__.py")):
             if init.parent.resolve() not in linked:
                 unlinked.append(str(init.parent.relative_to(ROOT)))
-    modules = [*(ROOT / "synth").glob("*.py"), *(ROOT / "storage").glob("*.py"), *(ROOT / "extractors").glob("*.py"),
-               *(ROOT / "pipeline").rglob("*.py")]
+    modules = [f for folder in ("synth", "storage", "frames", "extractors", "pipeline") for f in (ROOT / folder).rglob("*.py")]
     for f in sorted(modules):
         if f.name not in ("__init__.py", "__main__.py") and f"`{f.name}`" not in text:
             unnamed.append(str(f.relative_to(ROOT)))
