@@ -34,6 +34,7 @@ SYNTH_MAY_IMPORT = {
     "scenic": {"road", "parts", "variants"},
     "patterns": {"parts"},
     "window": {"road", "parts", "smt", "search", "scenic"},
+    "behaviour": {"road", "patterns", "window"},  # behaviour programs over a clip (issue 38), in the making
     "core": {"road", "parts", "smt", "search", "scenic"},
 }
 # The road imports of the core only these (a road knows no scene); the core's values (the scene and what describes
