@@ -185,7 +185,7 @@ def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
 
 def _world(rows: pd.DataFrame) -> dict[str, Any] | None:
     """The frame's place in its source's world (scene JSON's `world`, synth.world): the ego row's map_x, map_y,
-    map_heading, with its source, scene, frame index and map; None where the ego row has no world pose."""
+    map_heading, with its source, scene, frame index, timestamp and map; None where the ego row has no world pose."""
     if "map_x" not in rows.columns:
         return None
     ego = rows[rows["is_ego"].astype(bool)]
@@ -196,10 +196,11 @@ def _world(rows: pd.DataFrame) -> dict[str, Any] | None:
     if None in pose:
         return None
     names = {c: r.get(c) for c in ("source", "scene", "map_id")}
-    index = r.get("frame_index")
+    index, stamp = _given(r.get("frame_index")), _given(r.get("timestamp_us"))
     return {"x": pose[0], "y": pose[1], "heading": pose[2],
             **{c: str(v) for c, v in names.items() if isinstance(v, str) and v},
-            **({"frame_index": int(_given(index))} if _given(index) is not None else {})}
+            **({"frame_index": int(index)} if index is not None else {}),
+            **({"timestamp_us": int(stamp)} if stamp is not None else {})}
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:

@@ -23,7 +23,8 @@ from synth.geometry import normalize
 if TYPE_CHECKING:
     from synth.road.roadmap import Points, RoadMap
 
-WORLD_KEYS = ("source", "scene", "frame_index", "map_id", "x", "y", "heading")
+WORLD_KEYS = ("source", "scene", "frame_index", "timestamp_us", "map_id", "x", "y", "heading")
+MAX_TIMESTAMP_US = 2**62  # microseconds: any recording's clock, far below int64's end
 MAX_WORLD_COORDINATE = 1e9  # metres: UTM northings are ~5e6; beyond 1e9 a float's step is past a millimetre
 MAX_NAME = 256
 
@@ -44,6 +45,7 @@ class WorldPose:
     scene: str | None = None
     frame_index: int | None = None
     map_id: str | None = None
+    timestamp_us: int | None = None  # the frame's time (a clip's behaviours read it: synth.behaviour)
 
     @classmethod
     def identity(cls) -> WorldPose:
@@ -118,7 +120,7 @@ def road_in_world(pose: WorldPose, road: RoadMap) -> RoadMap:
 
 def world_from_dict(raw: Any) -> WorldPose:
     """Scene JSON's `world`, validated: x, y finite metres within MAX_WORLD_COORDINATE, heading finite (made
-    [0, 360)), the names printable strings, frame_index a non-negative integer; any other key refused."""
+    [0, 360)), the names printable strings, frame_index and timestamp_us non-negative integers; any other key refused."""
     if not isinstance(raw, Mapping):
         raise WorldError("world must be an object with x, y and heading")
     unknown = sorted(str(k) for k in raw if k not in WORLD_KEYS)
@@ -148,4 +150,9 @@ def world_from_dict(raw: Any) -> WorldPose:
     index = raw.get("frame_index")
     if index is not None and (isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < 2**31):
         raise WorldError(f"world frame_index must be an integer from 0 to 2^31 - 1, got {index!r}")
-    return WorldPose(nums["x"], nums["y"], normalize(nums["heading"]), frame_index=index, **names)
+    stamp = raw.get("timestamp_us")
+    if stamp is not None and (isinstance(stamp, bool) or not isinstance(stamp, int)
+                              or not 0 <= stamp < MAX_TIMESTAMP_US):
+        raise WorldError(f"world timestamp_us must be an integer from 0 to 2^62 - 1 microseconds, got {stamp!r}")
+    return WorldPose(nums["x"], nums["y"], normalize(nums["heading"]), frame_index=index, timestamp_us=stamp,
+                     **names)
