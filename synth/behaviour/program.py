@@ -139,7 +139,7 @@ def parse_clip_program(text: str) -> ClipProgram:
     """A clip program: the relational program's statements, then `behaviour` blocks (docs/dsl.md). Errors are
     one line naming the line and column."""
     rows = lines(text)
-    first = next((k for k, raw in enumerate(rows) if raw.split("#", 1)[0].split()[:1] == ["behaviour"]), len(rows))
+    first = next((k for k, raw in enumerate(rows) if raw.split("#", 1)[0].split()[:1] in (["behaviour"], ["then"])), len(rows))
     program = parse_program("\n".join(rows[:first]))
     behaviours: list[Behaviour] = []
     seen: set[str] = set()
