@@ -1,6 +1,7 @@
 """`r2s synth SCENE.json`: one scene in, its minimum-cost program out (DSL, Scenic or JSON). Several scene JSON
 files (frames of one scene, in time order): one program over the clip, which holds in each of them
-(synth.window.program)."""
+(synth.window.program). With --behaviours, the clip's program: its first frame's program and a behaviour per entity
+(synth.behaviour)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="F", help="write to this file (atomically) instead of stdout")
     p.add_argument("--max-entities", type=int, default=1000, metavar="N",
                    help="refuse scenes with more entities than this (default 1000)")
+    p.add_argument("--behaviours", action="store_true",
+                   help="the clip's program: its first frame's program plus a minimum-cost behaviour per entity, "
+                        "ego included (docs/dsl.md, Behaviour programs; frames need times and speeds)")
     add_synthesis_options(p)
 
 
@@ -34,7 +38,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("a clip is read from files: standard input (-) holds one scene")
     config = synthesis_config(args)
     scenes = [read_scene(path, max_entities=args.max_entities) for path in args.scene]
-    if len(scenes) == 1:
+    if args.behaviours:
+        from synth.behaviour.synthesize import synthesize_behaviours
+
+        result = synthesize_behaviours(scenes, config)
+    elif len(scenes) == 1:
         result = synthesize(scenes[0], config)
     else:
         from synth.window.program import synthesize_window

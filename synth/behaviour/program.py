@@ -10,7 +10,7 @@ from synth.behaviour.kinds import (PATH_WORDS, ChangingLanes, Cruising, Followin
                                    SlowingDown, SlowingToAStop, SpeedingUp, Stopped, Turning)
 from synth.dsl import MAX_STATEMENTS, Program, parse_program
 from synth.scene import EGO_ID, check_identifier
-from synth.syntax import BLANKS, DslError, Line, Range, lines
+from synth.syntax import _LINE_END, BLANKS, DslError, Line, Range, lines
 
 
 @dataclass(frozen=True)
@@ -135,11 +135,20 @@ def _segment(ln: Line) -> Segment:
     return Segment(path, pace, duration)
 
 
+def _behaviour_line(raw: str) -> bool:
+    return raw.split("#", 1)[0].split()[:1] in (["behaviour"], ["then"])
+
+
+def is_clip_program(text: str) -> bool:
+    """Does DSL text have behaviours (a line starting `behaviour` or `then`)?"""
+    return any(_behaviour_line(raw) for raw in _LINE_END.split(text))
+
+
 def parse_clip_program(text: str) -> ClipProgram:
     """A clip program: the relational program's statements, then `behaviour` blocks (docs/dsl.md). Errors are
     one line naming the line and column."""
     rows = lines(text)
-    first = next((k for k, raw in enumerate(rows) if raw.split("#", 1)[0].split()[:1] in (["behaviour"], ["then"])), len(rows))
+    first = next((k for k, raw in enumerate(rows) if _behaviour_line(raw)), len(rows))
     program = parse_program("\n".join(rows[:first]))
     behaviours: list[Behaviour] = []
     seen: set[str] = set()

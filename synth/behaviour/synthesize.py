@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from synth.behaviour.kinds import outward
@@ -31,6 +31,7 @@ class ClipResult:
     frame_ids: tuple[str, ...]
     duration_s: float
     behaviours_s: float  # seconds the behaviours took
+    clip: Clip = field(compare=False, repr=False)  # what they were read from (the Scenic text's parameters)
 
     @property
     def cost(self) -> int:
@@ -70,4 +71,4 @@ def synthesize_behaviours(scenes: Sequence[Scene | Mapping[str, Any]] | Clip,
                       for t in clip.tracks)
     took = time.perf_counter() - started
     program = ClipProgram(first.program, tuple(s.behaviour for s in segmented))
-    return ClipResult(program, first, segmented, tuple(s.frame_id for s in clip.scenes), clip.duration, took)
+    return ClipResult(program, first, segmented, tuple(s.frame_id for s in clip.scenes), clip.duration, took, clip)

@@ -1,0 +1,127 @@
+"""A clip program as a dynamic Scenic scenario for Scenic's Newtonian simulator (docs/scenic.md, "Behaviour
+programs"): `scenic.simulators.newtonian.driving_model` on the clip's road as OpenDRIVE (r2s export's .xodr, in
+the world frame), every entity of the clip's first frame at its recorded pose there, each behaving entity driven
+by r2sgen's own Scenic behaviour `R2sSegments`, one step of it per segment with the segment's recorded
+parameters (duration, speed at its ends, turn), the program's speed bounds as `require always`, and `terminate
+after` the clip's length. Values in, text out."""
+
+from __future__ import annotations
+
+import math
+
+from synth.behaviour.kinds import Cruising, SlowingToAStop, Stopped
+from synth.behaviour.synthesize import ClipResult
+from synth.behaviour.track import Track
+from synth.scene import VEHICLE_CLASSES, Entity
+from synth.syntax import fmt_number
+from synth.temporal import turn_of
+
+# The behaviour every moving entity runs: per segment (seconds, speed at its start and end in m/s, turn in
+# degrees CCW), the speed goes linearly from one end to the other and the heading turns at a steady rate, both
+# steered step by step toward where they should be (cars: speed set along the heading and a steering angle
+# whose Newtonian yaw rate closes the heading error in one step; pedestrians: walking speed and direction).
+PRELUDE = '''\
+import math
+
+def r2s__steer(car, yaw_rate):
+    """The steering whose Newtonian yaw rate (-speed * sin(steer * pi / 2) / length) is yaw_rate (rad/s)."""
+    speed = max(car.speed, 0.1)
+    return 2 / math.pi * math.asin(max(-1, min(1, -yaw_rate * car.length / speed)))
+
+behavior R2sSegments(segments, walks):
+    heading = self.heading
+    for duration, v0, v1, turn in segments:
+        steps = max(1, round(duration / simulation().timestep))
+        start = heading
+        for k in range(steps):
+            f = (k + 1) / steps
+            speed = v0 + (v1 - v0) * f
+            heading = start + turn * f
+            if walks:
+                take SetWalkingDirectionAction(heading), SetWalkingSpeedAction(speed)
+            else:
+                error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
+                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, error / simulation().timestep))
+    while True:
+        take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
+'''
+
+
+def _num(v: float) -> str:
+    return repr(round(v, 6))
+
+
+def segment_parameters(result: ClipResult, track: Track) -> list[tuple[float, float, float, float]]:
+    """(duration s, speed at start, speed at end, turn radians CCW) of each segment, as recorded at its boundary
+    samples (stopped: 0 m/s; slowing to a stop: to 0)."""
+    bounds = next(s.boundaries for s in result.segmented if s.behaviour.id == track.id)
+    segments = next(s.behaviour.segments for s in result.segmented if s.behaviour.id == track.id)
+    out = []
+    for seg, a, b in zip(segments, bounds, bounds[1:]):
+        s = track.samples
+        turn = sum(turn_of(s[k].heading, s[k + 1].heading) for k in range(a, b))
+        v0, v1 = s[a].speed, s[b].speed
+        if isinstance(seg.pace, Stopped):
+            v0 = v1 = 0.0
+        elif isinstance(seg.pace, SlowingToAStop):
+            v1 = 0.0
+        out.append((s[b].t - s[a].t, v0, v1, math.radians(turn)))
+    return out
+
+
+def speed_bound(result: ClipResult, track: Track, v_stop: float) -> float:
+    """The most its behaviour lets the entity go (m/s): its Range paces' upper bounds, its recorded speed where a
+    segment slows to a stop, V_STOP where it is stopped or parked."""
+    behaviour = result.program.behaviour(track.id)
+    top = v_stop
+    for seg in behaviour.segments:
+        if isinstance(seg.pace, Cruising):
+            top = max(top, seg.pace.range.hi)
+        elif not isinstance(seg.pace, Stopped):
+            top = max(top, max(x.speed for x in track.samples))
+    return top
+
+
+def _placed(e: Entity, name: str, world) -> tuple[str, str]:
+    """The Scenic class and the specifiers of an entity at its recorded pose in the world."""
+    x, y = world.point(e.x, e.y)
+    heading = world.heading + e.heading - 90.0  # Scenic's 0 is +y; the world's yaw is from +x
+    length, width = e.dimensions()
+    cls = "Pedestrian" if e.type == "Pedestrian" else "Car" if e.type in VEHICLE_CLASSES else "Object"
+    return cls, (f"new {cls} at ({_num(x)}, {_num(y)}), facing {_num(heading)} deg, with length {_num(length)}, "
+                 f"with width {_num(width)}, with regionContainedIn None, with allowCollisions True, "
+                 "with requireVisible False")
+
+
+def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
+    """The dynamic Scenic scenario of a clip program (module docstring). `xodr`: the path of the clip's road as
+    OpenDRIVE in the world frame (r2s export --to openscenario writes it for the clip's first frame)."""
+    clip = result.clip
+    first = clip.scenes[0]
+    world = first.world
+    lines = [f"# {result.header}",
+             "# A dynamic scenario for Scenic's Newtonian simulator, headless: compile in 2D mode "
+             "(scenic.scenarioFromFile(F, mode2D=True)) and simulate; every entity of the first frame at its recorded "
+             "pose in the world, each behaviour's segments with their recorded parameters (docs/scenic.md).",
+             f"param map = {xodr!r}", "param render = False",
+             "model scenic.simulators.newtonian.driving_model", "", PRELUDE]
+    late = [t.id for t in clip.tracks if not t.from_start]
+    if late:
+        lines.append(f"# Not placed (first seen after the clip's first frame): {', '.join(late)}")
+    by_id = first.by_id()
+    for track in clip.tracks:
+        if not track.from_start:
+            continue
+        e = first.ego if track.id == "ego" else by_id[track.id]
+        cls, placed = _placed(e, track.id, world)
+        behaviour = result.program.behaviour(track.id)
+        if not behaviour.parked and cls != "Object":
+            segments = ", ".join(f"({', '.join(_num(v) for v in p)})" for p in segment_parameters(result, track))
+            walks = "True" if cls == "Pedestrian" else "False"
+            placed += f", with speed {_num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
+        lines.append(f"{track.id} = {placed}")
+        top = speed_bound(result, track, v_stop)
+        if cls != "Object":
+            lines.append(f"require always {track.id}.speed <= {fmt_number(top + 0.01)}  # {behaviour.id}: its paces")
+    lines.append(f"terminate after {_num(clip.duration)} seconds")
+    return "\n".join(lines) + "\n"
