@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
 from pipeline.errors import UserError
@@ -26,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--behaviours", action="store_true",
                    help="the clip's program: its first frame's program plus a minimum-cost behaviour per entity, "
                         "ego included (docs/dsl.md, Behaviour programs; frames need times and speeds)")
+    p.add_argument("--road", metavar="XODR",
+                   help="with --behaviours --format scenic: the clip's road as OpenDRIVE, which the dynamic scenario "
+                        "loads (r2s export FIRST.json --to openscenario --out DIR writes it)")
     add_synthesis_options(p)
 
 
@@ -36,6 +40,15 @@ def run(args: argparse.Namespace) -> int:
     check_apart(args.out, [*(("input scene", s) for s in args.scene), ("config", args.config)])
     if len(args.scene) > 1 and "-" in args.scene:
         raise UserError("a clip is read from files: standard input (-) holds one scene")
+    if args.road is not None and not (args.behaviours and args.format == "scenic"):
+        raise UserError("--road is the OpenDRIVE road of a behaviour program's Scenic text: give it with "
+                        "--behaviours --format scenic")
+    if args.behaviours and args.format == "scenic" and args.road is None:
+        raise UserError("--behaviours --format scenic needs --road FILE.xodr, the road the scenario is simulated on "
+                        "(r2s export FIRST.json --to openscenario --out DIR writes it)")
+    if args.road is not None and not Path(args.road).is_file():
+        raise UserError(f"--road {args.road} is not a file (r2s export FIRST.json --to openscenario --out DIR "
+                        "writes the .xodr)")
     config = synthesis_config(args)
     scenes = [read_scene(path, max_entities=args.max_entities) for path in args.scene]
     if args.behaviours:
@@ -50,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
         result = synthesize_window(scenes, config)
     if args.format == "json":
         text = json.dumps(result.to_json_dict(), indent=1) + "\n"
+    elif args.format == "scenic" and args.behaviours:
+        from synth.behaviour.scenic import clip_scenic
+
+        text = clip_scenic(result, str(Path(args.road).resolve()), config.v_stop)
     elif args.format == "scenic":
         text = result.scenic
     else:
