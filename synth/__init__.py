@@ -36,12 +36,17 @@ _LAZY = {
     "tile": "synth.window.program",
     "WindowResult": "synth.window.program",
     "WindowError": "synth.window.program",
+    "synthesize_behaviours": "synth.behaviour.synthesize",
+    "ClipResult": "synth.behaviour.synthesize",
+    "check_clip": "synth.behaviour.check",
+    "parse_clip_program": "synth.behaviour.program",
 }
 
 __all__ = [
-    "CheckResult", "ConfigError", "DslError", "Entity", "ExitCode", "InputError", "Program", "R2sError", "Scene",
-    "SceneError", "SynthConfig", "SynthResult", "SynthStats", "WindowError", "WindowResult", "check", "check_window",
-    "frame_program", "parse_program", "scene_from_dict", "scene_from_json", "synthesize", "synthesize_window", "tile",
+    "CheckResult", "ClipResult", "ConfigError", "DslError", "Entity", "ExitCode", "InputError", "Program", "R2sError",
+    "Scene", "SceneError", "SynthConfig", "SynthResult", "SynthStats", "WindowError", "WindowResult", "check",
+    "check_clip", "check_window", "frame_program", "parse_clip_program", "parse_program", "scene_from_dict",
+    "scene_from_json", "synthesize", "synthesize_behaviours", "synthesize_window", "tile",
 ]
 
 

@@ -6,8 +6,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from synth.behaviour.kinds import (PATH_WORDS, ChangingLanes, Cruising, FollowingLane, Heading, Path, Pace,
-                                   SlowingDown, SlowingToAStop, SpeedingUp, Stopped, Turning)
+from synth.behaviour.kinds import (
+    PATH_WORDS,
+    ChangingLanes,
+    Cruising,
+    FollowingLane,
+    Heading,
+    Pace,
+    Path,
+    SlowingDown,
+    SlowingToAStop,
+    SpeedingUp,
+    Stopped,
+    Turning,
+)
 from synth.dsl import MAX_STATEMENTS, Program, parse_program
 from synth.scene import EGO_ID, check_identifier
 from synth.syntax import _LINE_END, BLANKS, DslError, Line, Range, lines

@@ -13,8 +13,17 @@ import math
 from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 
 from synth.behaviour.check import segment_holds
-from synth.behaviour.kinds import (ChangingLanes, Cruising, FollowingLane, Heading, SlowingDown, SlowingToAStop,
-                                   SpeedingUp, Stopped, Turning)
+from synth.behaviour.kinds import (
+    ChangingLanes,
+    Cruising,
+    FollowingLane,
+    Heading,
+    SlowingDown,
+    SlowingToAStop,
+    SpeedingUp,
+    Stopped,
+    Turning,
+)
 from synth.behaviour.program import Segment
 from synth.behaviour.track import Track
 from synth.config import SynthConfig
