@@ -212,7 +212,7 @@ def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:
     """A Scene back as frames rows (ids kept as they are; speeds and measurement sigmas as their optional columns,
     if any entity has one; lane facts and the road's map id as the road columns; the scene's world pose as the ego
-    row's map_x, map_y, map_heading)."""
+    row's map_x, map_y, map_heading; its time as every row's timestamp_us)."""
     optional = [c for c in OPTIONAL_COLUMNS if any(getattr(e, c) is not None for e in scene.entities)]
     world = scene.world
     map_id = scene.road.map_id if scene.road is not None else world.map_id if world is not None else None
@@ -221,7 +221,8 @@ def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = 
         rows.append(
             {
                 "frame_id": scene.frame_id, "source": source, "scene": scene_name or scene.frame_id.split("/")[0],
-                "frame_index": frame_index, "timestamp_us": None, "entity_id": e.id, "track_id": e.id,
+                "frame_index": frame_index,
+                "timestamp_us": world.timestamp_us if world is not None else None, "entity_id": e.id, "track_id": e.id,
                 "type": e.type, "category": e.type, "x": e.x, "y": e.y, "heading": e.heading,
                 "length": e.length, "width": e.width, "is_ego": e.is_ego,
                 **{c: getattr(e, c) for c in optional},

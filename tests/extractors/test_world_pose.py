@@ -92,7 +92,9 @@ def test_r2s_scene_writes_the_world_and_scene_rows_keep_it(tmp_path):
     assert res.returncode == 0, res.stderr
     doc = json.loads(res.stdout)
     assert list(doc) == ["frame_id", "entities", "world"]  # no map: no road, a world
-    assert set(doc["world"]) == {"source", "scene", "frame_index", "x", "y", "heading"}
+    assert set(doc["world"]) == {"source", "scene", "frame_index", "timestamp_us", "x", "y", "heading"}
+    rows = pd.read_parquet(frames)
+    assert doc["world"]["timestamp_us"] == int(rows[rows.frame_id == "scene-0103/0"].timestamp_us.iloc[0])
     scene = scene_from_dict(doc)
     back = frame_to_scene(pd.DataFrame(scene_to_rows(scene, source="nuscenes", scene_name="scene-0103")))
     assert back.world == scene.world
@@ -108,6 +110,9 @@ def test_the_frames_without_a_world_pose_make_scenes_without_world():
     ({"x": 1, "y": 2}, "lacks heading"), ({"x": 1, "y": 2, "heading": True}, "must be a number"),
     ({"x": 1e10, "y": 2, "heading": 0}, "within 1e9"), ({"x": 1, "y": 2, "heading": 0, "yaw": 3}, "unknown key 'yaw'"),
     ({"x": 1, "y": 2, "heading": 0, "frame_index": -1}, "frame_index"),
+    ({"x": 1, "y": 2, "heading": 0, "timestamp_us": -1}, "timestamp_us"),
+    ({"x": 1, "y": 2, "heading": 0, "timestamp_us": 1.5}, "timestamp_us"),
+    ({"x": 1, "y": 2, "heading": 0, "timestamp_us": 2**62}, "timestamp_us"),
     ({"x": 1, "y": 2, "heading": 0, "scene": "a\nb"}, "printable"), ([1, 2, 3], "must be an object")])
 def test_a_bad_world_is_one_line(world, says):
     with pytest.raises(SceneError, match=says):
