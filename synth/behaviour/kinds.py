@@ -81,6 +81,14 @@ class Summary:
             min(self.h_lo, offset), max(self.h_hi, offset))
 
 
+def pace_possible(m: Summary, config: SynthConfig) -> bool:
+    """Can write_pace write a pace on this interval or on any longer one from the same start? Each pace's
+    condition but the last change is kept only while it holds (a speed above V_STOP, a rise or a fall past DV, a
+    hull wider than C_SPEED stay), so once none is left, none comes back: the segmentation stops extending."""
+    return (m.s_max <= config.v_stop or m.falling or m.rising or m.steps <= 1
+            or not wider_than(outward(m.s_min, m.s_max), config.c_speed))
+
+
 def _all(samples: Sequence[Sample], a: int, b: int, test) -> bool:
     return all(test(samples[k]) for k in range(a, b + 1))
 

@@ -10,11 +10,14 @@ from __future__ import annotations
 import math
 
 from synth.behaviour.kinds import Cruising, SlowingToAStop, Stopped
+from synth.behaviour.program import Behaviour
+from synth.behaviour.segmentation import Segmented
 from synth.behaviour.synthesize import ClipResult
 from synth.behaviour.track import Track
 from synth.scene import VEHICLE_CLASSES, Entity
 from synth.syntax import fmt_number
 from synth.temporal import turn_of
+from synth.world import WorldPose
 
 # The behaviour every moving entity runs: per segment (seconds, speed at its start and end in m/s, turn in
 # degrees CCW), the speed goes linearly from one end to the other and the heading turns at a steady rate, both
@@ -51,14 +54,11 @@ def _num(v: float) -> str:
     return repr(round(v, 6))
 
 
-def segment_parameters(result: ClipResult, track: Track) -> list[tuple[float, float, float, float]]:
+def segment_parameters(segmented: Segmented, track: Track) -> list[tuple[float, float, float, float]]:
     """(duration s, speed at start, speed at end, turn radians CCW) of each segment, as recorded at its boundary
     samples (stopped: 0 m/s; slowing to a stop: to 0)."""
-    bounds = next(s.boundaries for s in result.segmented if s.behaviour.id == track.id)
-    segments = next(s.behaviour.segments for s in result.segmented if s.behaviour.id == track.id)
-    out = []
-    for seg, a, b in zip(segments, bounds, bounds[1:]):
-        s = track.samples
+    s, bounds, out = track.samples, segmented.boundaries, []
+    for seg, a, b in zip(segmented.behaviour.segments, bounds, bounds[1:]):
         turn = sum(turn_of(s[k].heading, s[k + 1].heading) for k in range(a, b))
         v0, v1 = s[a].speed, s[b].speed
         if isinstance(seg.pace, Stopped):
@@ -69,10 +69,9 @@ def segment_parameters(result: ClipResult, track: Track) -> list[tuple[float, fl
     return out
 
 
-def speed_bound(result: ClipResult, track: Track, v_stop: float) -> float:
+def speed_bound(behaviour: Behaviour, track: Track, v_stop: float) -> float:
     """The most its behaviour lets the entity go (m/s): its Range paces' upper bounds, its recorded speed where a
     segment slows to a stop, V_STOP where it is stopped or parked."""
-    behaviour = result.program.behaviour(track.id)
     top = v_stop
     for seg in behaviour.segments:
         if isinstance(seg.pace, Cruising):
@@ -82,7 +81,7 @@ def speed_bound(result: ClipResult, track: Track, v_stop: float) -> float:
     return top
 
 
-def _placed(e: Entity, name: str, world) -> tuple[str, str]:
+def _placed(e: Entity, world: WorldPose) -> tuple[str, str]:
     """The Scenic class and the specifiers of an entity at its recorded pose in the world."""
     x, y = world.point(e.x, e.y)
     heading = world.heading + e.heading - 90.0  # Scenic's 0 is +y; the world's yaw is from +x
@@ -109,19 +108,19 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
     if late:
         lines.append(f"# Not placed (first seen after the clip's first frame): {', '.join(late)}")
     by_id = first.by_id()
-    for track in clip.tracks:
+    for segmented, track in zip(result.segmented, clip.tracks):  # both ego first, then in order of appearance
         if not track.from_start:
             continue
+        behaviour = segmented.behaviour
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, placed = _placed(e, track.id, world)
-        behaviour = result.program.behaviour(track.id)
+        cls, placed = _placed(e, world)
         if not behaviour.parked and cls != "Object":
-            segments = ", ".join(f"({', '.join(_num(v) for v in p)})" for p in segment_parameters(result, track))
+            segments = ", ".join(f"({', '.join(_num(v) for v in p)})" for p in segment_parameters(segmented, track))
             walks = "True" if cls == "Pedestrian" else "False"
             placed += f", with speed {_num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
         lines.append(f"{track.id} = {placed}")
-        top = speed_bound(result, track, v_stop)
         if cls != "Object":
+            top = speed_bound(behaviour, track, v_stop)
             lines.append(f"require always {track.id}.speed <= {fmt_number(top + 0.01)}  # {behaviour.id}: its paces")
     lines.append(f"terminate after {_num(clip.duration)} seconds")
     return "\n".join(lines) + "\n"

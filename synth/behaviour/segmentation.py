@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from synth.behaviour.kinds import Stopped, Summary, outward, write_pace, write_path
+from synth.behaviour.kinds import Stopped, Summary, outward, pace_possible, write_pace, write_path
 from synth.behaviour.program import Behaviour, Segment
 from synth.behaviour.track import Track
 from synth.config import SynthConfig
@@ -26,13 +26,16 @@ def written_segment(m: Summary, config: SynthConfig) -> Segment | None:
 
 
 def segment_table(track: Track, config: SynthConfig) -> list[list[Segment | None]]:
-    """table[a][b - a - 1]: the segment written on samples a .. b, for every a < b."""
+    """table[a][b - a - 1]: the segment written on samples a .. b, for every a < b up to the first b past which
+    no pace can be written (kinds.pace_possible); the row ends there."""
     samples, out = track.samples, []
     for a in range(track.n - 1):
         m, row = Summary.start(samples[a]), []
         for b in range(a + 1, track.n):
             m = m.then(samples[b], samples[b - 1], track.steps, b - 1, config)
             row.append(written_segment(m, config))
+            if not pace_possible(m, config):
+                break  # no longer interval from a has a pace either: the row ends here
         out.append(row)
     return out
 
@@ -61,8 +64,9 @@ def segment_track(track: Track, config: SynthConfig, after=None) -> Segmented:
     best[n - 1] = (0, n - 1)
     for a in range(n - 2, -1, -1):
         choice = None
-        for b in range(n - 1, a, -1):  # the longest first: ties keep the largest b
-            seg, rest = table[a][b - a - 1], best[b]
+        row = table[a]
+        for b in range(a + len(row), a, -1):  # the longest first: ties keep the largest b
+            seg, rest = row[b - a - 1], best[b]
             if seg is None or rest is None:
                 continue
             cost = seg.cost + rest[0]

@@ -43,15 +43,11 @@ class Steps:
 
     @classmethod
     def of(cls, samples: Sequence[Sample], graph: LaneGraph | None) -> Steps:
-        keep, left, right = [], [], []
-        for s, n in zip(samples, samples[1:]):
-            if graph is None or s.lane is None or n.lane is None:
-                keep.append(False), left.append(False), right.append(False)
-                continue
-            keep.append(n.lane in graph.related(s.lane, "same"))
-            left.append(n.lane in graph.related(s.lane, "left"))
-            right.append(n.lane in graph.related(s.lane, "right"))
-        return cls(tuple(keep), tuple(left), tuple(right))
+        def related(side: str) -> tuple[bool, ...]:
+            return tuple(graph is not None and s.lane is not None and n.lane is not None
+                         and n.lane in graph.related(s.lane, side) for s, n in zip(samples, samples[1:]))
+
+        return cls(related("same"), related("left"), related("right"))
 
 
 @dataclass(frozen=True)
