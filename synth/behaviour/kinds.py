@@ -114,14 +114,18 @@ def _never_rises(samples: Sequence[Sample], a: int, b: int, dv: float) -> bool:
 
 
 # ----------------------------------------------------------------------------------------------------- paths
-class Path:
-    """Where a segment goes. `cost`, `text`; holds(samples, steps, a, b); write(summary, config) or None."""
+class Kind:
+    """A path or a pace: its cost, and its text (a class attribute, or a property of its Range), which it prints as."""
 
     cost: ClassVar[int]
-    order: ClassVar[int]  # the order synthesis asks the paths in (the grammar's)
+    text: str
 
     def __str__(self) -> str:
         return self.text
+
+
+class Path(Kind):
+    """Where a segment goes: holds(samples, steps, a, b); written by write_path."""
 
 
 @dataclass(frozen=True)
@@ -211,13 +215,8 @@ def write_path(m: Summary, config: SynthConfig) -> Path | None:
 
 
 # ----------------------------------------------------------------------------------------------------- paces
-class Pace:
-    """How fast a segment goes. `cost`, `text`; holds(samples, a, b, config); written by write_pace."""
-
-    cost: ClassVar[int]
-
-    def __str__(self) -> str:
-        return self.text
+class Pace(Kind):
+    """How fast a segment goes: holds(samples, a, b, config); written by write_pace."""
 
 
 @dataclass(frozen=True)
