@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 
@@ -81,6 +82,7 @@ def test_nuscenes_keyframes_get_a_behaviour_program(excerpt_frames, tmp_path):
 
 def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
     scenic = pytest.importorskip("scenic")
+    from scenic.core.distributions import RejectionException
     export = tmp_path / "export"
     proc = run_r2s("export", av2_clip[0], "--to", "openscenario", "--out", str(export))
     assert proc.returncode == 0, proc.stderr
@@ -98,3 +100,9 @@ def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
     ego_last = json.loads(open(av2_clip[-1]).read())["world"]
     x, y = result.result.trajectory[-1][0][:2]
     assert math.hypot(x - ego_last["x"], y - ego_last["y"]) < 1.0  # ego after 1.1 s of its behaviour
+    # The requirements are live: a bound below ego's recorded speed makes Scenic reject every scene (`require
+    # always` holds from the first instant on, which sampling already checks).
+    tight = re.sub(r"require always ego\.speed <= [0-9.]+", "require always ego.speed <= 0.2", text)
+    assert tight != text
+    with pytest.raises(RejectionException):
+        scenic.scenarioFromString(tight, mode2D=True).generate(maxIterations=5)
