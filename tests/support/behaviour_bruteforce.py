@@ -39,7 +39,9 @@ def cents(lo: float, hi: float) -> Range:
 def shortest_arc(headings: list[float]) -> tuple[float, float]:
     """The arc (start, start + width) holding every heading, opposite the largest gap between them."""
     hs = sorted(h % 360.0 for h in headings)
-    gaps = [(hs[(k + 1) % len(hs)] - hs[k]) % 360.0 for k in range(len(hs))]
+    # The gap after each heading, counter-clockwise to the next (the last one's wraps round to the first: all
+    # headings equal leave one gap of 360 there, and an arc of width 0).
+    gaps = [hs[k + 1] - hs[k] for k in range(len(hs) - 1)] + [hs[0] + 360.0 - hs[-1]]
     if len(hs) == 1:
         return hs[0], hs[0]
     k = max(range(len(hs)), key=lambda i: gaps[i])

@@ -16,7 +16,7 @@ from synth.behaviour.synthesize import synthesize_behaviours
 from synth.behaviour.track import ClipError, Sample, Steps, Track, read_clip
 from synth.config import SynthConfig
 from synth.syntax import DslError
-from tests.support import ROOT
+from tests.support import ROOT, run_r2s
 from tests.support.behaviour_bruteforce import brute_cost
 
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
@@ -79,6 +79,32 @@ def test_every_track_of_a_real_clip_is_minimal_and_checked(av2_clip):
     assert check_clip(str(result.program), av2_clip, config).ok
     assert parse_clip_program(str(result.program)) == result.program
     assert result.cost == result.first.cost + sum(b.cost for b in result.program.behaviours)
+
+
+def _minimal_on_every_track(scenes, config):
+    clip = read_clip(scenes)
+    for track in clip.tracks:
+        assert segment_track(track, config).behaviour.cost == brute_cost(track, config), track.id
+    assert check_clip(synthesize_behaviours(clip, config).program, clip, config).ok
+    return clip
+
+
+def test_every_track_of_nuscenes_keyframes_is_minimal(excerpt_frames):
+    config = SynthConfig(motion=True, lanes=True)
+    clip = _minimal_on_every_track([frame_scene(str(excerpt_frames), f"scene-0103/{k}") for k in range(4)], config)
+    assert len(clip.tracks) > 20
+
+
+def test_every_track_of_a_waymo_second_is_minimal(shared_dir, tmp_path):
+    source = tmp_path / "waymo"
+    source.mkdir()
+    (source / "one.pkl").write_bytes((shared_dir / "data" / "waymo" / "sd_waymo_v1.2_7e21cb7ea347ecaa.pkl").read_bytes())
+    frames = tmp_path / "frames"
+    assert run_r2s("extract", "scenarionet", str(source), "--categories", "all", "--out", str(frames)).returncode == 0
+    scene = "7e21cb7ea347ecaa"
+    config = SynthConfig(motion=True, lanes=True)
+    clip = _minimal_on_every_track([frame_scene(str(frames), f"{scene}/{k}") for k in range(11)], config)
+    assert any(any(t.steps.keep) for t in clip.tracks)
 
 
 def test_the_checker_refuses_a_behaviour_that_leaves_the_recording(av2_clip):
