@@ -58,6 +58,16 @@ def test_dynamic_programming_is_minimal_against_the_brute_force(track):
     assert bounds[0] == 0 and bounds[-1] == track.n - 1 and list(bounds) == sorted(bounds)
 
 
+def test_a_steady_walk_is_one_segment():
+    """Equal headings, no lane, a steady speed: one segment, `heading Range(h, h) deg, cruising ...` (cost 4)."""
+    samples = tuple(Sample(0.5 * k, 1.25, 61.5, None, False) for k in range(5))
+    track = Track("pedestrian1", "Pedestrian", samples, Steps.of(samples, None), True)
+    found = segment_track(track, CONFIG)
+    assert str(found.behaviour) == ("behaviour pedestrian1 heading Range(61.5, 61.5) deg, cruising Range(1.25, 1.25) m/s "
+                                    "for Range(2, 2) s\n")
+    assert found.behaviour.cost == brute_cost(track, CONFIG) == 4
+
+
 def _clip(first: int, n: int):
     return [frame_scene(str(AV2), f"{LOG}/{k}") for k in range(first, first + n)]
 
