@@ -18,16 +18,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.cli.inputs import load_config, read_program, read_scene, read_text_file
+    from pipeline.cli.inputs import load_config, read_scene, read_text_file
     from synth.behaviour.program import is_clip_program
+    from synth.dsl import parse_program
     from synth.semantics import check
+    from synth.syntax import DslError
 
     config = load_config(args.config)
-    program_text = read_text_file(args.program, "program")
-    if len(args.scene) > 1 or is_clip_program(program_text):
-        return check_clip_files(args.scene, args.program, program_text, config)
-    scene = read_scene(args.scene[0])
-    program = read_program(args.program)
+    scene = read_scene(args.scene[0]) if len(args.scene) == 1 else None  # a scene's errors first, as ever
+    text = read_text_file(args.program, "program")
+    try:
+        if scene is None or is_clip_program(text):
+            return check_clip_files(args.scene, text, config)
+        program = parse_program(text)
+    except DslError as exc:
+        raise UserError(f"{args.program}: {exc}") from None
     result = check(program, scene, config)
     if result.ok:
         print(f"ok: the program contains scene {scene.frame_id} (cost {program.cost})")
@@ -37,19 +42,16 @@ def run(args: argparse.Namespace) -> int:
     raise CheckFailed(f"the program does not contain the scene ({len(result.violations)} violations)")
 
 
-def check_clip_files(scene_paths: list[str], program_path: str, text: str, config) -> int:
-    """A clip program on the clip's frames: exit 0 when it contains the clip, else the violations and exit 3."""
+def check_clip_files(scene_paths: list[str], text: str, config) -> int:
+    """A clip program on the clip's frames: exit 0 when it contains the clip, else the violations and exit 3.
+    A program that is not DSL raises DslError (the caller names the file)."""
     from pipeline.cli.inputs import read_scene
     from synth.behaviour.check import check_clip
     from synth.behaviour.program import parse_clip_program
-    from synth.syntax import DslError
 
     if len(scene_paths) > 1 and "-" in scene_paths:
         raise UserError("a clip is read from files: standard input (-) holds one scene")
-    try:
-        program = parse_clip_program(text)
-    except DslError as exc:
-        raise UserError(f"{program_path}: {exc}") from None
+    program = parse_clip_program(text)
     scenes = [read_scene(p) for p in scene_paths]
     result = check_clip(program, scenes, config)
     if result.ok:

@@ -22,7 +22,7 @@ from synth.behaviour.kinds import (
 )
 from synth.dsl import MAX_STATEMENTS, Program, parse_program
 from synth.scene import EGO_ID, check_identifier
-from synth.syntax import _LINE_END, BLANKS, DslError, Line, Range, lines
+from synth.syntax import BLANKS, DslError, Line, Range, lines
 
 
 @dataclass(frozen=True)
@@ -152,8 +152,8 @@ def _behaviour_line(raw: str) -> bool:
 
 
 def is_clip_program(text: str) -> bool:
-    """Does DSL text have behaviours (a line starting `behaviour` or `then`)?"""
-    return any(_behaviour_line(raw) for raw in _LINE_END.split(text))
+    """Does DSL text have behaviours (a line starting `behaviour` or `then`)? DslError for a line past the bound."""
+    return any(_behaviour_line(raw) for raw in lines(text))
 
 
 def parse_clip_program(text: str) -> ClipProgram:
