@@ -17,8 +17,8 @@ from typing import ClassVar
 from synth.behaviour.track import Sample, Steps
 from synth.config import SynthConfig
 from synth.geometry import normalize
+from synth.patterns.temporal import TURN_ANGLE, turn_of
 from synth.syntax import Range, printed
-from synth.temporal import TURN_ANGLE, turn_of
 
 EPS = 1e-9  # the checker's slack: degrees, m/s, seconds (as r2s check's)
 

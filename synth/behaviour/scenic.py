@@ -14,9 +14,9 @@ from synth.behaviour.program import Behaviour
 from synth.behaviour.segmentation import Segmented
 from synth.behaviour.synthesize import ClipResult
 from synth.behaviour.track import Track
+from synth.patterns.temporal import turn_of
 from synth.scene import VEHICLE_CLASSES, Entity
 from synth.syntax import fmt_number
-from synth.temporal import turn_of
 from synth.world import WorldPose
 
 # The behaviour every moving entity runs: per segment (seconds, speed at its start and end in m/s, turn in

@@ -9,10 +9,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from synth.geometry import normalize
-from synth.lane_relations import LaneGraph
+from synth.road.lane_relations import LaneGraph
 from synth.scene import Scene, SceneError, as_scene
-from synth.window import clip_entities
-from synth.window_road import window_road
+from synth.window.program import clip_entities
+from synth.window.road import window_road
 
 
 class ClipError(SceneError):
