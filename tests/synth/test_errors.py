@@ -13,6 +13,7 @@ import sys
 import pytest
 
 import extractors
+import frames
 import pipeline
 import synth
 from synth.errors import KINDS, CheckFailed, ExitCode, InputError, InternalError, R2sError, SamplingError
@@ -21,7 +22,7 @@ from tests.support import ROOT
 
 def _project_exception_classes() -> list[type[BaseException]]:
     found = []
-    for package in (synth, extractors, pipeline):
+    for package in (synth, frames, extractors, pipeline):
         for info in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
             if info.name.endswith(".__main__"):  # runs the command when imported
                 continue
