@@ -1,0 +1,130 @@
+"""A linked road network (synth.opendrive.Network) as OpenDRIVE 1.7 XML, written with scenariogeneration
+(docs/formats.md, "OpenDRIVE"): one road per Network road, its reference line as line geometries, its one
+driving lane (-1) centred on it by a lane offset of half its width, widths and offsets linear between the
+reference line's points; road and lane links; junctions with their connections; the recentring offset in the
+header. `r2s export --to opendrive` writes this alone; `--to openscenario` writes it beside its scenarios."""
+
+from __future__ import annotations
+
+import datetime
+import math
+import re
+from pathlib import Path
+
+from synth.opendrive import Network, Road
+
+DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
+VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
+HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
+SAME = 2.5e-6  # metres (and m/m): width pieces this close are one (ASAM: 1e-6; halved for the offsets, still one)
+NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")  # outside XML 1.0's Char
+
+
+def xml_text(text: str) -> str:
+    """Text as XML 1.0 can hold it: each character it cannot (control characters, lone surrogates as a file name
+    undecodable in UTF-8 gives them, U+FFFE, U+FFFF) as its Python escape (\\x01, \\udcff): a file name or a path
+    in a note must not make the file one no XML parser reads."""
+    return NOT_XML.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+
+
+def straight_runs(points) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """A reference line's segments, runs of them in one direction (within HEADING_TOLERANCE) as one line (ASAM's
+    check flags two line geometries in a row with the same heading as redundant)."""
+    runs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    start, heading = None, None
+    for a, b in zip(points, points[1:]):
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
+        if start is not None and abs(math.remainder(h - heading, math.tau)) < HEADING_TOLERANCE:
+            runs[-1] = (start, b)
+            continue
+        start, heading = a, h
+        runs.append((a, b))
+    return runs
+
+
+def _same_line(p: tuple[float, float, float], q: tuple[float, float, float]) -> bool:
+    """Whether two width pieces (s, a, b: a + b (s' - s)) are one line as ASAM's redundancy check decides it
+    (qc_opendrive's are_same_equations, within its EPSILON): the second is then left out."""
+    (s1, a1, b1), (s2, a2, b2) = p, q
+    return abs(a1 - a2 - b1 * s1 + b2 * s2) < SAME and abs(b1 - b2) < SAME
+
+
+def _profile(road: Road):
+    """The road's lanes: a centre lane and lane -1 with its width linear between points, and the lane offsets
+    that centre it (half the width); an entry only where the slope changes (ASAM flags repeated ones)."""
+    from scenariogeneration import xodr
+
+    s, w = road.s, road.widths
+    pieces: list[tuple[float, float, float]] = []
+    for i in range(len(s) - 1):
+        slope = (w[i + 1] - w[i]) / (s[i + 1] - s[i])
+        if pieces and _same_line(pieces[-1], (s[i], w[i], slope)):
+            continue
+        pieces.append((s[i], w[i], slope))
+    centre = xodr.Lane(a=0)
+    centre.add_roadmark(xodr.RoadMark(xodr.RoadMarkType.none))
+    section = xodr.LaneSection(0, centre)
+    s0, a, b = pieces[0]
+    lane = xodr.Lane(xodr.LaneType.driving, a=a, b=b)
+    for s0, a, b in pieces[1:]:
+        lane.add_lane_width(a=a, b=b, soffset=s0)
+    lane.add_roadmark(xodr.RoadMark(xodr.RoadMarkType.solid, laneChange=xodr.LaneChange.none))
+    pre, suc = road.predecessor, road.successor
+    if pre is not None and pre.kind == "road":
+        lane.add_link("predecessor", -1)
+    if suc is not None and suc.kind == "road":
+        lane.add_link("successor", -1)
+    section.add_right_lane(lane)
+    profile = xodr.Lanes()
+    profile.add_lanesection(section)
+    for s0, a, b in pieces:
+        profile.add_laneoffset(xodr.LaneOffset(s0, a / 2.0, b / 2.0))
+    return profile
+
+
+def opendrive(net: Network, name: str):
+    """The XML element of a network (module docstring)."""
+    from scenariogeneration import xodr
+
+    odr = xodr.OpenDrive(xml_text(name), revMinor="7")  # 1.7: the newest every ASAM check applies to
+    types = {"road": xodr.ElementType.road, "junction": xodr.ElementType.junction}
+    contact = {"start": xodr.ContactPoint.start, "end": xodr.ContactPoint.end, None: None}
+    for road in net.roads:
+        plan = xodr.PlanView()
+        for (x0, y0), (x1, y1) in straight_runs(road.points):
+            plan.add_fixed_geometry(xodr.Line(math.dist((x0, y0), (x1, y1))), x0, y0, math.atan2(y1 - y0, x1 - x0))
+        r = xodr.Road(road.id, plan, _profile(road), road_type=road.junction, name=xml_text(road.name))
+        r.add_elevation(0, 0, 0, 0, 0)  # flat: scene JSON is 2D (the schema wants an elevation in the profile)
+        if road.predecessor is not None:
+            r.add_predecessor(types[road.predecessor.kind], road.predecessor.id, contact[road.predecessor.contact])
+        if road.successor is not None:
+            r.add_successor(types[road.successor.kind], road.successor.id, contact[road.successor.contact])
+        odr.add_road(r)
+    for j in net.junctions:
+        junction = xodr.Junction(f"junction {j.id}", j.id)
+        for n, (incoming, connecting) in enumerate(j.connections):
+            c = xodr.Connection(incoming, connecting, xodr.ContactPoint.start, id=n)
+            c.add_lanelink(-1, -1)
+            junction.add_connection(c)
+        odr.add_junction(junction)
+    element = odr.get_element()
+    header = element.find("header")
+    header.set("date", DATE.isoformat())
+    header.set("vendor", VENDOR)
+    _set_offset(header, net.offset)
+    return element
+
+
+def _set_offset(header, offset: tuple[float, float]) -> None:
+    """The header's offset (OpenDRIVE 1.7 t_header_Offset: the recorded frame's coordinates of the origin)."""
+    import xml.etree.ElementTree as ET
+
+    ET.SubElement(header, "offset", x=repr(offset[0]), y=repr(offset[1]), z="0.0", hdg="0.0")
+
+
+def write_xml(element, path: Path) -> None:
+    """An XML tree to a file, indented."""
+    import xml.etree.ElementTree as ET
+
+    ET.indent(element, space="    ")
+    ET.ElementTree(element).write(path, encoding="utf-8", xml_declaration=True)

@@ -1,0 +1,349 @@
+"""A recorded road as a linked OpenDRIVE road network, as values (docs/formats.md, "OpenDRIVE"): which road each
+lane becomes, how roads link, which form junctions, and each road's reference line and widths. Pure: the XML is
+written at the edge (pipeline/export/opendrive.py).
+
+One road per recorded lane outside junctions, with one driving lane (-1, right-hand traffic) centred on the
+reference line. Same-direction neighbours stay separate roads (not lanes of one road): lane changes are left to
+a simulator's own lane graph.
+
+Roles. A lane is a connecting road's piece (in a junction) when the map says it is an intersection lane, or when
+its road could not be linked to its neighbour directly: OpenDRIVE links a road to one road at each end, so a
+lane that is one of several successors of a lane (a fork) or that has several predecessors (a merge) is made a
+junction's too. An intersection lane without predecessors or successors is an ordinary road (the area begins or ends there).
+Each path through junction lanes, from an ordinary road (the incoming road) to the next ordinary road (or to
+where the lanes stop), is one connecting road whose reference line is the path's centre lines joined; paths
+that share a lane or an incoming or outgoing road are one junction.
+
+Geometry. Reference lines are the recorded centre lines, vertex to vertex (line geometries, tolerance 0), but at
+their ends: every road end meeting others (a node: a lane's end and its successors' starts) is moved to the
+node's mean point, and the road's first (last) ENDING metres run straight in the node's mean heading, so that
+linked lanes meet edge to edge (ASAM's check allows 0.01 m). Widths are the lane polygon's chord across the
+centre line at each vertex (clamped to [MIN_WIDTH, MAX_WIDTH]; the polygon's area over the line's length where
+the chord cannot be had), linear between vertices, the node's mean at a node. Coordinates are recentred: the
+whole metres nearest the lanes' mean point are subtracted (`offset`, which the header keeps).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from synth.roadmap import LANE, MapFeature, RoadMap
+
+MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerate polygon's, clamped
+MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
+ENDING = 0.05  # metres: the straight piece at a road's end in its node's heading (at most a quarter of the road)
+MAX_PATHS = 100_000  # connecting roads in one network at most (paths through junction lanes multiply)
+MAX_PATH_LANES = 64  # junction lanes in one path at most
+
+
+@dataclass(frozen=True)
+class Link:
+    """A road's predecessor or successor: another road (met at its `contact` end) or a junction."""
+
+    kind: str  # "road" or "junction"
+    id: int
+    contact: str | None = None  # "start" or "end" for a road
+
+
+@dataclass(frozen=True)
+class Road:
+    """One OpenDRIVE road: its reference line (points in the recentred frame, consecutive ones distinct), its
+    lane's width at each point, the recorded lanes it follows, its junction (-1: none) and links."""
+
+    id: int
+    lanes: tuple[str, ...]
+    points: tuple[tuple[float, float], ...]
+    widths: tuple[float, ...]
+    junction: int = -1
+    predecessor: Link | None = None
+    successor: Link | None = None
+
+    @property
+    def name(self) -> str:
+        return " > ".join(self.lanes)
+
+    @property
+    def s(self) -> tuple[float, ...]:
+        """The distance along the reference line of each point."""
+        d = np.hypot(*np.diff(np.asarray(self.points), axis=0).T) if len(self.points) > 1 else np.zeros(0)
+        return tuple(np.concatenate([[0.0], np.cumsum(d)]).tolist())
+
+
+@dataclass(frozen=True)
+class Junction:
+    """A junction: its connections, each (incoming road, connecting road), the connecting road entered at its
+    start."""
+
+    id: int
+    connections: tuple[tuple[int, int], ...]
+
+
+@dataclass(frozen=True)
+class Network:
+    """A linked road network: roads, junctions, the offset subtracted from every coordinate (the recorded frame's
+    point that is the network's origin) and what could not be kept (notes for the user)."""
+
+    roads: tuple[Road, ...]
+    junctions: tuple[Junction, ...]
+    offset: tuple[float, float]
+    notes: tuple[str, ...] = ()
+
+    def road_of_lane(self) -> dict[str, int]:
+        """Each recorded lane outside junctions -> its road's id."""
+        return {r.lanes[0]: r.id for r in self.roads if r.junction == -1}
+
+
+def _clean(line: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    pts = [tuple(line[0])] if line else []
+    for p in line[1:]:
+        if math.dist(pts[-1], p) > MIN_SEGMENT:
+            pts.append(tuple(p))
+    return pts
+
+
+def lane_widths(f: MapFeature, pts: list[tuple[float, float]]) -> list[float]:
+    """The lane's width at each point of its centre line: the chord of its polygon along the normal there (the
+    piece through the point), the ends taking their neighbour's (a polygon's end caps lie across the normal);
+    the mean width (area over length) where there is no chord."""
+    import shapely
+
+    a = np.asarray(pts, dtype=float)
+    length = float(np.hypot(*np.diff(a, axis=0).T).sum())
+    poly = shapely.Polygon(f.polygon) if len(f.polygon) >= 3 else None
+    mean = min(MAX_WIDTH, max(MIN_WIDTH, poly.area / length)) if poly is not None and length > 0 else MIN_WIDTH
+    if poly is None or not poly.is_valid or len(a) < 3:
+        return [mean] * len(a)
+    tangent = np.zeros_like(a)
+    tangent[1:-1] = a[2:] - a[:-2]
+    norm = np.hypot(tangent[:, 0], tangent[:, 1])
+    norm[norm == 0] = 1.0
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1) / norm[:, None]
+    reach = 2 * MAX_WIDTH
+    chords = shapely.linestrings(np.stack([a - reach * normal, a + reach * normal], axis=1))
+    cuts = shapely.intersection(chords, poly)
+    out = []
+    for i, (p, cut) in enumerate(zip(a, cuts)):
+        w = None
+        if 0 < i < len(a) - 1 and cut is not None and not cut.is_empty:
+            point = shapely.Point(p)
+            pieces = getattr(cut, "geoms", [cut])
+            near = [g for g in pieces if g.distance(point) < 1e-6 and g.length > 0]
+            if near:
+                w = near[0].length
+        out.append(mean if w is None else min(MAX_WIDTH, max(MIN_WIDTH, w)))
+    out[0], out[-1] = out[1], out[-2]
+    return out
+
+
+class _Ends:
+    """Union-find over road ends (road index, 0 start / 1 end): the ends that meet are one node."""
+
+    def __init__(self) -> None:
+        self.parent: dict = {}
+
+    def find(self, x):
+        self.parent.setdefault(x, x)
+        while self.parent[x] != x:
+            self.parent[x] = self.parent[self.parent[x]]
+            x = self.parent[x]
+        return x
+
+    def union(self, a, b) -> None:
+        self.parent[self.find(a)] = self.find(b)
+
+
+def lane_graph(lanes: dict[str, MapFeature]) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """Each lane's successors and predecessors among `lanes`, a link either lane names being a link (a map may
+    record it on one side only)."""
+    succ = {k: [s for s in f.successors if s in lanes] for k, f in lanes.items()}
+    pred = {k: [p for p in f.predecessors if p in lanes] for k, f in lanes.items()}
+    for k in lanes:
+        for s in succ[k]:
+            if k not in pred[s]:
+                pred[s].append(k)
+        for p in pred[k]:
+            if k not in succ[p]:
+                succ[p].append(k)
+    return succ, pred
+
+
+def roles(lanes: dict[str, MapFeature], succ: dict[str, list[str]], pred: dict[str, list[str]]) -> set[str]:
+    """The lanes that are pieces of connecting roads (module docstring, "Roles")."""
+    junction = {k for k, f in lanes.items() if f.is_intersection}
+    for k in lanes:  # forks and merges
+        if len(succ[k]) > 1:
+            junction.update(succ[k])
+        if len(pred[k]) > 1:
+            junction.add(k)
+    # where the area starts or the lanes stop: an incoming or outgoing road (a junction needs both, for Scenic)
+    junction -= {k for k in junction if not pred[k] or not succ[k]}
+    return junction
+
+
+def network(road: RoadMap) -> Network:
+    """The linked network of a road's lanes (in its frame; module docstring)."""
+    lanes = {f.feature_id: f for f in road.lanes if len(_clean(f.line)) >= 2}
+    succ, pred = lane_graph(lanes)
+    junction = roles(lanes, succ, pred)
+    while True:  # an ordinary road with both ends at one junction (Scenic refuses it) becomes the junction's
+        ordinary = [k for k in sorted(lanes) if k not in junction]
+        paths = _paths(ordinary, junction, succ)
+        path_junction = _junctions(paths)
+        ends: dict[str, set] = defaultdict(set)
+        for (inc, _, out), j in zip(paths, path_junction):
+            ends[inc].add(("succ", j))
+            if out is not None:
+                ends[out].add(("pred", j))
+        both = {k for k, e in ends.items() if {j for w, j in e if w == "succ"} & {j for w, j in e if w == "pred"}}
+        if not both:
+            break
+        junction |= both
+    notes: list[str] = []
+    covered = {c for _, p, _ in paths for c in p}
+    left_out = sorted(junction - covered)
+    if left_out:
+        notes.append(f"{len(left_out)} junction lane(s) on no path from an ordinary lane left out "
+                     f"(e.g. {left_out[0]!r})")
+    rid = {k: i for i, k in enumerate(ordinary, start=1)}  # road ids: ordinary lanes (sorted), then paths
+
+    # lines and widths of every road, before the ends are pinned
+    widths = {k: lane_widths(f, _clean(f.line)) for k, f in lanes.items()}
+    lines: list[list[tuple[float, float]]] = []
+    wids: list[list[float]] = []
+    for k in ordinary:
+        lines.append(_clean(lanes[k].line))
+        wids.append(list(widths[k]))
+    for _, p, _ in paths:
+        pts: list = []
+        ws: list = []
+        for c in p:
+            line = _clean(lanes[c].line)
+            skip = 1 if pts and math.dist(pts[-1], line[0]) <= MIN_SEGMENT else 0
+            pts += line[skip:]
+            ws += widths[c][skip:]
+        lines.append(pts)
+        wids.append(ws)
+
+    # nodes: which road ends meet (road index in `lines`, 0 start / 1 end)
+    nodes = _Ends()
+    n_ord = len(ordinary)
+    links: dict[tuple[int, int], Link] = {}
+    for i, k in enumerate(ordinary):
+        nxt = [s for s in succ[k] if s not in junction]
+        if nxt and len(succ[k]) == 1 and len(pred[nxt[0]]) == 1:
+            j = rid[nxt[0]] - 1
+            nodes.union((i, 1), (j, 0))
+            links[(i, 1)] = Link("road", j + 1, "start")
+            links[(j, 0)] = Link("road", i + 1, "end")
+    for n, (inc, p, out) in enumerate(paths):
+        i = n_ord + n
+        nodes.union((rid[inc] - 1, 1), (i, 0))
+        links[(i, 0)] = Link("road", rid[inc], "end")
+        links[(rid[inc] - 1, 1)] = Link("junction", path_junction[n])
+        if out is not None:
+            nodes.union((i, 1), (rid[out] - 1, 0))
+            links[(i, 1)] = Link("road", rid[out], "start")
+            links[(rid[out] - 1, 0)] = Link("junction", path_junction[n])
+
+    # each node's pose: mean point, mean heading of travel, mean width
+    members: dict = defaultdict(list)
+    for i in range(len(lines)):
+        for end in (0, 1):
+            if (i, end) in nodes.parent:
+                members[nodes.find((i, end))].append((i, end))
+    pose: dict = {}
+    for root, ends in members.items():
+        pts = np.array([lines[i][-end] if end else lines[i][0] for i, end in ends])
+        heads = []
+        for i, end in ends:
+            a, b = (lines[i][-2], lines[i][-1]) if end else (lines[i][0], lines[i][1])
+            heads.append(math.atan2(b[1] - a[1], b[0] - a[0]))
+        h = math.atan2(sum(map(math.sin, heads)), sum(map(math.cos, heads)))
+        w = float(np.mean([wids[i][-1] if end else wids[i][0] for i, end in ends]))
+        spread = float(np.hypot(*(pts - pts.mean(axis=0)).T).max())
+        pose[root] = (tuple(pts.mean(axis=0).tolist()), h, w, spread)
+
+    all_pts = np.concatenate([np.asarray(line) for line in lines]) if lines else np.zeros((1, 2))
+    offset = tuple(float(v) for v in np.round(all_pts.mean(axis=0)))
+    roads = []
+    for i, (line, ws) in enumerate(zip(lines, wids)):
+        start = pose.get(nodes.find((i, 0))) if (i, 0) in nodes.parent else None
+        end = pose.get(nodes.find((i, 1))) if (i, 1) in nodes.parent else None
+        pts, w = _pinned(line, ws, start, end)
+        pts = [(x - offset[0], y - offset[1]) for x, y in pts]
+        names = (ordinary[i],) if i < n_ord else paths[i - n_ord][1]
+        roads.append(Road(i + 1, names, tuple(pts), tuple(w), -1 if i < n_ord else path_junction[i - n_ord],
+                          links.get((i, 0)), links.get((i, 1))))
+    junctions = defaultdict(list)
+    for n, (inc, _, _) in enumerate(paths):
+        junctions[path_junction[n]].append((rid[inc], n_ord + n + 1))
+    return Network(tuple(roads), tuple(Junction(j, tuple(c)) for j, c in sorted(junctions.items())), offset,
+                   tuple(notes))
+
+
+def _paths(ordinary: list[str], junction: set[str], succ: dict[str, list[str]]
+           ) -> list[tuple[str, tuple[str, ...], str | None]]:
+    """Every path through junction lanes: (its incoming lane, its junction lanes, its outgoing lane or None
+    where the lanes stop), in a stable order."""
+    paths: list[tuple[str, tuple[str, ...], str | None]] = []
+    for k in ordinary:
+        stack = [(s,) for s in reversed(succ[k]) if s in junction]
+        while stack:
+            path = stack.pop()
+            last = path[-1]
+            ends = [s for s in succ[last] if s not in junction]
+            more = [s for s in succ[last] if s in junction and s not in path]
+            paths += [(k, path, s) for s in ends]
+            if not ends and not more:
+                paths.append((k, path, None))
+            if len(path) < MAX_PATH_LANES:
+                stack += [path + (s,) for s in reversed(more)]
+            if len(paths) > MAX_PATHS:
+                raise ValueError(f"more than {MAX_PATHS:,} paths through junctions")
+    return paths
+
+
+def _junctions(paths: list[tuple[str, tuple[str, ...], str | None]]) -> list[int]:
+    """Each path's junction (1, 2, ...): paths that share an incoming road are one junction (a road has one
+    successor), and so are paths that share an outgoing road."""
+    group = _Ends()
+    for i, (inc, _, out) in enumerate(paths):
+        group.union(("path", i), ("in", inc))
+        if out is not None:
+            group.union(("path", i), ("out", out))
+    jid: dict = {}
+    return [jid.setdefault(group.find(("path", i)), len(jid) + 1) for i in range(len(paths))]
+
+
+def _pinned(line, ws, start, end):
+    """A road's points and widths with its ends at their nodes' poses: the node's point, then ENDING metres in its
+    heading (points of the recorded line within twice that of an end dropped)."""
+    pts = [np.asarray(p, dtype=float) for p in line]
+    w = list(ws)
+    length = sum(math.dist(a, b) for a, b in zip(line, line[1:]))
+    e = min(ENDING, length / 4)
+    if start is not None:
+        (p0, h0, w0, _) = start
+        p0 = np.asarray(p0)
+        d0 = np.array([math.cos(h0), math.sin(h0)])
+        keep = [k for k in range(1, len(pts)) if math.dist(pts[k], p0) > 2 * e]
+        pts, w = [p0, p0 + e * d0] + [pts[k] for k in keep], [w0, w0] + [w[k] for k in keep]
+    if end is not None:
+        (p1, h1, w1, _) = end
+        p1 = np.asarray(p1)
+        d1 = np.array([math.cos(h1), math.sin(h1)])
+        first = 2 if start is not None else 1
+        keep = [k for k in range(len(pts) - 1) if k < first or math.dist(pts[k], p1) > 2 * e]
+        keep = [k for k in keep if k < first or k < len(pts) - 1]
+        pts, w = [pts[k] for k in keep] + [p1 - e * d1, p1], [w[k] for k in keep] + [w1, w1]
+    out_p, out_w = [tuple(pts[0].tolist())], [w[0]]
+    for p, x in zip(pts[1:], w[1:]):
+        if math.dist(out_p[-1], p) > MIN_SEGMENT:
+            out_p.append(tuple(p.tolist()))
+            out_w.append(x)
+    return out_p, out_w
