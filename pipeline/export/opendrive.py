@@ -11,12 +11,17 @@ import math
 import re
 from pathlib import Path
 
-from synth.opendrive import Network, Road
+from pipeline.errors import UserError
+from synth.opendrive import Network, Road, network
+from synth.roadmap import RoadMap
 
 DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
 VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
 SAME = 2.5e-6  # metres (and m/m): width pieces this close are one (ASAM: 1e-6; halved for the offsets, still one)
+# Line geometries in one .xodr at most: each is ~190 bytes of XML and ~1.6 KB while scenariogeneration builds it
+# (10^6 took 1.6 GB and 54 s for a 186 MB file); real roads within 50 m of ego have up to ~1,100 (nuScenes-mini).
+MAX_GEOMETRIES = 100_000
 NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")  # outside XML 1.0's Char
 
 
@@ -128,3 +133,59 @@ def write_xml(element, path: Path) -> None:
 
     ET.indent(element, space="    ")
     ET.ElementTree(element).write(path, encoding="utf-8", xml_declaration=True)
+
+
+def linked(road: RoadMap, what: str) -> Network:
+    """The linked network of a road in its source's world (synth.opendrive), or one line (UserError) where
+    OpenDRIVE cannot be had: no lane with a centre line, or more than MAX_GEOMETRIES line geometries."""
+    try:
+        import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
+    except ImportError:
+        raise UserError("OpenDRIVE needs scenariogeneration (pip install scenariogeneration==0.16.7)") from None
+    # the bound first, on the recorded points (each road's line has at most its lanes' points and 4 more)
+    points = sum(len(f.line) + 4 for f in road.lanes)
+    if points > MAX_GEOMETRIES:
+        raise UserError(f"the road of {what} would be up to {points:,} OpenDRIVE line geometries, more than "
+                        f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
+                        "(r2s scene --radius)")
+    try:
+        net = network(road)
+    except ValueError as exc:  # too many paths through junctions
+        raise UserError(f"the road of {what}: {exc}") from None
+    if not net.roads:
+        raise UserError(f"{what} has no lane with a centre line: OpenDRIVE needs a road")
+    return net
+
+
+def export_road(source: str, map_id: str | None, out: str) -> str:
+    """`r2s export SOURCE --to opendrive --out F.xodr`: the road of a scene JSON (in its world) or one map of a
+    maps dataset, written atomically to `out`; returns the line to tell the user."""
+    from pipeline.cli.inputs import read_scene
+    from pipeline.outputs import writing
+    from storage.atomic import atomic_path
+    from synth.world import WorldPose, road_in_world
+
+    if Path(source).is_dir() or source.endswith(".parquet"):
+        from extractors.maps import read_maps
+
+        maps = [m for m in read_maps(source) if map_id is None or m.map_id == map_id]
+        if not maps:
+            raise UserError(f"{source} holds no map" + (f" {map_id!r}" if map_id is not None else ""))
+        if len(maps) > 1:
+            raise UserError(f"{source} holds {len(maps)} maps: name one with --map ID")
+        road, what = maps[0], f"map {maps[0].map_id!r}"
+    else:
+        if map_id is not None:
+            raise UserError("--map names a map of a maps dataset; a scene JSON has its own road")
+        scene = read_scene(source)
+        if scene.road is None:
+            raise UserError(f"the scene {scene.frame_id!r} has no road: export a frame whose source has a map")
+        road, what = road_in_world(scene.world or WorldPose.identity(), scene.road), f"the scene {scene.frame_id!r}"
+    net = linked(road, what)
+    element = opendrive(net, road.map_id)
+    with writing(out), atomic_path(out) as tmp:
+        write_xml(element, tmp)
+    connecting = sum(r.junction != -1 for r in net.roads)
+    return (f"wrote {out}: {len(net.roads) - connecting} roads and {connecting} connecting roads in "
+            f"{len(net.junctions)} junctions from {what}, offset ({net.offset[0]:g}, {net.offset[1]:g})"
+            + "".join(f"; {n}" for n in net.notes))
