@@ -9,7 +9,9 @@ a simulator's own lane graph.
 Roles. A lane is a connecting road's piece (in a junction) when the map says it is an intersection lane, or when
 its road could not be linked to its neighbour directly: OpenDRIVE links a road to one road at each end, so a
 lane that is one of several successors of a lane (a fork) or that has several predecessors (a merge) is made a
-junction's too. An intersection lane without predecessors or successors is an ordinary road (the area begins or ends there).
+junction's too. An intersection lane without predecessors is an ordinary road (the area begins there); so are the last lanes
+of a junction none of whose paths leads to an ordinary road, and a road with both ends at one junction is made
+that junction's (Scenic's parser refuses both).
 Each path through junction lanes, from an ordinary road (the incoming road) to the next ordinary road (or to
 where the lanes stop), is one connecting road whose reference line is the path's centre lines joined; paths
 that share a lane or an incoming or outgoing road are one junction.
@@ -180,8 +182,7 @@ def roles(lanes: dict[str, MapFeature], succ: dict[str, list[str]], pred: dict[s
             junction.update(succ[k])
         if len(pred[k]) > 1:
             junction.add(k)
-    # where the area starts or the lanes stop: an incoming or outgoing road (a junction needs both, for Scenic)
-    junction -= {k for k in junction if not pred[k] or not succ[k]}
+    junction -= {k for k in junction if not pred[k]}  # where the area starts: an incoming road
     return junction
 
 
@@ -190,7 +191,9 @@ def network(road: RoadMap) -> Network:
     lanes = {f.feature_id: f for f in road.lanes if len(_clean(f.line)) >= 2}
     succ, pred = lane_graph(lanes)
     junction = roles(lanes, succ, pred)
-    while True:  # an ordinary road with both ends at one junction (Scenic refuses it) becomes the junction's
+    # Scenic refuses an ordinary road with both ends at one junction (it becomes the junction's) and a junction
+    # with no outgoing road (its paths' last lanes become ordinary roads)
+    for _ in range(len(lanes) + 1):
         ordinary = [k for k in sorted(lanes) if k not in junction]
         paths = _paths(ordinary, junction, succ)
         path_junction = _junctions(paths)
@@ -200,9 +203,11 @@ def network(road: RoadMap) -> Network:
             if out is not None:
                 ends[out].add(("pred", j))
         both = {k for k, e in ends.items() if {j for w, j in e if w == "succ"} & {j for w, j in e if w == "pred"}}
-        if not both:
+        outgoing = {j for (_, _, out), j in zip(paths, path_junction) if out is not None}
+        stuck = {p[-1] for (_, p, _), j in zip(paths, path_junction) if j not in outgoing}
+        if not both and not stuck:
             break
-        junction |= both
+        junction = (junction | both) - stuck
     notes: list[str] = []
     covered = {c for _, p, _ in paths for c in p}
     left_out = sorted(junction - covered)

@@ -1,0 +1,65 @@
+"""Reading an exported .xodr back the way a simulator does (Scenic's own OpenDRIVE parser) and comparing it with
+the recorded map it came from: each Scenic lane's distance from its recorded centre line, and which recorded
+successor links Scenic's network keeps (as a successor or a junction maneuver)."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from synth.roadmap import RoadMap
+
+SEP = " > "  # how a connecting road's name joins the recorded lanes it follows (synth.opendrive.Road.name)
+
+
+def scenic_network(xodr: Path):
+    """Scenic's road network of the file (no cache written)."""
+    from scenic.domains.driving.roads import Network
+
+    return Network.fromFile(str(xodr), useCache=False, writeCache=False)
+
+
+def offset(xodr: Path) -> tuple[float, float]:
+    o = ET.parse(xodr).getroot().find("header/offset")
+    return float(o.get("x")), float(o.get("y"))
+
+
+def centre_line_gaps(net, road: RoadMap, shift: tuple[float, float], step: float = 1.0) -> dict[str, float]:
+    """Each Scenic lane (by its road's name) -> the largest distance from a point of its centre line, sampled
+    every `step` metres, to the recorded centre line(s) it follows (shifted into the file's frame)."""
+    out = {}
+    for lane in net.lanes:
+        names = lane.road.name.split(SEP)
+        recorded = np.concatenate([np.asarray(road[n].line) for n in names]) - shift
+        line = shapely.LineString(recorded)
+        pts = np.asarray([(p.x, p.y) if hasattr(p, "x") else tuple(p)[:2] for p in lane.centerline.points])
+        scenic_line = shapely.LineString(pts)
+        n = max(2, int(math.ceil(scenic_line.length / step)) + 1)
+        samples = shapely.line_interpolate_point(scenic_line, np.linspace(0, scenic_line.length, n))
+        out[lane.road.name] = float(shapely.distance(samples, line).max())
+    return out
+
+
+def kept_links(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """The recorded successor links (a, b) between lanes of the map, split into those Scenic's network keeps (b
+    follows a: as a's lane's successor, in one connecting road, or as a junction maneuver's connecting or end
+    lane) and those it does not."""
+    follows = set()
+    for lane in net.lanes:
+        names = lane.road.name.split(SEP)
+        follows.update(zip(names, names[1:]))
+        if lane._successor is not None:
+            follows.add((names[-1], lane._successor.road.name.split(SEP)[0]))
+        for m in lane.maneuvers:  # a maneuver of a lane that is itself a connecting road's has no connecting lane
+            via = m.connectingLane.road.name.split(SEP) if m.connectingLane is not None else names
+            follows.add((names[-1], via[0]))
+            follows.add((via[-1], m.endLane.road.name.split(SEP)[0]))
+    kept, lost = [], []
+    for f in road.lanes:
+        for s in f.successors:
+            (kept if (f.feature_id, s) in follows else lost).append((f.feature_id, s))
+    return kept, lost
