@@ -142,16 +142,15 @@ def linked(road: RoadMap, what: str) -> Network:
         import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
     except ImportError:
         raise UserError("OpenDRIVE needs scenariogeneration (pip install scenariogeneration==0.16.7)") from None
-    # the bound first, on the recorded points (each road's line has at most its lanes' points and 4 more)
-    points = sum(len(f.line) + 4 for f in road.lanes)
-    if points > MAX_GEOMETRIES:
-        raise UserError(f"the road of {what} would be up to {points:,} OpenDRIVE line geometries, more than "
-                        f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
-                        "(r2s scene --radius)")
     try:
         net = network(road)
     except ValueError as exc:  # too many paths through junctions
         raise UserError(f"the road of {what}: {exc}") from None
+    geometries = sum(len(straight_runs(r.points)) for r in net.roads)  # counted before the costly XML is built
+    if geometries > MAX_GEOMETRIES:
+        raise UserError(f"the road of {what} would be {geometries:,} OpenDRIVE line geometries, more than "
+                        f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
+                        "(r2s scene --radius)")
     if not net.roads:
         raise UserError(f"{what} has no lane with a centre line: OpenDRIVE needs a road")
     return net

@@ -80,6 +80,12 @@ def test_asam_checkers_report_no_issue_on_any_file(fid, recorded, tmp_path):
         assert asam_issues(f) == [], f.name
 
 
+def road_offset(xodr: Path) -> tuple[float, float]:
+    """The recentring offset in an .xodr's header: its coordinates plus this are the world's."""
+    o = ET.parse(xodr).getroot().find("header/offset")
+    return float(o.get("x")), float(o.get("y"))
+
+
 def _read_back(xosc: Path) -> dict[str, dict]:
     root = ET.parse(xosc).getroot()
     out: dict[str, dict] = {}
@@ -108,10 +114,11 @@ def test_positions_read_back_from_the_xosc_give_back_every_scene(fid, recorded, 
         scene = scene_from_json(f.read_text())
         back = _read_back(tmp_path / "osc" / f"{name}.xosc")
         assert set(back) == {e.id for e in scene.entities}
+        ox, oy = road_offset(tmp_path / "osc" / f"{base}.xodr")  # the road's recentring
         for e in scene.entities:
             b = back[e.id]
-            x, y, h = global_to_ego(world["x"], world["y"], math.radians(world["heading"]), [b["x"]], [b["y"]],
-                                    [b["h"]])
+            x, y, h = global_to_ego(world["x"], world["y"], math.radians(world["heading"]), [b["x"] + ox],
+                                    [b["y"] + oy], [b["h"]])
             assert math.hypot(x[0] - e.x, y[0] - e.y) < 1e-6 and _gap(h[0], e.heading) < 1e-6
             assert b["category"] == CATEGORY[e.type]
             assert (b["length"], b["width"]) == pytest.approx(e.dimensions(), rel=1e-12)
@@ -125,12 +132,14 @@ def test_the_road_runs_through_the_recorded_centre_lines(recorded, tmp_path):
     doc = json.loads(scene_file.read_text())
     world = doc["world"]
     lanes = {f["id"]: f for f in doc["road"]["features"] if f["kind"] == "lane"}
-    roads = ET.parse(tmp_path / "osc" / "scene-0103_0.xodr").getroot().findall("road")
-    assert sorted(r.get("name") for r in roads) == sorted(lanes)
+    xodr = tmp_path / "osc" / "scene-0103_0.xodr"
+    roads = ET.parse(xodr).getroot().findall("road")
+    ox, oy = road_offset(xodr)
+    assert sorted(r.get("name") for r in roads) == sorted(lanes)  # nuScenes' excerpt records no lane links
     for road in roads:
         line = np.array(lanes[road.get("name")]["line"])
         geoms = road.findall("planView/geometry")
-        starts = np.array([[float(g.get("x")), float(g.get("y"))] for g in geoms])
+        starts = np.array([[float(g.get("x")) + ox, float(g.get("y")) + oy] for g in geoms])
         x, y, _ = global_to_ego(world["x"], world["y"], math.radians(world["heading"]), starts[:, 0], starts[:, 1],
                                 np.zeros(len(starts)))
         # every geometry starts on a vertex of the recorded centre line (merged runs skip vertices), the first
@@ -139,7 +148,7 @@ def test_the_road_runs_through_the_recorded_centre_lines(recorded, tmp_path):
         assert d.max() < 1e-6 and math.hypot(x[0] - line[0, 0], y[0] - line[0, 1]) < 1e-6
         total = sum(float(g.get("length")) for g in geoms)
         assert total == pytest.approx(np.hypot(*np.diff(line, axis=0).T).sum(), rel=1e-6)
-        width = float(road.find("lanes/laneSection/right/lane/width").get("a"))
+        width = float(road.find("lanes/laneSection/right/lane/width").get("a"))  # the first piece's
         offset = float(road.find("lanes/laneOffset").get("a"))
         assert road.find("lanes/laneSection/right/lane").get("id") == "-1" and offset == pytest.approx(width / 2)
 
@@ -206,14 +215,17 @@ def test_names_xml_cannot_hold_are_escaped_in_the_notes(recorded, tmp_path):
 def test_a_road_of_more_line_geometries_than_the_bound_is_one_line(recorded, tmp_path):
     """A lane whose centre line zigzags over MAX_GEOMETRIES + 1 segments (10^6 took 1.6 GB and 54 s for a 186 MB
     .xodr): one line naming the bound, exit 2, nothing written; one geometry fewer is written."""
-    from pipeline.export.openscenario import MAX_GEOMETRIES, lane_runs
+    from pipeline.export.opendrive import MAX_GEOMETRIES, straight_runs
+    from synth.opendrive import network
 
     scene_file, _ = recorded["scene-0061/0"]
     doc = json.loads(scene_file.read_text())
     lane = next(f for f in doc["road"]["features"] if f["kind"] == "lane" and len(f.get("line") or []) >= 2)
     scene = scene_from_json(scene_file.read_text())
-    others = sum(len(runs) for f, runs in lane_runs(road_in_world(scene.world, scene.road))
-                 if f.feature_id != lane["id"])  # the geometries of the other lanes, as the export counts them
+    # the geometries of the other lanes' roads, as the export counts them (the excerpt's lanes are not linked, so
+    # each lane is a road on its own)
+    others = sum(len(straight_runs(r.points)) for r in network(road_in_world(scene.world, scene.road)).roads
+                 if r.lanes != (lane["id"],))
     x0, y0 = lane["line"][0]
     for segments, ok in ((MAX_GEOMETRIES - others, True), (MAX_GEOMETRIES - others + 1, False)):
         lane["line"] = [[x0 + 0.01 * i, y0 + 0.01 * (i % 2)] for i in range(segments + 1)]
