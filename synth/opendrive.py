@@ -41,6 +41,7 @@ MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are
 ENDING = 0.05  # metres: the straight piece at a road's end in its node's heading (at most a quarter of the road)
 MAX_PATHS = 100_000  # connecting roads in one network at most (paths through junction lanes multiply)
 MAX_PATH_LANES = 64  # junction lanes in one path at most
+TAIL = "\x00tail"  # the key of a dead-end junction lane's second half (no feature id holds a control character)
 
 
 @dataclass(frozen=True)
@@ -191,10 +192,20 @@ def network(road: RoadMap) -> Network:
     lanes = {f.feature_id: f for f in road.lanes if len(_clean(f.line)) >= 2}
     succ, pred = lane_graph(lanes)
     junction = roles(lanes, succ, pred)
+    shape = {k: (_clean(f.line), lane_widths(f, _clean(f.line))) for k, f in lanes.items()}
+    # a junction lane where the lanes stop (the area's edge): its first half stays the junction's, its second an
+    # ordinary road named as it is (Scenic gives a junction path without an outgoing road no maneuver)
+    recorded = {k: k for k in lanes}
+    for k in sorted(junction):
+        if not succ[k]:
+            tail = k + TAIL
+            shape[k], shape[tail] = _halves(*shape[k])
+            recorded[tail] = k
+            succ[k], pred[tail], succ[tail] = [tail], [k], []
     # Scenic refuses an ordinary road with both ends at one junction (it becomes the junction's) and a junction
     # with no outgoing road (its paths' last lanes become ordinary roads)
-    for _ in range(len(lanes) + 1):
-        ordinary = [k for k in sorted(lanes) if k not in junction]
+    for _ in range(len(recorded) + 1):
+        ordinary = [k for k in sorted(recorded) if k not in junction]
         paths = _paths(ordinary, junction, succ)
         path_junction = _junctions(paths)
         ends: dict[str, set] = defaultdict(set)
@@ -217,20 +228,19 @@ def network(road: RoadMap) -> Network:
     rid = {k: i for i, k in enumerate(ordinary, start=1)}  # road ids: ordinary lanes (sorted), then paths
 
     # lines and widths of every road, before the ends are pinned
-    widths = {k: lane_widths(f, _clean(f.line)) for k, f in lanes.items()}
     lines: list[list[tuple[float, float]]] = []
     wids: list[list[float]] = []
     for k in ordinary:
-        lines.append(_clean(lanes[k].line))
-        wids.append(list(widths[k]))
+        lines.append(list(shape[k][0]))
+        wids.append(list(shape[k][1]))
     for _, p, _ in paths:
         pts: list = []
         ws: list = []
         for c in p:
-            line = _clean(lanes[c].line)
+            line, widths = shape[c]
             skip = 1 if pts and math.dist(pts[-1], line[0]) <= MIN_SEGMENT else 0
             pts += line[skip:]
-            ws += widths[c][skip:]
+            ws += widths[skip:]
         lines.append(pts)
         wids.append(ws)
 
@@ -281,7 +291,7 @@ def network(road: RoadMap) -> Network:
         end = pose.get(nodes.find((i, 1))) if (i, 1) in nodes.parent else None
         pts, w = _pinned(line, ws, start, end)
         pts = [(x - offset[0], y - offset[1]) for x, y in pts]
-        names = (ordinary[i],) if i < n_ord else paths[i - n_ord][1]
+        names = (recorded[ordinary[i]],) if i < n_ord else paths[i - n_ord][1]
         roads.append(Road(i + 1, names, tuple(pts), tuple(w), -1 if i < n_ord else path_junction[i - n_ord],
                           links.get((i, 0)), links.get((i, 1))))
     junctions = defaultdict(list)
@@ -323,6 +333,21 @@ def _junctions(paths: list[tuple[str, tuple[str, ...], str | None]]) -> list[int
             group.union(("path", i), ("out", out))
     jid: dict = {}
     return [jid.setdefault(group.find(("path", i)), len(jid) + 1) for i in range(len(paths))]
+
+
+def _halves(line: list, widths: list) -> tuple[tuple[list, list], tuple[list, list]]:
+    """A centre line and its widths cut where half its length is run: the point there (widths interpolated)
+    ends the first half and starts the second."""
+    a = np.asarray(line, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
+    half = s[-1] / 2
+    i = int(np.searchsorted(s, half, side="right")) - 1  # the segment [i, i + 1] holding the cut
+    t = (half - s[i]) / (s[i + 1] - s[i])
+    p = tuple((a[i] + t * (a[i + 1] - a[i])).tolist())
+    w = widths[i] + t * (widths[i + 1] - widths[i])
+    first = [tuple(x) for x in line[:i + 1]] + ([p] if t > 0 else [])
+    second = [p] + [tuple(x) for x in line[i + 1:]]
+    return (first, list(widths[:i + 1]) + ([w] if t > 0 else [])), (second, [w] + list(widths[i + 1:]))
 
 
 def _pinned(line, ws, start, end):

@@ -40,7 +40,7 @@ def scenes(tmp_path_factory) -> dict[str, Path]:
 def av2(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("odr-av2") / "map.xodr"
     res = run_r2s("export", str(AV2_MAPS), "--to", "opendrive", "--out", str(out))
-    assert res.returncode == 0 and "13 junctions" in res.stdout, res.stderr
+    assert res.returncode == 0, res.stderr
     return out
 
 
@@ -54,7 +54,7 @@ def test_asam_checker_reports_no_issue_on_a_scene_road(fid, scenes, tmp_path):
 
 def test_asam_checker_reports_no_issue_on_a_whole_map_with_junctions(av2):
     root = ET.parse(av2).getroot()
-    assert len(root.findall("junction")) == 13 and any(r.get("junction") != "-1" for r in root.findall("road"))
+    assert len(root.findall("junction")) > 0 and any(r.get("junction") != "-1" for r in root.findall("road"))
     assert asam_issues(av2) == []
 
 
@@ -64,13 +64,17 @@ def test_scenic_loads_the_map_with_its_junctions_and_lanes_on_the_recorded_centr
 
     road = next(iter(read_maps(AV2_MAPS)))
     net = scenic_network(av2)
-    assert len(net.intersections) == len(ET.parse(av2).getroot().findall("junction")) == 13
+    assert len(net.intersections) == len(ET.parse(av2).getroot().findall("junction")) > 0
+    # every recorded intersection lane between two lanes of the map is in a junction (a connecting road's)
+    inside = {n for r in net.connectingRoads for n in r.name.split(" > ")}
+    lanes = {f.feature_id for f in road.lanes}
+    between = [f.feature_id for f in road.lanes if f.is_intersection and lanes & set(f.predecessors)
+               and lanes & set(f.successors)]
+    assert between and set(between) <= inside
     gaps = centre_line_gaps(net, road, offset(av2))
     assert len(gaps) >= 0.95 * len(road.lanes) and max(gaps.values()) < TOLERANCE
     kept, lost = kept_links(net, road)
-    # 184 of 199 today: the rest lead into a junction lane that leaves the area (a dead end, which Scenic's parser
-    # gives no maneuver); issue 37 asks for 99%
-    assert len(kept) >= 0.92 * (len(kept) + len(lost))
+    assert len(kept) >= 0.99 * (len(kept) + len(lost)) and len(kept) > 100  # issue 37's bar (all 199 today)
 
 
 def test_a_map_dataset_of_several_maps_needs_one_named(tmp_path):
