@@ -88,3 +88,37 @@ def test_a_map_dataset_of_several_maps_needs_one_named(tmp_path):
     res = run_r2s("export", str(maps), "--to", "opendrive", "--map", map_id, "--out", str(tmp_path / "x.xodr"))
     assert res.returncode == 0, res.stderr
     assert asam_issues(tmp_path / "x.xodr") == []
+
+
+def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, tmp_path):
+    """Scenic's Newtonian simulator, headless (2D, render off): a car with FollowLaneBehavior set 6 m before
+    the end of a road that enters a junction leaves it for one of the recorded lanes after it (a connecting
+    road's, then its outgoing road's) and keeps moving. One car, 4 s: the whole map's figure is
+    bench/bench_opendrive.py's."""
+    scenic = pytest.importorskip("scenic")
+    import shapely
+    from scenic.simulators.newtonian import NewtonianSimulator
+
+    from synth.opendrive import network
+    from tests.support.opendrive import SEP, offset
+
+    road = next(iter(read_maps(AV2_MAPS)))
+    net = network(road)
+    assert net.offset == offset(av2)
+    start = next(r for r in net.roads if r.junction == -1 and r.successor is not None
+                 and r.successor.kind == "junction" and shapely.LineString(r.points).length > 12)
+    p = shapely.LineString(start.points).interpolate(shapely.LineString(start.points).length - 6)
+    xodr = tmp_path / "map.xodr"  # Scenic writes its cache beside the map
+    xodr.write_bytes(av2.read_bytes())
+    scenario = scenic.scenarioFromString(
+        f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
+        f"ego = new Car at ({p.x!r}, {p.y!r}), with behavior FollowLaneBehavior(target_speed=6)\n",
+        mode2D=True, params={"render": False})
+    scene, _ = scenario.generate(maxIterations=10)
+    trajectory = NewtonianSimulator().simulate(scene, maxSteps=40).trajectory
+    first, last, before = trajectory[0][0], trajectory[-1][0], trajectory[-2][0]
+    lane = scene.workspace.network.laneAt(last)
+    after = {s for f in start.lanes for s in road[f].successors}
+    names = lane.road.name.split(SEP)
+    assert (first - last).norm() > 6 and (last - before).norm() > 0.1  # past the road's end, still moving
+    assert names[0] in after or any(road[n].predecessors and set(road[n].predecessors) & after for n in names)
