@@ -41,7 +41,10 @@ MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are
 ENDING = 0.05  # metres: the straight piece at a road's end in its node's heading (at most a quarter of the road)
 MAX_PATHS = 100_000  # connecting roads in one network at most (paths through junction lanes multiply)
 MAX_PATH_LANES = 64  # junction lanes in one path at most
-TAIL = "\x00tail"  # the key of a dead-end junction lane's second half (no feature id holds a control character)
+# the keys of a split lane's second half (no feature id holds a control character): a junction lane's, an
+# ordinary lane's
+TAIL, MIDDLE, BRIDGE = "\x00tail", "\x00middle", "\x00to\x00"
+LINK_GAP = 0.1  # metres: linked lane ends farther apart are bridged (nearer ones meet at their mean point)
 
 
 @dataclass(frozen=True)
@@ -95,10 +98,6 @@ class Network:
     junctions: tuple[Junction, ...]
     offset: tuple[float, float]
     notes: tuple[str, ...] = ()
-
-    def road_of_lane(self) -> dict[str, int]:
-        """Each recorded lane outside junctions -> its road's id."""
-        return {r.lanes[0]: r.id for r in self.roads if r.junction == -1}
 
 
 def _clean(line: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -193,33 +192,60 @@ def network(road: RoadMap) -> Network:
     succ, pred = lane_graph(lanes)
     junction = roles(lanes, succ, pred)
     shape = {k: (_clean(f.line), lane_widths(f, _clean(f.line))) for k, f in lanes.items()}
-    # a junction lane where the lanes stop (the area's edge): its first half stays the junction's, its second an
-    # ordinary road named as it is (Scenic gives a junction path without an outgoing road no maneuver)
-    recorded = {k: k for k in lanes}
+    recorded = {k: (k,) for k in lanes}  # the recorded lanes each key follows (a split lane's halves name it)
+    # a successor link between lanes that do not meet (Waymo's maps have a few, 2 to 20 m apart): a straight
+    # junction lane from the one's end to the other's start bridges the gap
+    bridges = 0
+    for a in sorted(lanes):
+        for b in list(succ[a]):
+            gap = math.dist(shape[a][0][-1], shape[b][0][0])
+            if gap <= LINK_GAP:
+                continue
+            bridge = a + BRIDGE + b
+            shape[bridge] = ([shape[a][0][-1], shape[b][0][0]], [shape[a][1][-1], shape[b][1][0]])
+            recorded[bridge] = (a, b)
+            succ[a] = [bridge if s == b else s for s in succ[a]]
+            pred[b] = [bridge if p == a else p for p in pred[b]]
+            succ[bridge], pred[bridge] = [b], [a]
+            junction.add(bridge)
+            bridges += 1
+
+    def split(k: str, mark: str) -> str:
+        """Cut lane k at half its length: k keeps the first half, a new key the second and k's successors."""
+        new = k + mark
+        shape[k], shape[new] = _halves(*shape[k])
+        recorded[new] = recorded[k]
+        succ[new], pred[new] = succ[k], [k]
+        for s in succ[k]:
+            pred[s] = [new if p == k else p for p in pred[s]]
+        succ[k] = [new]
+        return new
+
+    # a junction lane followed by another junction lane or by none: its second half is an ordinary road, so
+    # that every path through a junction is one junction lane from an ordinary road to an ordinary road (paths
+    # through chains of them multiply: 10^5 and more on a Waymo map; Scenic gives a path without an outgoing
+    # road no maneuver)
     for k in sorted(junction):
-        if not succ[k]:
-            tail = k + TAIL
-            shape[k], shape[tail] = _halves(*shape[k])
-            recorded[tail] = k
-            succ[k], pred[tail], succ[tail] = [tail], [k], []
-    # Scenic refuses an ordinary road with both ends at one junction (it becomes the junction's) and a junction
-    # with no outgoing road (its paths' last lanes become ordinary roads)
-    for _ in range(len(recorded) + 1):
-        ordinary = [k for k in sorted(recorded) if k not in junction]
-        paths = _paths(ordinary, junction, succ)
-        path_junction = _junctions(paths)
-        ends: dict[str, set] = defaultdict(set)
-        for (inc, _, out), j in zip(paths, path_junction):
-            ends[inc].add(("succ", j))
-            if out is not None:
-                ends[out].add(("pred", j))
-        both = {k for k, e in ends.items() if {j for w, j in e if w == "succ"} & {j for w, j in e if w == "pred"}}
-        outgoing = {j for (_, _, out), j in zip(paths, path_junction) if out is not None}
-        stuck = {p[-1] for (_, p, _), j in zip(paths, path_junction) if j not in outgoing}
-        if not both and not stuck:
-            break
-        junction = (junction | both) - stuck
+        if not succ[k] or any(s in junction for s in succ[k]):
+            split(k, TAIL)
+    ordinary = [k for k in sorted(recorded) if k not in junction]
+    paths = _paths(ordinary, junction, succ)
+    # an ordinary road with both ends at one junction (Scenic's parser refuses it) is cut in two, linked
+    ends: dict[str, set] = defaultdict(set)
+    for (inc, _, out), j in zip(paths, _junctions(paths)):
+        ends[inc].add(("succ", j))
+        if out is not None:
+            ends[out].add(("pred", j))
+    both = sorted(k for k, e in ends.items() if {j for w, j in e if w == "succ"} & {j for w, j in e if w == "pred"})
+    for k in both:
+        split(k, MIDDLE)
+    ordinary = [k for k in sorted(recorded) if k not in junction]
+    paths = _paths(ordinary, junction, succ)
+    path_junction = _junctions(paths)
     notes: list[str] = []
+    if bridges:
+        notes.append(f"{bridges} recorded successor link(s) between lanes more than {LINK_GAP:g} m apart bridged by "
+                     "a straight connecting road")
     covered = {c for _, p, _ in paths for c in p}
     left_out = sorted(junction - covered)
     if left_out:
@@ -291,7 +317,7 @@ def network(road: RoadMap) -> Network:
         end = pose.get(nodes.find((i, 1))) if (i, 1) in nodes.parent else None
         pts, w = _pinned(line, ws, start, end)
         pts = [(x - offset[0], y - offset[1]) for x, y in pts]
-        names = (recorded[ordinary[i]],) if i < n_ord else paths[i - n_ord][1]
+        names = recorded[ordinary[i]] if i < n_ord else tuple(n for c in paths[i - n_ord][1] for n in recorded[c])
         roads.append(Road(i + 1, names, tuple(pts), tuple(w), -1 if i < n_ord else path_junction[i - n_ord],
                           links.get((i, 0)), links.get((i, 1))))
     junctions = defaultdict(list)

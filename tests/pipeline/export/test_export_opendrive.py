@@ -99,7 +99,7 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     import shapely
     from scenic.simulators.newtonian import NewtonianSimulator
 
-    from synth.opendrive import network
+    from synth.opendrive import lane_graph, network
     from tests.support.opendrive import SEP, offset
 
     road = next(iter(read_maps(AV2_MAPS)))
@@ -118,7 +118,10 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     trajectory = NewtonianSimulator().simulate(scene, maxSteps=40).trajectory
     first, last, before = trajectory[0][0], trajectory[-1][0], trajectory[-2][0]
     lane = scene.workspace.network.laneAt(last)
-    after = {s for f in start.lanes for s in road[f].successors}
-    names = lane.road.name.split(SEP)
+    succ, _ = lane_graph({f.feature_id: f for f in road.lanes})
+    after, frontier = set(), {start.lanes[-1]}
+    for _ in range(3):  # the recorded lanes within three links after the start (some are shorter than a metre)
+        frontier = {s for f in frontier for s in succ[f]} - after
+        after |= frontier
     assert (first - last).norm() > 6 and (last - before).norm() > 0.1  # past the road's end, still moving
-    assert names[0] in after or any(road[n].predecessors and set(road[n].predecessors) & after for n in names)
+    assert set(lane.road.name.split(SEP)) & after, (start.lanes, lane.road.name)
