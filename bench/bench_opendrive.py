@@ -1,0 +1,151 @@
+"""What `r2s export --to opendrive` costs per map against its size, and whether simulators can use what it writes
+(issue 37).
+
+Maps: the shipped Argoverse 2 log's whole map, and each shared Waymo scenario's map (../shared/data/waymo, as
+many as --waymo says; skipped without). Each is exported by `r2s export MAPS --map ID --to opendrive` in a fresh
+interpreter (its CPU seconds, wall seconds and peak resident memory, VmHWM), then read back: ASAM's qc-opendrive
+(errors and warnings), Scenic's parser (its intersections; each Scenic lane's largest distance from the recorded
+centre line it follows, sampled every metre; the recorded successor links Scenic keeps), and driving: one car
+per recorded lane that has a successor in the map, set 6 m before its end (at its middle if it is shorter than
+8 m), FollowLaneBehavior at 6 m/s in Scenic's Newtonian simulator (2D, render off, collisions allowed: the cars
+do not see each other) for 6 s; a car drove on when at some step its lane is one of the recorded lanes within
+three links after its own. Writes bench/results/opendrive.json and opendrive.md.
+
+    .venv/bin/python bench/bench_opendrive.py [--waymo 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT))
+
+from common import machine, run_child, write_results  # noqa: E402
+
+CHILD = """
+import json, sys, time
+from pipeline.cli import main
+t = time.process_time()
+rc = main(sys.argv[1:])
+cpu = time.process_time() - t
+hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")) / 1024
+print(json.dumps({"rc": rc, "cpu_s": cpu, "peak_rss_mb": hwm}))
+"""
+STEPS = 60  # 6 s at Scenic's 0.1 s step
+SHARED = ROOT.parent / "shared" / "data" / "waymo"
+
+
+def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
+    """Cars that drove from their lane into a successor, cars started, and the lanes of those that did not."""
+    import scenic
+    import shapely
+    from scenic.simulators.newtonian import NewtonianSimulator
+
+    from synth.opendrive import lane_graph
+
+    lanes = {f.feature_id: f for f in road.lanes}
+    succ, _ = lane_graph(lanes)
+    starts, lines = [], []
+    for k in sorted(lanes):
+        if not succ[k]:
+            continue
+        line = shapely.LineString([(x - shift[0], y - shift[1]) for x, y in lanes[k].line])
+        p = line.interpolate(line.length / 2 if line.length < 8 else line.length - 6)
+        starts.append(k)
+        lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), with behavior FollowLaneBehavior("
+                     "target_speed=6), with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
+    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
+            + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
+    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
+    scene, _ = scenario.generate(maxIterations=1)
+    trajectory = NewtonianSimulator().simulate(scene, maxSteps=STEPS).trajectory
+    network = scene.workspace.network
+    ok, failed = 0, []
+    for i, k in enumerate(starts):
+        after, frontier = set(), {k}
+        for _ in range(3):
+            frontier = {s for f in frontier for s in succ[f]} - after
+            after |= frontier
+        reached = False
+        for step in trajectory:
+            lane = network.laneAt(step[i])
+            if lane is not None and set(lane.road.name.split(" > ")) & after:
+                reached = True
+                break
+        ok += reached
+        if not reached:
+            end = network.laneAt(trajectory[-1][i])
+            failed.append(f"{k}: moved {(trajectory[-1][i] - trajectory[0][i]).norm():.1f} m, ends on "
+                          f"{end.road.name if end is not None else None}")
+    return ok, len(starts), failed
+
+
+def measure(maps: Path, map_id: str, work: Path) -> dict:
+    from extractors.maps import read_maps
+    from tests.pipeline.export.test_export_openscenario import asam_issues
+    from tests.support.opendrive import centre_line_gaps, kept_links, offset, scenic_network
+
+    road = next(m for m in read_maps(maps) if m.map_id == map_id)
+    xodr = work / f"{map_id}.xodr"
+    cost = run_child("bench_opendrive", [sys.executable, "-c", CHILD, "export", str(maps), "--map", map_id, "--to",
+                                         "opendrive", "--out", str(xodr)], ROOT)
+    issues = asam_issues(xodr)
+    t = time.perf_counter()
+    net = scenic_network(xodr)
+    load = time.perf_counter() - t
+    gaps = centre_line_gaps(net, road, offset(xodr))
+    kept, lost = kept_links(net, road)
+    drove, cars, failed = drive(xodr, road, offset(xodr))
+    return {"map": map_id, "features": len(road.features), "lanes": len(road.lanes),
+            "points": sum(len(f.line) + len(f.polygon) for f in road.features), "cpu_s": cost["cpu_s"],
+            "wall_s": cost["wall_s"], "peak_rss_mb": cost["peak_rss_mb"], "xodr_mb": xodr.stat().st_size / 2**20,
+            "asam_issues": len(issues), "scenic_load_s": load, "intersections": len(net.intersections),
+            "max_gap_m": max(gaps.values()), "links_kept": len(kept), "links": len(kept) + len(lost),
+            "drove": drove, "cars": cars, "failed": failed[:10]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--waymo", type=int, default=3, help="shared Waymo scenarios to take (0: none)")
+    args = ap.parse_args()
+    import subprocess
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        from extractors.maps import read_maps
+
+        av2 = ROOT / "data/argoverse2-log-excerpt/frames.maps"
+        rows += [measure(av2, m.map_id, work) for m in read_maps(av2)]
+        pkls = sorted(SHARED.glob("sd_*.pkl"))[:args.waymo] if SHARED.exists() else []
+        if pkls:
+            (work / "waymo").mkdir()
+            for p in pkls:
+                (work / "waymo" / p.name).symlink_to(p)
+            subprocess.run([sys.executable, "-m", "pipeline.cli", "extract", "scenarionet", str(work / "waymo"),
+                            "--out", str(work / "waymo.parquet")], check=True, cwd=ROOT, capture_output=True)
+            rows += [measure(work / "waymo.maps", m.map_id, work) for m in read_maps(work / "waymo.maps")]
+        for r in rows:
+            print(r)
+    lines = ["# OpenDRIVE from recorded maps (issue 37)", "",
+             f"`bench/bench_opendrive.py`; {machine()['cpu']}, {machine()['note']}.", "",
+             "| map | features | points | export CPU s | wall s | peak MB | .xodr MB | ASAM issues | Scenic load s "
+             "| intersections | max lane gap m | links kept | drove on |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['map'][:16]} | {r['features']} | {r['points']:,} | {r['cpu_s']:.1f} | {r['wall_s']:.1f} "
+                     f"| {r['peak_rss_mb']:.0f} | {r['xodr_mb']:.1f} | {r['asam_issues']} | {r['scenic_load_s']:.0f} "
+                     f"| {r['intersections']} | {r['max_gap_m']:.3f} | {r['links_kept']} / {r['links']} "
+                     f"| {r['drove']} / {r['cars']} ({100 * r['drove'] / max(1, r['cars']):.0f}%) |")
+    write_results("opendrive", {"machine": machine(), "rows": rows}, "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
