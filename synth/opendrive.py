@@ -6,15 +6,16 @@ One road per recorded lane outside junctions, with one driving lane (-1, right-h
 reference line. Same-direction neighbours stay separate roads (not lanes of one road): lane changes are left to
 a simulator's own lane graph.
 
-Roles. A lane is a connecting road's piece (in a junction) when the map says it is an intersection lane, or when
-its road could not be linked to its neighbour directly: OpenDRIVE links a road to one road at each end, so a
-lane that is one of several successors of a lane (a fork) or that has several predecessors (a merge) is made a
-junction's too. An intersection lane without predecessors is an ordinary road (the area begins there); so are the last lanes
-of a junction none of whose paths leads to an ordinary road, and a road with both ends at one junction is made
-that junction's (Scenic's parser refuses both).
-Each path through junction lanes, from an ordinary road (the incoming road) to the next ordinary road (or to
-where the lanes stop), is one connecting road whose reference line is the path's centre lines joined; paths
-that share a lane or an incoming or outgoing road are one junction.
+Roles. A lane is a junction's (a connecting road's piece) when the map says it is an intersection lane, or when
+it could not be linked directly: OpenDRIVE links a road to one road at each end, so a lane that is one of
+several successors of a lane (a fork) or that has several predecessors (a merge) is a junction's too; an
+intersection lane without predecessors is an ordinary road (the area begins there). A junction lane followed by
+another junction lane, or by none, is cut at half its length, its second half an ordinary road: so every path
+through a junction is one junction lane from an ordinary road to an ordinary road (chains of them multiply paths
+beyond 10^5 on a Waymo map; Scenic's parser gives a path without an outgoing road no maneuver). Each such path
+is one connecting road; paths that share an incoming or an outgoing road are one junction; an ordinary road
+with both ends at one junction (Scenic's parser refuses it) is cut in two, linked. A recorded link between lanes
+more than LINK_GAP apart is bridged by a straight junction lane.
 
 Geometry. Reference lines are the recorded centre lines, vertex to vertex (line geometries, tolerance 0), but at
 their ends: every road end meeting others (a node: a lane's end and its successors' starts) is moved to the

@@ -144,3 +144,14 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
         after |= frontier
     assert (first - last).norm() > 6 and (last - before).norm() > 0.1  # past the road's end, still moving
     assert set(lane.road.name.split(SEP)) & after, (start.lanes, lane.road.name)
+
+
+def test_what_opendrive_cannot_be_made_from_is_one_line_and_nothing_is_written(scenes, tmp_path):
+    bare = tmp_path / "bare.json"
+    bare.write_text('{"frame_id": "log/7", "entities": [{"id": "ego", "type": "Car", "x": 0, "y": 0, "heading": 0}]}')
+    out = tmp_path / "x.xodr"
+    for args, says in (([str(bare)], "has no road"), ([str(scenes["scene-0103/0"]), str(bare)], "give no variants"),
+                       ([str(scenes["scene-0103/0"]), "--map", "m"], "--map names a map of a maps dataset"),
+                       ([str(AV2_MAPS), "--map", "nope"], "holds no map 'nope'")):
+        assert_one_line_error(run_r2s("export", *args, "--to", "opendrive", "--out", str(out)), contains=says)
+        assert not out.exists()
