@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.roadmap import LANE, MapFeature, RoadMap
+from synth.roadmap import MapFeature, RoadMap
 
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerate polygon's, clamped
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
@@ -282,7 +282,7 @@ def network(road: RoadMap) -> Network:
             nodes.union((i, 1), (j, 0))
             links[(i, 1)] = Link("road", j + 1, "start")
             links[(j, 0)] = Link("road", i + 1, "end")
-    for n, (inc, p, out) in enumerate(paths):
+    for n, (inc, _, out) in enumerate(paths):
         i = n_ord + n
         nodes.union((rid[inc] - 1, 1), (i, 0))
         links[(i, 0)] = Link("road", rid[inc], "end")

@@ -14,8 +14,8 @@ import argparse
 from pathlib import Path
 
 from pipeline.cli.options import bounded_int
-from pipeline.export import ROAD_ONLY, TARGETS
 from pipeline.errors import UserError
+from pipeline.export import ROAD_ONLY, TARGETS
 from pipeline.outputs import check_apart, check_folder
 
 
