@@ -24,17 +24,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from common import machine, run_child, write_results  # noqa: E402
-
-CHILD = """
-import json, sys, time
-from pipeline.cli import main
-t = time.process_time()
-rc = main(sys.argv[1:])
-cpu = time.process_time() - t
-hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")) / 1024
-print(json.dumps({"rc": rc, "cpu_s": cpu, "peak_rss_mb": hwm}))
-"""
+from common import R2S_CHILD, machine, run_child, write_results  # noqa: E402
 
 
 def r2s(*args: str, cwd: Path) -> None:
@@ -72,7 +62,7 @@ def main() -> None:
             for to in ("scenarionet", "openscenario"):
                 out = work / f"out-{to}-{n}"
                 load = os.getloadavg()[0]
-                rec = run_child("bench_export.py", [sys.executable, "-c", CHILD, "export", str(scene), str(folder),
+                rec = run_child("bench_export.py", [sys.executable, "-c", R2S_CHILD, "export", str(scene), str(folder),
                                                    "--to", to, "--out", str(out)], ROOT)
                 rows.append({"target": to, "variants": n, "scenarios": n + 1, **rec, "load": load,
                              "cpu_ms_per_scenario": 1e3 * rec["cpu_s"] / (n + 1),

@@ -7,8 +7,8 @@ interpreter (its CPU seconds, wall seconds and peak resident memory, VmHWM), the
 (errors and warnings), Scenic's parser (its intersections; each Scenic lane's largest distance from the recorded
 centre line it follows, sampled every metre; the recorded successor links Scenic keeps), and driving: one car
 per recorded lane that has a successor in the map, set 6 m before its end (at its middle if it is shorter than
-8 m), FollowLaneBehavior at 6 m/s in Scenic's Newtonian simulator (2D, render off, collisions allowed: the cars
-do not see each other) for 6 s; a car drove on when at some step its lane is one of the recorded lanes within
+8 m), FollowLaneBehavior at 6 m/s in Scenic's Newtonian simulator (2D, render off, collisions allowed and cars anywhere: the
+cars do not see each other) for 6 s; a car drove on when at some step its lane is one of the recorded lanes within
 three links after its own. Writes bench/results/opendrive.json and opendrive.md.
 
     .venv/bin/python bench/bench_opendrive.py [--waymo 3]
@@ -27,17 +27,8 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 
-from common import machine, run_child, write_results  # noqa: E402
+from common import R2S_CHILD, machine, run_child, write_results  # noqa: E402
 
-CHILD = """
-import json, sys, time
-from pipeline.cli import main
-t = time.process_time()
-rc = main(sys.argv[1:])
-cpu = time.process_time() - t
-hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")) / 1024
-print(json.dumps({"rc": rc, "cpu_s": cpu, "peak_rss_mb": hwm}))
-"""
 STEPS = 60  # 6 s at Scenic's 0.1 s step
 SHARED = ROOT.parent / "shared" / "data" / "waymo"
 
@@ -60,7 +51,8 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
         p = line.interpolate(line.length / 2 if line.length < 8 else line.length - 6)
         starts.append(k)
         lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), with behavior FollowLaneBehavior("
-                     "target_speed=6), with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
+                     "target_speed=6), with allowCollisions True, with requireVisible False, "
+                     "with regionContainedIn everywhere")
     code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
             + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
     scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
@@ -94,7 +86,7 @@ def measure(maps: Path, map_id: str, work: Path) -> dict:
 
     road = next(m for m in read_maps(maps) if m.map_id == map_id)
     xodr = work / f"{map_id}.xodr"
-    cost = run_child("bench_opendrive", [sys.executable, "-c", CHILD, "export", str(maps), "--map", map_id, "--to",
+    cost = run_child("bench_opendrive", [sys.executable, "-c", R2S_CHILD, "export", str(maps), "--map", map_id, "--to",
                                          "opendrive", "--out", str(xodr)], ROOT)
     issues = asam_issues(xodr)
     t = time.perf_counter()

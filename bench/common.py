@@ -47,6 +47,19 @@ def best(fn, repeat: int) -> float:
     return min(times)
 
 
+# A child that runs one r2s command (`python -c R2S_CHILD VERB ARGS...`) and prints its CPU seconds and peak
+# resident memory as the JSON line run_child reads.
+R2S_CHILD = """
+import json, sys, time
+from pipeline.cli import main
+t = time.process_time()
+rc = main(sys.argv[1:])
+cpu = time.process_time() - t
+hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")) / 1024
+print(json.dumps({"rc": rc, "cpu_s": cpu, "peak_rss_mb": hwm}))
+"""
+
+
 def run_child(script: str, cmd: list[str], cwd: Path) -> dict:
     """Run a benchmark's child process (a fresh interpreter: its own peak RSS) that prints one JSON line last;
     returns that record with `wall_s`, the child's wall clock. A failure stops the benchmark with its stderr."""
