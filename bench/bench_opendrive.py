@@ -1,8 +1,8 @@
 """What `r2s export --to opendrive` costs per map against its size, and whether simulators can use what it writes
 (issue 37).
 
-Maps: the shipped Argoverse 2 log's whole map, and each shared Waymo scenario's map (../shared/data/waymo, as
-many as --waymo says; skipped without). Each is exported by `r2s export MAPS --map ID --to opendrive` in a fresh
+Maps: the shipped Argoverse 2 log's whole map, and the shared Waymo scenarios' maps (../shared/data/waymo, the
+--waymo smallest files; skipped without). Each is exported by `r2s export MAPS --map ID --to opendrive` in a fresh
 interpreter (its CPU seconds, wall seconds and peak resident memory, VmHWM), then read back: ASAM's qc-opendrive
 (errors and warnings), Scenic's parser (its intersections; each Scenic lane's largest distance from the recorded
 centre line it follows, sampled every metre; the recorded successor links Scenic keeps), and driving: one car
@@ -105,7 +105,7 @@ def measure(maps: Path, map_id: str, work: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--waymo", type=int, default=3, help="shared Waymo scenarios to take (0: none)")
+    ap.add_argument("--waymo", type=int, default=3, help="shared Waymo scenarios to take, smallest first (0: none)")
     args = ap.parse_args()
     import subprocess
 
@@ -116,7 +116,7 @@ def main() -> None:
 
         av2 = ROOT / "data/argoverse2-log-excerpt/frames.maps"
         rows += [measure(av2, m.map_id, work) for m in read_maps(av2)]
-        pkls = sorted(SHARED.glob("sd_*.pkl"))[:args.waymo] if SHARED.exists() else []
+        pkls = sorted(SHARED.glob("sd_*.pkl"), key=lambda p: p.stat().st_size)[:args.waymo] if SHARED.exists() else []
         if pkls:
             (work / "waymo").mkdir()
             for p in pkls:
