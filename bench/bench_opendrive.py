@@ -39,7 +39,7 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     import shapely
     from scenic.simulators.newtonian import NewtonianSimulator
 
-    from synth.opendrive import lane_graph
+    from synth.road.opendrive import lane_graph
 
     lanes = {f.feature_id: f for f in road.lanes}
     succ, _ = lane_graph(lanes)
@@ -80,7 +80,7 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
 
 
 def measure(maps: Path, map_id: str, work: Path) -> dict:
-    from extractors.maps import read_maps
+    from frames.maps import read_maps
     from tests.pipeline.export.test_export_openscenario import asam_issues
     from tests.support.opendrive import centre_line_gaps, kept_links, offset, scenic_network
 
@@ -112,7 +112,7 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        from extractors.maps import read_maps
+        from frames.maps import read_maps
 
         av2 = ROOT / "data/argoverse2-log-excerpt/frames.maps"
         rows += [measure(av2, m.map_id, work) for m in read_maps(av2)]

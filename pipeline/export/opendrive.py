@@ -1,4 +1,4 @@
-"""A linked road network (synth.opendrive.Network) as OpenDRIVE 1.7 XML, written with scenariogeneration
+"""A linked road network (synth.road.opendrive.Network) as OpenDRIVE 1.7 XML, written with scenariogeneration
 (docs/formats.md, "OpenDRIVE"): one road per Network road, its reference line as line geometries, its one
 driving lane (-1) centred on it by a lane offset of half its width, widths and offsets linear between the
 reference line's points; road and lane links; junctions with their connections; the recentring offset in the
@@ -12,8 +12,8 @@ import re
 from pathlib import Path
 
 from pipeline.errors import UserError
-from synth.opendrive import Network, Road, network
-from synth.roadmap import RoadMap
+from synth.road.opendrive import Network, Road, network
+from synth.road.roadmap import RoadMap
 
 DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
 VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
@@ -136,7 +136,7 @@ def write_xml(element, path: Path) -> None:
 
 
 def linked(road: RoadMap, what: str) -> Network:
-    """The linked network of a road in its source's world (synth.opendrive), or one line (UserError) where
+    """The linked network of a road in its source's world (synth.road.opendrive), or one line (UserError) where
     OpenDRIVE cannot be had: no lane with a centre line, or more than MAX_GEOMETRIES line geometries."""
     try:
         import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
@@ -165,7 +165,7 @@ def export_road(source: str, map_id: str | None, out: str) -> str:
     from synth.world import WorldPose, road_in_world
 
     if Path(source).is_dir() or source.endswith(".parquet"):
-        from extractors.maps import read_maps
+        from frames.maps import read_maps
 
         maps = [m for m in read_maps(source) if map_id is None or m.map_id == map_id]
         if not maps:

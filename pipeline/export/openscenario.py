@@ -2,7 +2,7 @@
 lanes, both written with scenariogeneration (docs/formats.md, "Exported scenarios").
 
 The road: the scene's road (the map features within r2s scene's radius of ego) as linked OpenDRIVE, recentred
-(pipeline/export/opendrive.py, synth/opendrive.py; docs/formats.md "OpenDRIVE").
+(pipeline/export/opendrive.py, synth/road/opendrive.py; docs/formats.md "OpenDRIVE").
 
 A scenario (`scenario`): every entity at its world pose less the road's offset (a TeleportAction to a
 WorldPosition: x, y in the road's recentred frame, z = 0, h the yaw in radians), with its recorded speed along

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from synth.roadmap import RoadMap
+from synth.road.roadmap import RoadMap
 
-SEP = " > "  # how a connecting road's name joins the recorded lanes it follows (synth.opendrive.Road.name)
+SEP = " > "  # how a connecting road's name joins the recorded lanes it follows (synth.road.opendrive.Road.name)
 
 
 def scenic_network(xodr: Path):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from extractors.maps import read_maps
+from frames.maps import read_maps
 from tests.support import SHARED, assert_one_line_error, run_r2s
 from tests.support.extract import EXCERPT
 
@@ -118,7 +118,7 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     import shapely
     from scenic.simulators.newtonian import NewtonianSimulator
 
-    from synth.opendrive import lane_graph, network
+    from synth.road.opendrive import lane_graph, network
     from tests.support.opendrive import SEP, offset
 
     road = next(iter(read_maps(AV2_MAPS)))

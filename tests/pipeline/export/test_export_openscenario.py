@@ -216,7 +216,7 @@ def test_a_road_of_more_line_geometries_than_the_bound_is_one_line(recorded, tmp
     """A lane whose centre line zigzags over MAX_GEOMETRIES + 1 segments (10^6 took 1.6 GB and 54 s for a 186 MB
     .xodr): one line naming the bound, exit 2, nothing written; one geometry fewer is written."""
     from pipeline.export.opendrive import MAX_GEOMETRIES, straight_runs
-    from synth.opendrive import network
+    from synth.road.opendrive import network
 
     scene_file, _ = recorded["scene-0061/0"]
     doc = json.loads(scene_file.read_text())

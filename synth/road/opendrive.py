@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.roadmap import MapFeature, RoadMap
+from synth.road.roadmap import MapFeature, RoadMap
 
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerate polygon's, clamped
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped

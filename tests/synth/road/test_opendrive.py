@@ -1,4 +1,4 @@
-"""synth.opendrive on random lane graphs (hypothesis): straight lanes between points of a grid, each lane's
+"""synth.road.opendrive on random lane graphs (hypothesis): straight lanes between points of a grid, each lane's
 successors the lanes that start where it ends, some marked intersection lanes, some links between lanes that do
 not meet. Checked against the graph itself, not against the module's own rules: every recorded link is kept (the
 next road of a road, or a connecting road's lane after its incoming road's, names the successor), links are
@@ -14,8 +14,8 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.opendrive import network
-from synth.roadmap import LANE, MapFeature, RoadMap
+from synth.road.opendrive import network
+from synth.road.roadmap import LANE, MapFeature, RoadMap
 
 GRID = [(x * 20.0, y * 20.0) for x in range(3) for y in range(3)]
 
