@@ -72,7 +72,12 @@ def main() -> int:
         return 1
     from synth.config import SynthConfig
     from synth.scene import scene_from_dict
-    from synth.synthesize import SynthStats, synthesize
+    from synth.synthesize import synthesize
+
+    try:
+        from synth.result import SynthStats
+    except ImportError:  # a tree from before the one driver (issue 36) declares it beside synthesize
+        from synth.synthesize import SynthStats
 
     split = "certify_s" in SynthStats.__dataclass_fields__
     totals = None if split else _stage_timers()

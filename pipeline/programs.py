@@ -13,13 +13,21 @@ import pyarrow.parquet as pq
 
 from storage.parquet import check_column_types, dataset_files
 from synth.errors import InputError
-from synth.synthesize import RESULT_FIELDS
+from synth.result import RESULT_FIELDS, ResultField
 from synth.version import ROWS_VERSION
 
-_ARROW_TYPES = {"string": pa.string(), "int32": pa.int32(), "int64": pa.int64(), "float64": pa.float64(),
-                "bool": pa.bool_()}
-# The columns are the result fields (synth.synthesize.RESULT_FIELDS, the one declaration), in their order.
-PROGRAMS_SCHEMA = pa.schema([(f.name, _ARROW_TYPES[f.type]) for f in RESULT_FIELDS])
+# The Parquet type of a result field's Python type; the counts of one frame's program (its cost, lower bound and
+# entities, at most a few thousand) are int32, as every programs file since the first release has them.
+_ARROW_TYPES = {str: pa.string(), int: pa.int64(), float: pa.float64(), bool: pa.bool_()}
+_INT32 = frozenset({"cost", "lower_bound", "n_entities"})
+
+
+def _arrow_type(result_field: ResultField) -> pa.DataType:
+    return pa.int32() if result_field.name in _INT32 else _ARROW_TYPES[result_field.type]
+
+
+# The columns are the result fields (synth.result.RESULT_FIELDS, the one declaration), in their order.
+PROGRAMS_SCHEMA = pa.schema([(f.name, _arrow_type(f)) for f in RESULT_FIELDS])
 PROGRAMS_COLUMNS = tuple(PROGRAMS_SCHEMA.names)
 # Columns added after the first release: a file written before them lacks them, and readers take them as null
 # (a row without a frame_hash is recomputed on resume: what it was computed from is unknown).
@@ -37,7 +45,7 @@ class ProgramsError(InputError, ValueError):
 
 
 def result_row(result: Any, frame_hash: str | None = None) -> dict[str, Any]:
-    """A programs row from a synth.synthesize.SynthResult (its config's hash is the row's config_hash);
+    """A programs row from a synth.result.SynthResult (its config's hash is the row's config_hash);
     `frame_hash`: the hash of the frame's rows it was computed from (frames.frame_hash), None when it did not
     come from a frames file."""
     return {**{f.name: result.value(f) for f in RESULT_FIELDS if f.source != "run"},

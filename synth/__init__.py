@@ -19,8 +19,9 @@ search load on first use (`Program`, `parse_program`, `check` by name, the rest 
 # system sets the attribute after loading a submodule): importing the module now binds the function for good.
 from synth.config import ConfigError, SynthConfig  # noqa: E402
 from synth.errors import ExitCode, InputError, R2sError  # noqa: E402
+from synth.result import SynthResult, SynthStats  # noqa: E402
 from synth.scene import Entity, Scene, SceneError, scene_from_dict, scene_from_json  # noqa: E402
-from synth.synthesize import SynthResult, SynthStats, synthesize  # noqa: E402
+from synth.synthesize import synthesize  # noqa: E402
 from synth.version import __version__  # noqa: E402, F401
 
 # Loaded on first access: the DSL needs the statement parts (numpy, the interval library), its syntax fractions.

@@ -31,9 +31,10 @@ from frames.rows import FramesError, frame_to_scene
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.errors import InternalError
+from synth.result import SynthResult
 from synth.scene import Scene
 from synth.search.budget import current_rss_mb, peak_rss_mb
-from synth.synthesize import SynthResult, synthesize
+from synth.synthesize import synthesize
 
 # What a frame runs when not synth.synthesize: a function of the same signature given to run_frames (a
 # module-level function or a functools.partial of one: the task carries it to the worker by reference).

@@ -18,19 +18,26 @@ How windows tile a scene's frames (tile) is here too: it is arithmetic on timest
 from __future__ import annotations
 
 import math
-import time
 from bisect import bisect_left
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from synth.config import ConfigError, SynthConfig, as_config
-from synth.scene import Scene, SceneError, as_scene
-from synth.synthesize import SynthStats, require_speeds
+from synth.driver import Frame, Oracles, drive
+from synth.dsl import Program, Statement
+from synth.oracle import RelationOracle, make_oracle
+from synth.parts import parts_for
+from synth.result import SynthResult
+from synth.road.roadmap import RoadMap
+from synth.scene import Entity, Scene, SceneError, as_scene
+from synth.scenic.emit import render_scenic
+from synth.statement import choose_references, write_statements
 from synth.version import __version__
+from synth.window.road import window_road
 
 if TYPE_CHECKING:
-    from synth.dsl import Program
     from synth.semantics import CheckResult
 
 class WindowError(SceneError):
@@ -38,25 +45,13 @@ class WindowError(SceneError):
 
 
 @dataclass(frozen=True)
-class WindowResult:
-    """The program synthesized for a window of frames: its cost, status and certificate, as SynthResult's, and the
-    frames it covers (`frame_ids`, in order). `frame_program(scene)` is what it says of one of them."""
+class WindowResult(SynthResult):
+    """The program synthesized for a window of frames: a SynthResult (its frame_id the window's first frame, its
+    status the window search's, n_entities every entity present in some frame, certified: every frame's program
+    certified on its frame) and the frames it covers (`frame_ids`, in order). `frame_program(scene)` is what it
+    says of one of them."""
 
     frame_ids: tuple[str, ...]
-    status: str  # optimal | feasible | timeout | memout (for the window's search)
-    cost: int
-    lower_bound: int
-    n_entities: int  # entities declared (ego excluded): every entity present in some frame of the window
-    program: Program
-    scenic: str
-    certified: bool  # every frame's program certified on its frame
-    stats: SynthStats
-    config: SynthConfig
-
-    @property
-    def frame_id(self) -> str:
-        """The window's first frame: what the single-frame outputs' frame_id holds."""
-        return self.frame_ids[0]
 
     @property
     def first_frame(self) -> str:
@@ -69,27 +64,15 @@ class WindowResult:
     def frame_program(self, scene: Scene) -> Program:
         return frame_program(self.program, scene)
 
-    def value(self, result_field: Any) -> Any:
-        """The value of a result field that is not the batch stage's own (RESULT_FIELDS), as SynthResult.value."""
-        holder = {"result": self, "stats": self.stats, "config": self.config}[result_field.source]
-        value = getattr(holder, result_field.name)
-        return str(value) if result_field.name == "program" else value
-
-    def to_json_dict(self) -> dict:
-        """The `r2s synth --format json` document of a clip: the single-frame document (frame_id: the first
-        frame), then the window's first and last frame and its number of frames."""
-        from synth.synthesize import RESULT_FIELDS
-
-        return {**{f.name: self.value(f) for f in RESULT_FIELDS if f.source == "result"},
-                "first_frame": self.first_frame, "last_frame": self.last_frame, "frames": len(self.frame_ids),
-                "stats": {f.name: self.value(f) for f in RESULT_FIELDS if f.source == "stats"}}
+    def json_more(self) -> dict:
+        """The `r2s synth --format json` document of a clip is the single-frame document (frame_id: the first
+        frame) with the window's first and last frame and its number of frames before the stats."""
+        return {"first_frame": self.first_frame, "last_frame": self.last_frame, "frames": len(self.frame_ids)}
 
 
 def frame_program(program: Program, scene: Scene) -> Program:
     """The window program's statements of the entities present in `scene`, in the program's order: what the
     window program says of that frame (checked with r2s check's semantics as any program is)."""
-    from synth.dsl import Program
-
     present = {e.id for e in scene.others}
     return Program(tuple(st for st in program.statements if st.id in present))
 
@@ -198,109 +181,113 @@ def check_window_config(config: SynthConfig) -> None:
                           "(any other strategy)")
 
 
+@dataclass(frozen=True)
+class Window:
+    """A window of frames of one scene, as the driver (synth.driver) synthesizes it: its frames, the clip's
+    entities and the frames each is present in, and what the window's oracle and Scenic text stand on."""
+
+    kind: ClassVar[str] = "window"
+    scenes: tuple[Scene, ...]
+    ids: tuple[str, ...]  # the clip's entities, in order of first appearance (clip_entities)
+    present: dict[str, list[int]] = field(hash=False)  # each entity's frames (indices)
+    # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen (in
+    # the ego frame of that frame, where its relations to ego were measured); the text's road is the window's.
+    shown: Scene
+    road: RoadMap | None  # the window's road (synth.window.road): every frame's, in the first frame's ego frame
+
+    @classmethod
+    def of(cls, scenes: Sequence[Scene], config: SynthConfig) -> Window:
+        """The window of `scenes`, refused (one line) before any work if it is not frames of one scene
+        (WindowError), if the config cannot search a window, if a frame lacks what the config asks (as a Frame's),
+        or if the frames' roads cannot be brought together."""
+        check_window_config(config)
+        ids, present = clip_entities(scenes)
+        for scene in scenes:
+            Frame.of(scene, config)
+        road = window_road(scenes)
+        first = {e.id: e for scene in reversed(scenes) for e in scene.others}
+        shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road,
+                      scenes[0].world)
+        return cls(tuple(scenes), ids, present, shown, road)
+
+    @property
+    def all_ids(self) -> tuple[str, ...]:
+        """The window oracle's ids: ego, then the clip's entities."""
+        return (self.shown.ego.id,) + self.ids
+
+    @cached_property
+    def poses(self) -> dict[str, tuple[Entity, ...]]:
+        """Each entity's poses in the frames it is in: what a part's window fallback is decided on."""
+        by_id = [scene.by_id() for scene in self.scenes]
+        return {i: tuple(by_id[k][i] for k in self.present[i]) for i in self.ids}
+
+    def oracles(self, config: SynthConfig) -> Oracles:
+        """Each frame's oracle with its full table, and the window's oracle on their intersection."""
+        frames = tuple(make_oracle(scene, config) for scene in self.scenes)
+        for oracle in frames:
+            oracle.full_table()
+        window = RelationOracle(self.shown, config, self.all_ids, window_table(frames, self.all_ids),
+                                parts=parts_for(config), poses=self.poses)
+        return Oracles(window, frames)
+
+    def program(self, oracles: Oracles, order: tuple[int, ...], config: SynthConfig) -> Program:
+        """Each frame's statements by Alg. 4 with the window's choice of reference and relation, each entity's
+        clause its part's merge of its frames' clauses."""
+        all_ids, window = self.all_ids, oracles.search
+        # Alg. 4's nearest reference, measured in the frame where the target is first seen (where every reference
+        # that witnesses it for the window is too).
+        places = [{e.id: (e.x, e.y) for e in scene.entities} for scene in self.scenes]
+        seen = {i: self.present[i][0] for i in self.ids}
+
+        def distance(r: int, i: int) -> float:
+            at = places[seen[all_ids[i]]]
+            (rx, ry), (x, y) = at[all_ids[r]], at[all_ids[i]]
+            return math.hypot(rx - x, ry - y)
+
+        choices = dict(zip(order, choose_references(window, order, distance)))
+        written: dict[str, dict[str, list]] = {}  # per entity, per part: the clause of each frame it is in
+        for oracle in oracles.frames:
+            at = {i: k for k, i in enumerate(oracle.ids)}  # window id -> the frame oracle's index
+            mine = [i for i in order if all_ids[i] in at]
+            rows = [tuple((at[all_ids[r]], c) for r, c in choices[i]) for i in mine]
+            for st in write_statements(oracle, tuple(at[all_ids[i]] for i in mine), rows, config):
+                for part, clause in st.parts:
+                    written.setdefault(st.id, {}).setdefault(part, []).append(clause)
+        by_name, poses, types = {p.name: p for p in window.parts}, self.poses, self.shown.by_id()
+        return Program(tuple(
+            Statement(i, types[i].type, parts=tuple((part, by_name[part].merged(frames, poses[i], config))
+                                                    for part, frames in written[i].items()))
+            for i in (all_ids[j] for j in order)))
+
+    def frame_program(self, program: Program, scene: Scene) -> Program:
+        return frame_program(program, scene)
+
+    def where(self, scene: Scene) -> str:
+        return f"frame {scene.frame_id}: "
+
+    def scenic(self, program: Program, status: str, config: SynthConfig) -> str:
+        first, last = self.scenes[0], self.scenes[-1]
+        header = (f"frames {first.frame_id} to {last.frame_id} ({len(self.scenes)} frames): cost {program.cost} "
+                  f"({status}), r2sgen {__version__}")
+        # On the window's road, so that a lane clause of an entity first seen later names a region of the text.
+        shown = self.shown
+        return render_scenic(program, shown if self.road is shown.road else replace(shown, road=self.road), config,
+                             header=header)
+
+    def result(self, **fields: Any) -> WindowResult:
+        return WindowResult(frame_id=self.scenes[0].frame_id, n_entities=len(self.ids),
+                            frame_ids=tuple(s.frame_id for s in self.scenes), **fields)
+
+
 def synthesize_window(scenes: Sequence[Scene | Mapping[str, Any]],
                       config: SynthConfig | Mapping[str, Any] | None = None) -> WindowResult:
     """A minimum-cost program whose every clause holds in every frame of the window (docs/dsl.md, "Programs over
     a window"). `scenes`: the window's frames of one scene, in time order, with stable ids (Scenes or decoded
     scene JSON). `config` as synthesize takes it. Bad input raises SceneError / WindowError / ConfigError (one
     line); a frame program the solver cannot certify raises CertificationError. Deterministic."""
-    from synth.dsl import Program, Statement
-    from synth.oracle import RelationOracle, make_oracle
-    from synth.parts import parts_for
-    from synth.parts.lane import require_lanes
-    from synth.scenic.emit import render_scenic
-    from synth.search import Budget, CostModel, search
-    from synth.smt.certify import certify
-    from synth.statement import choose_references, write_statements
-    from synth.synthesize import CertificationError
-    from synth.window.road import window_road
-
     scenes = [as_scene(s) for s in scenes]
     config = as_config(config)
-    check_window_config(config)
-    ids, present = clip_entities(scenes)
-    for scene in scenes:
-        if config.motion:
-            require_speeds(scene)
-        if config.lanes:
-            require_lanes(scene)
-    road = window_road(scenes)  # refused before any work if the frames' roads cannot be brought together
-    started = time.perf_counter()
-    budget = Budget(config.time_limit, config.memory_limit)
-    oracles = [make_oracle(scene, config) for scene in scenes]
-    for oracle in oracles:
-        oracle.full_table()
-    # The scene the window's oracle and Scenic text stand on: ego's first frame, each entity where first seen (in
-    # the ego frame of that frame, where its relations to ego were measured); the text's road is the window's.
-    first = {e.id: e for scene in reversed(scenes) for e in scene.others}
-    shown = Scene(scenes[0].frame_id, (scenes[0].ego,) + tuple(first[i] for i in ids), scenes[0].road, scenes[0].world)
-    all_ids = (shown.ego.id,) + ids
-    # Each entity's poses in the frames it is in: what a part's window fallback is decided on.
-    poses = {i: tuple(scenes[k].by_id()[i] for k in present[i]) for i in ids}
-    window = RelationOracle(shown, config, all_ids, window_table(oracles, all_ids), parts=parts_for(config), poses=poses)
-    t = time.perf_counter()
-    oracle_s = t - started
-    found = search(config.strategy, CostModel(window), budget)
-    search_s = time.perf_counter() - t
-    t = time.perf_counter()
-    order = tuple(i + 1 for i in found.order)  # window oracle indices (0 is ego)
-    # Alg. 4's nearest reference, measured in the frame where the target is first seen (where every reference
-    # that witnesses it for the window is too).
-    places = [{e.id: (e.x, e.y) for e in scene.entities} for scene in scenes]
-    seen = {i: present[i][0] for i in ids}
-
-    def distance(r: int, i: int) -> float:
-        at = places[seen[all_ids[i]]]
-        (rx, ry), (x, y) = at[all_ids[r]], at[all_ids[i]]
-        return math.hypot(rx - x, ry - y)
-
-    choices = dict(zip(order, choose_references(window, order, distance)))
-    written: dict[str, dict[str, list]] = {}  # per entity, per part: the clause of each frame it is in
-    for oracle in oracles:
-        at = {i: k for k, i in enumerate(oracle.ids)}  # window id -> the frame oracle's index
-        mine = [i for i in order if all_ids[i] in at]
-        rows = [tuple((at[all_ids[r]], c) for r, c in choices[i]) for i in mine]
-        for st in write_statements(oracle, tuple(at[all_ids[i]] for i in mine), rows, config):
-            for part, clause in st.parts:
-                written.setdefault(st.id, {}).setdefault(part, []).append(clause)
-    by_name = {p.name: p for p in window.parts}
-    program = Program(tuple(
-        Statement(i, first[i].type, parts=tuple((part, by_name[part].merged(frames, poses[i], config))
-                                                for part, frames in written[i].items()))
-        for i in (all_ids[j] for j in order)))
-    if program.cost != found.cost:
-        raise AssertionError(f"window program cost {program.cost} differs from the search's {found.cost}")
-    ranges_s = time.perf_counter() - t
-    t = time.perf_counter()
-    certified = False
-    if all(oracle.backend is not None for oracle in oracles):
-        for oracle, scene in zip(oracles, scenes):
-            failed = certify(oracle.backend, frame_program(program, scene), scene)
-            if failed:
-                raise CertificationError(f"frame {scene.frame_id}: the solver refutes the statements of "
-                                         f"{', '.join(failed)}")
-        certified = True
-    certify_s = time.perf_counter() - t
-    t = time.perf_counter()
-    header = (f"frames {scenes[0].frame_id} to {scenes[-1].frame_id} ({len(scenes)} frames): cost {program.cost} "
-              f"({found.status}), r2sgen {__version__}")
-    # On the window's road: every frame's, in the first frame's ego frame (synth.window.road), so that a lane clause
-    # of an entity first seen later names a region of the text.
-    scenic = render_scenic(program, shown if road is shown.road else replace(shown, road=road), config, header=header)
-    render_s = time.perf_counter() - t
-    smt = [o.backend.stats for o in oracles if o.backend is not None]
-    return WindowResult(
-        frame_ids=tuple(s.frame_id for s in scenes),
-        status=found.status,
-        cost=found.cost,
-        lower_bound=found.lower_bound,
-        n_entities=len(ids),
-        program=program,
-        scenic=scenic,
-        certified=certified,
-        stats=SynthStats.since(started, smt, found.nodes_expanded, search_s, oracle_s, ranges_s, certify_s, render_s),
-        config=config,
-    )
+    return drive(Window.of(scenes, config), config)
 
 
 def tile(timestamps_us: Sequence[int], window_us: int, stride_us: int | None = None,

@@ -1,4 +1,4 @@
-"""The result fields (synth.synthesize.RESULT_FIELDS) drive both outputs; both still say what docs/formats.md says:
+"""The result fields (synth.result.RESULT_FIELDS) drive both outputs; both still say what docs/formats.md says:
 the `r2s synth --format json` keys in their order, the programs Parquet columns with their types."""
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ def test_every_exception_class_has_the_root_and_one_kind_whose_exit_code_it_keep
     ("synth.config.ConfigError", ValueError), ("frames.rows.FramesError", ValueError),
     ("pipeline.programs.ProgramsError", ValueError), ("synth.scenic.emit.NotGenerated", ValueError),
     ("synth.variants.gibbs.NoVariant", ValueError), ("synth.smt.SolverUnavailable", RuntimeError),
-    ("synth.synthesize.CertificationError", RuntimeError),
+    ("synth.driver.CertificationError", RuntimeError),
 ])
 def test_classes_callers_catch_by_their_builtin_base_keep_it(cls, base):
     module, name = cls.rsplit(".", 1)

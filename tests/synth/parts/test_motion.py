@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from synth.config import STRATEGIES, ConfigError, SynthConfig, parse_uncertainty
+from synth.driver import SpeedMissing
 from synth.dsl import AbsoluteSpeed, MovingLike, RelativeSpeed, Stationary, parse_program
 from synth.oracle import make_oracle
 from synth.parts import MOTION
@@ -24,7 +25,7 @@ from synth.parts.motion import LIKE, STATIONARY
 from synth.scene import Scene, SceneError, scene_from_dict
 from synth.search.costs import CostModel
 from synth.semantics import check
-from synth.synthesize import SpeedMissing, synthesize
+from synth.synthesize import synthesize
 from synth.tables import NONE
 from tests.support import assert_one_line_error, run_r2s, shipped_frames
 from tests.support.bruteforce import FREE, motion_witnesses, optimal_cost, random_scene_dict
