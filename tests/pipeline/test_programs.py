@@ -10,6 +10,7 @@ import pyarrow.parquet as pq
 
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
+from synth.result import RESULT_FIELDS
 from synth.scene import scene_from_dict
 from synth.synthesize import synthesize
 from tests.support import ROOT, run_r2s
@@ -66,6 +67,9 @@ def test_programs_parquet_has_the_documented_columns_and_types_and_the_json_valu
     assert len(documented) == 21
     assert [(f.name, str(f.type)) for f in table.schema] == [(n, ARROW_NAMES.get(t, t)) for n, t in documented]
     written, failed = table.to_pylist()
+    # each column reads back as the Python type the core declares for its field (pipeline gives its Arrow type)
+    assert [type(written[f.name]) for f in RESULT_FIELDS if f.name not in ("error", "frame_hash")] == \
+        [f.type for f in RESULT_FIELDS if f.name not in ("error", "frame_hash")]
     doc = result.to_json_dict()
     assert {k: written[k] for k in doc if k != "stats"} == {k: v for k, v in doc.items() if k != "stats"}
     assert {k: written[k] for k in doc["stats"]} == doc["stats"]
