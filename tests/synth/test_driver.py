@@ -68,7 +68,7 @@ def test_the_stage_timer_sums_a_stage_run_twice_and_times_one_that_raises():
 
 def test_a_window_result_is_the_frame_result_with_its_frames():
     window, frame = synthesize_window(FRAMES), synthesize(FRAMES[0])
-    assert isinstance(window, SynthResult) and type(frame) is SynthResult
+    assert type(window) is WindowResult and isinstance(window, SynthResult) and type(frame) is SynthResult
     # one declaration of the fields: the window's are SynthResult's, then its frames
     assert [f.name for f in fields(window)] == [f.name for f in fields(frame)] + ["frame_ids"]
     assert (window.frame_id, window.frame_ids, window.first_frame, window.last_frame) == ("f0", ("f0", "f1"), "f0",
