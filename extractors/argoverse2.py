@@ -43,6 +43,7 @@ from extractors.base import (
 from extractors.categories import Taxonomy
 from extractors.speed import speeds_by_track, track_speeds
 from storage.regular_files import open_regular, read_regular
+from synth.pose import SE2
 from synth.road.lane_facts import RoadIndex
 from synth.road.roadmap import (
     CROSSWALK,
@@ -169,11 +170,9 @@ class CityPlaces:
             yaw = quaternion_yaw(poses["qw"][j], poses["qx"][j], poses["qy"][j], poses["qz"][j])
             return tuple(np.where(found, v, np.nan) for v in (poses["tx_m"][j], poses["ty_m"][j], yaw))
 
-        ex, ey, eyaw = pose_at(cols["timestamp_ns"])
-        c, s = np.cos(eyaw), np.sin(eyaw)
+        ego = SE2.body(*pose_at(cols["timestamp_ns"]))  # one pose per row: the vehicle's frame at its stamp
         box_yaw = quaternion_yaw(cols["qw"], cols["qx"], cols["qy"], cols["qz"])
-        return cls(ex + c * cols["tx_m"] - s * cols["ty_m"], ey + s * cols["tx_m"] + c * cols["ty_m"],
-                   eyaw + box_yaw, *pose_at(stamps))
+        return cls(*ego.apply(cols["tx_m"], cols["ty_m"]), ego.heading_out(box_yaw), *pose_at(stamps))
 
 
 def ground_speeds(cols: dict[str, np.ndarray], places: CityPlaces, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

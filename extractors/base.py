@@ -36,6 +36,7 @@ from frames.naming import SceneNames
 from frames.rows import FramesError, _dim, frame_rows, known_speed
 from storage.regular_files import check_regular
 from synth.geometry import normalize
+from synth.pose import SE2
 from synth.road.lane_facts import RoadIndex
 from synth.road.roadmap import MapError, MapRepairs, RoadMap
 from synth.scene import DEFAULT_MAX_ENTITIES
@@ -230,16 +231,12 @@ def global_to_ego(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Global positions and yaws (radians, CCW from +x, as nuScenes / ScenarioNet / AV2 city) into the ego frame.
 
-    Offsets are rotated by (90 deg - ego_yaw) so that the ego's forward axis becomes +y; headings are
-    yaw - ego_yaw in degrees, in [0, 360).
+    The ego pose's ego frame (synth.pose.SE2.ego: its forward axis becomes +y); headings are yaw - ego_yaw in
+    degrees, in [0, 360).
     """
-    dx = np.asarray(xs, dtype=float) - ego_x
-    dy = np.asarray(ys, dtype=float) - ego_y
-    c, s = math.cos(ego_yaw), math.sin(ego_yaw)
-    x = dx * s - dy * c  # minus the leftward component
-    y = dx * c + dy * s  # the forward component
-    heading = np.degrees(np.asarray(yaws, dtype=float) - ego_yaw) % 360.0
-    return x, y, heading
+    ego = SE2.ego(ego_x, ego_y, ego_yaw)
+    x, y = ego.local(np.asarray(xs, dtype=float), np.asarray(ys, dtype=float))
+    return x, y, np.degrees(ego.heading_in(np.asarray(yaws, dtype=float))) % 360.0
 
 
 def vehicle_to_ego(xs: Any, ys: Any, yaws: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -44,6 +44,7 @@ from extractors.base import (
 )
 from extractors.categories import Taxonomy
 from extractors.speed import MAX_GAP_S, track_speeds
+from synth.pose import SE2
 from synth.scene import ENTITY_TYPES
 
 # Robotics logs (MCAP, ROS bags) carry whatever category strings their writer chose: nuScenes names (the
@@ -272,9 +273,8 @@ def ground_positions(raw: list[RawBox], t: int, poses: PoseTrack, options: LogOp
     in_ego = [b for b in raw if b.frame == options.ego_frame]
     pose = poses.at(t) if in_ego else None
     if pose is not None:
-        px, py, yaw = pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        out.update({b.track_id: (px + c * b.x - s * b.y, py + s * b.x + c * b.y) for b in in_ego})
+        ego = SE2.body(*pose)  # the ego frame of a log is a body frame (x forward, y left)
+        out.update({b.track_id: ego.apply(b.x, b.y) for b in in_ego})
     return out
 
 

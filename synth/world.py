@@ -15,10 +15,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Any, Protocol
 
 from synth.errors import InputError
 from synth.geometry import normalize
+from synth.pose import SE2
 
 if TYPE_CHECKING:
     from synth.road.roadmap import Points, RoadMap
@@ -52,18 +54,18 @@ class WorldPose:
         """The ego frame as a world: ego at the origin facing +y (heading 90 from +x), so points stay put."""
         return cls(0.0, 0.0, 90.0)
 
+    @cached_property
+    def frame(self) -> SE2:
+        """This pose's ego frame in its world (synth.pose: the one transform)."""
+        return SE2.ego(self.x, self.y, math.radians(self.heading))
+
     def point(self, x: float, y: float) -> tuple[float, float]:
         """A point of the ego frame in the world (the inverse of extractors.base.global_to_ego)."""
-        yaw = math.radians(self.heading)
-        c, s = math.cos(yaw), math.sin(yaw)
-        return self.x + x * s + y * c, self.y - x * c + y * s
+        return self.frame.apply(x, y)
 
     def local(self, x: float, y: float) -> tuple[float, float]:
         """A point of the world in this pose's ego frame (extractors.base.global_to_ego; the inverse of point)."""
-        yaw = math.radians(self.heading)
-        c, s = math.cos(yaw), math.sin(yaw)
-        dx, dy = x - self.x, y - self.y
-        return dx * s - dy * c, dx * c + dy * s
+        return self.frame.local(x, y)
 
     def yaw(self, heading: float) -> float:
         """An ego-frame heading (degrees CCW from +y) as a world yaw in radians CCW from +x, in [-pi, pi)."""

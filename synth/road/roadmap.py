@@ -24,6 +24,7 @@ from itertools import chain
 import numpy as np
 
 from synth.errors import InputError
+from synth.pose import SE2
 
 LANE, ROAD_LINE, CROSSWALK, INTERSECTION, DRIVABLE_AREA = "lane", "road_line", "crosswalk", "intersection", \
     "drivable_area"
@@ -503,15 +504,13 @@ def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: floa
         if (geom.distance(origin) <= radius or f.feature_id in named
                 or (centres is not None and geom.distance(centres) <= TOUCHING)):
             kept.append(f)
-    yaw = math.radians(heading)
-    c, s = math.cos(yaw), math.sin(yaw)
+    ego = SE2.ego(x, y, math.radians(heading))  # the pose's forward axis becomes +y (as global_to_ego's)
 
     def move(pts: Points) -> Points:
         if not pts:
             return ()
-        a = np.asarray(pts, dtype=float) - (x, y)
-        # the offset rotated by (90 deg - heading): the pose's forward axis becomes +y (extractors.base.global_to_ego)
-        return points(a[:, 0] * s - a[:, 1] * c, a[:, 0] * c + a[:, 1] * s)
+        a = np.asarray(pts, dtype=float)
+        return points(*ego.local(a[:, 0], a[:, 1]))
 
     moved = [f.with_(polygon=move(f.polygon), line=move(f.line)) for f in kept]
     return RoadMap.of(road.map_id, links_within(moved, neighbours=True))
