@@ -19,6 +19,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from frames.ego_place import FramePlace
 from frames.frame_hash import RowBytes
 from frames.schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
@@ -223,22 +224,19 @@ class FrameRoads:
             self._tables.pop(map_id, None)
         return self._maps[map_id]
 
-    def road(self, rows) -> tuple[RoadMap | None, str | None]:
+    def road(self, rows, place: FramePlace | None = None) -> tuple[RoadMap | None, str | None]:
         """(the frame's road in its ego frame, None) or (None, the map it names that is missing) for the rows of
-        one frame (a DataFrame); (None, None) when the frame names no map."""
+        one frame (a DataFrame) at `place` (their ego row's, FramePlace.of the rows if not given); (None, None)
+        when the frame names no map or has no pose."""
         from synth.road.roadmap import in_ego_frame
 
-        if "map_id" not in rows.columns:
+        place = place if place is not None else FramePlace.of(rows)
+        if (pose := place.road_pose) is None:
             return None, None
-        ego = rows[rows["is_ego"]].iloc[0]
-        if ego["map_id"] is None or not all(v == v and v is not None for v in (ego["map_x"], ego["map_y"],
-                                                                               ego["map_heading"])):
-            return None, None
-        road = self.map_named(ego["map_id"])
+        road = self.map_named(place.map_id)
         if road is None:
-            return None, ego["map_id"]
+            return None, place.map_id
         placed = rows[rows["map_x"].notna() & rows["map_y"].notna()]  # map_x is there: ego's was read above
         centres = list(zip(placed["map_x"].astype(float), placed["map_y"].astype(float)))
         named = {lane for ids in rows["lanes"] if ids is not None for lane in ids} if "lanes" in rows.columns else ()
-        return in_ego_frame(road, float(ego["map_x"]), float(ego["map_y"]), float(ego["map_heading"]),
-                            self.radius, centres, named), None
+        return in_ego_frame(road, *pose, self.radius, centres, named), None

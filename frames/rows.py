@@ -18,6 +18,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from frames.dataset import FramesDataset, check_table
+from frames.ego_place import FramePlace, given
 from frames.naming import SceneNames
 from frames.schema import (
     EXTRACTED_SCHEMA,
@@ -144,16 +145,11 @@ def _dim(v: Any) -> float | None:
     return f if math.isfinite(f) and f > 0 else None
 
 
-def _given(v: Any) -> float | None:
-    # NaN is how pandas stores a missing float; anything else (negative, inf) is for the scene to refuse.
-    import pandas as pd  # loaded already wherever rows come from pandas
-
-    return None if v is None or pd.isna(v) else float(v)
-
-
-def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
+def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None, place: FramePlace | None = None) -> Scene:
     """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone), with
-    each entity's lane facts where the rows have them, and `road` (in the frame's ego frame) as its road."""
+    each entity's lane facts where the rows have them, `road` (in the frame's ego frame) as its road, and the
+    world of `place` (the ego row's, read once by whoever placed the road: FramePlace.of the rows if not given).
+    A length or width that is not a positive finite number is no box (docs/formats.md, Frames Parquet)."""
     fid = str(rows["frame_id"].iloc[0])
     entities = []
     for r in rows.itertuples(index=False):
@@ -163,7 +159,7 @@ def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
                 d[key] = v
         # Speed and measurement bounds; a missing value (NaN, None) means "not given".
         for key in OPTIONAL_COLUMNS:
-            if (v := _given(getattr(r, key, None))) is not None:
+            if (v := given(getattr(r, key, None))) is not None:
                 d[key] = v
         lanes = getattr(r, "lanes", None)
         if lanes is not None and not (isinstance(lanes, float) and math.isnan(lanes)):
@@ -174,33 +170,13 @@ def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None) -> Scene:
                     d[key] = v if key == "lane" else bool(v)
         entities.append(d)
     doc: dict[str, Any] = {"frame_id": fid, "entities": entities}
-    if (world := _world(rows)) is not None:
+    if (world := (place if place is not None else FramePlace.of(rows)).world) is not None:
         doc["world"] = world
     try:
         scene = scene_from_dict(doc)
     except SceneError as exc:
         raise FramesError(f"frame {fid!r}: {exc}") from None
     return scene if road is None else replace(scene, road=road)
-
-
-def _world(rows: pd.DataFrame) -> dict[str, Any] | None:
-    """The frame's place in its source's world (scene JSON's `world`, synth.world): the ego row's map_x, map_y,
-    map_heading, with its source, scene, frame index, timestamp and map; None where the ego row has no world pose."""
-    if "map_x" not in rows.columns:
-        return None
-    ego = rows[rows["is_ego"].astype(bool)]
-    if ego.empty:
-        return None
-    r = ego.iloc[0]
-    pose = [_given(r.get(c)) for c in ("map_x", "map_y", "map_heading")]
-    if None in pose:
-        return None
-    names = {c: r.get(c) for c in ("source", "scene", "map_id")}
-    index, stamp = _given(r.get("frame_index")), _given(r.get("timestamp_us"))
-    return {"x": pose[0], "y": pose[1], "heading": pose[2],
-            **{c: str(v) for c, v in names.items() if isinstance(v, str) and v},
-            **({"frame_index": int(index)} if index is not None else {}),
-            **({"timestamp_us": int(stamp)} if stamp is not None else {})}
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:

@@ -15,6 +15,7 @@ import sys
 import pandas as pd
 import pyarrow as pa
 
+from frames.ego_place import FramePlace
 from frames.rows import frame_to_scene, to_table, validate_frames
 from pipeline.errors import UserError
 from synth.scene import Scene
@@ -71,14 +72,15 @@ def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
         raise UserError(f"{frames} has no frame {frame_id!r}{_hint(dataset, frame_id)}")
     rows = table.to_pandas()
     validate_frames(rows)
-    return frame_to_scene(rows, _road(frames, rows, radius))
+    place = FramePlace.of(rows)  # the ego row read once, for the road and the world
+    return frame_to_scene(rows, _road(frames, rows, radius, place), place)
 
 
-def _road(frames: str, rows: pd.DataFrame, radius: float):
+def _road(frames: str, rows: pd.DataFrame, radius: float, place: FramePlace):
     """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
     from frames.maps import FrameRoads, maps_dir
 
-    road, missing = FrameRoads(maps_dir(frames), radius).road(rows)
+    road, missing = FrameRoads(maps_dir(frames), radius).road(rows, place)
     if missing is not None:
         sys.stderr.write(f"r2s scene: warning: the frame names map {missing!r}, which is not in {maps_dir(frames)}; "
                          "the scene has no road\n")

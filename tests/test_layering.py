@@ -39,8 +39,8 @@ SYNTH_MAY_IMPORT = {
 }
 # The road imports of the core only these (a road knows no scene); the core's values (the scene and what describes
 # it, below the parts) import no sub-room but the road.
-ROAD_MAY_IMPORT = {"synth.errors", "synth.geometry"}
-CORE_VALUES = {"synth.scene", "synth.world", "synth.geometry", "synth.errors", "synth.config", "synth.syntax",
+ROAD_MAY_IMPORT = {"synth.errors", "synth.geometry", "synth.pose"}
+CORE_VALUES = {"synth.scene", "synth.world", "synth.geometry", "synth.pose", "synth.errors", "synth.config", "synth.syntax",
                "synth.tables", "synth.perturbation", "synth.intervals", "synth.ranges", "synth.draws", "synth.version"}
 
 

@@ -25,6 +25,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from frames.dataset import read_frame_rows
+from frames.ego_place import FramePlace
 from frames.frame_hash import Coverage, frame_hashes_of, to_hex
 from frames.maps import FrameRoads
 from frames.rows import FramesError, frame_to_scene
@@ -168,7 +169,7 @@ def run_chunk(task: ChunkTask) -> pa.Table:
                 f.write(str(i))
         try:
             frame_rows = rows.iloc[start - first: start - first + n]
-            scene = frame_to_scene(frame_rows, _road(roads, frame_rows) if roads is not None else None)
+            scene = frame_scene(frame_rows, roads)
         except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
             out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, frame_hash=frame_hash))
             continue
@@ -194,12 +195,16 @@ def hash_rows(rows: pa.Table, starts: np.ndarray, roads: FrameRoads | None) -> t
         raise ChunkInvalid(one_line(str(exc), 400)) from None
 
 
-def _road(roads: FrameRoads, rows):
-    """A frame's road (what r2s scene gives it); a map the frame names but the maps lack is a FramesError."""
-    road, missing = roads.road(rows)
-    if missing is not None:
-        raise FramesError(f"the frame names map {missing!r}, which is not in {roads.where}")
-    return road
+def frame_scene(rows, roads: FrameRoads | None) -> Scene:
+    """A frame's rows as its Scene, with (given `roads`: --lanes) the road r2s scene gives it; the ego row is read
+    once for both (frames.ego_place). A map the frame names but the maps lack is a FramesError."""
+    place = FramePlace.of(rows)
+    road = None
+    if roads is not None:
+        road, missing = roads.road(rows, place)
+        if missing is not None:
+            raise FramesError(f"the frame names map {missing!r}, which is not in {roads.where}")
+    return frame_to_scene(rows, road, place)
 
 
 def run_frame(task: FrameTask) -> dict:

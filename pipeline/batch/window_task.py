@@ -18,14 +18,14 @@ import pyarrow as pa
 
 from frames.dataset import read_frame_rows
 from frames.maps import FrameRoads
-from frames.rows import FramesError, frame_to_scene
+from frames.rows import FramesError
 from pipeline.batch.task import (
     ChunkInvalid,
     ChunkUnreadable,
     Units,
     _hard_memory_cap,
     _reset_peak_rss,
-    _road,
+    frame_scene,
     hash_rows,
     one_line,
 )
@@ -99,7 +99,7 @@ class WindowTask(Units):
         frames, digest = self.read(unit, roads)
         n_entities = max(len(f) for f in frames) - 1
         try:
-            scenes = [frame_to_scene(f, _road(roads, f) if roads is not None else None) for f in frames]
+            scenes = [frame_scene(f, roads) for f in frames]
         except FramesError as exc:  # one bad frame is an error row for its window; the run goes on
             return self._failure(unit, "error", str(exc), n_entities, digest)
         _reset_peak_rss()
