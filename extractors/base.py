@@ -33,7 +33,8 @@ import numpy as np
 
 from extractors.categories import ALL, UNKNOWN_CLASS, CategorySelection, Taxonomy
 from frames.naming import SceneNames
-from frames.rows import FramesError, _dim, frame_rows, known_speed
+from frames.rows import FramesError, frame_rows, known_speed
+from frames.scene import box
 from storage.regular_files import check_regular
 from synth.geometry import normalize
 from synth.pose import SE2
@@ -423,7 +424,7 @@ def _facts_args(worlds: list[tuple[float, float, float]]) -> tuple[list[float], 
 
 def _as_entity(b: RecordedObject, cls: str) -> dict[str, Any]:
     return {"track_id": b.track_id, "type": cls, "category": b.category, "x": b.x, "y": b.y,
-            "heading": b.heading, "length": _dim(b.length), "width": _dim(b.width), "speed": known_speed(b.speed)}
+            "heading": b.heading, "length": box(b.length), "width": box(b.width), "speed": known_speed(b.speed)}
 
 
 def require_path(path: str | os.PathLike, what: str) -> Path:

@@ -19,8 +19,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from frames.ego_place import FramePlace
 from frames.frame_hash import RowBytes
+from frames.scene import EgoPlace, FrameColumns, given
 from frames.schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
 from storage.folders import check_replaceable, replace_with
@@ -224,19 +224,22 @@ class FrameRoads:
             self._tables.pop(map_id, None)
         return self._maps[map_id]
 
-    def road(self, rows, place: FramePlace | None = None) -> tuple[RoadMap | None, str | None]:
+    def road(self, rows, place: EgoPlace | None = None) -> tuple[RoadMap | None, str | None]:
         """(the frame's road in its ego frame, None) or (None, the map it names that is missing) for the rows of
-        one frame (a DataFrame) at `place` (their ego row's, FramePlace.of the rows if not given); (None, None)
-        when the frame names no map or has no pose."""
+        one frame (FrameColumns, an Arrow table or a DataFrame) at `place` (their ego row's, EgoPlace.of the rows
+        if not given); (None, None) when the frame names no map or has no pose."""
         from synth.road.roadmap import in_ego_frame
 
-        place = place if place is not None else FramePlace.of(rows)
+        rows = FrameColumns.of(rows)
+        place = place if place is not None else EgoPlace.of(rows)
         if (pose := place.road_pose) is None:
             return None, None
         road = self.map_named(place.map_id)
         if road is None:
             return None, place.map_id
-        placed = rows[rows["map_x"].notna() & rows["map_y"].notna()]  # map_x is there: ego's was read above
-        centres = list(zip(placed["map_x"].astype(float), placed["map_y"].astype(float)))
-        named = {lane for ids in rows["lanes"] if ids is not None for lane in ids} if "lanes" in rows.columns else ()
+        # map_x and map_y are there: ego's were read above
+        centres = [(float(x), float(y)) for x, y in zip(rows.get("map_x"), rows.get("map_y"))
+                   if given(x) is not None and given(y) is not None]
+        lanes = rows.get("lanes")
+        named = {lane for ids in lanes if ids is not None for lane in ids} if lanes is not None else ()
         return in_ego_frame(road, *pose, self.radius, centres, named), None

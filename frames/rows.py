@@ -11,15 +11,14 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator, Mapping
-from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from frames.dataset import FramesDataset, check_table
-from frames.ego_place import FramePlace, given
 from frames.naming import SceneNames
+from frames.scene import frame_to_scene
 from frames.schema import (
     EXTRACTED_SCHEMA,
     FRAMES_COLUMNS,
@@ -30,8 +29,7 @@ from frames.schema import (
     FramesError,
 )
 from storage.atomic import atomic_path
-from synth.road.roadmap import RoadMap
-from synth.scene import EGO_ID, Scene, SceneError, make_scene, scene_from_dict
+from synth.scene import EGO_ID, Scene, make_scene
 
 if TYPE_CHECKING:  # pandas is imported where rows are tabled: `r2s extract --help` and the sources need it not
     import pandas as pd
@@ -136,47 +134,6 @@ def validate_frames(df: pd.DataFrame) -> None:
         if not pa.types.is_string(table.schema.field(name).type) and table.column(name).null_count < len(table):
             table = table.set_column(table.schema.get_field_index(name), name, table.column(name).cast(pa.string()))
     check_table(table)
-
-
-def _dim(v: Any) -> float | None:
-    if v is None:
-        return None
-    f = float(v)
-    return f if math.isfinite(f) and f > 0 else None
-
-
-def frame_to_scene(rows: pd.DataFrame, road: RoadMap | None = None, place: FramePlace | None = None) -> Scene:
-    """One frame's rows as a validated Scene (ids and types are re-checked: frames may come from anyone), with
-    each entity's lane facts where the rows have them, `road` (in the frame's ego frame) as its road, and the
-    world of `place` (the ego row's, read once by whoever placed the road: FramePlace.of the rows if not given).
-    A length or width that is not a positive finite number is no box (docs/formats.md, Frames Parquet)."""
-    fid = str(rows["frame_id"].iloc[0])
-    entities = []
-    for r in rows.itertuples(index=False):
-        d = {"id": r.entity_id, "type": r.type, "x": float(r.x), "y": float(r.y), "heading": float(r.heading)}
-        for key in ("length", "width"):
-            if (v := _dim(getattr(r, key))) is not None:
-                d[key] = v
-        # Speed and measurement bounds; a missing value (NaN, None) means "not given".
-        for key in OPTIONAL_COLUMNS:
-            if (v := given(getattr(r, key, None))) is not None:
-                d[key] = v
-        lanes = getattr(r, "lanes", None)
-        if lanes is not None and not (isinstance(lanes, float) and math.isnan(lanes)):
-            d["lanes"] = [str(x) for x in lanes]
-            for key in LANE_FACT_COLUMNS[1:]:
-                v = getattr(r, key, None)
-                if v is not None and not (isinstance(v, float) and math.isnan(v)):
-                    d[key] = v if key == "lane" else bool(v)
-        entities.append(d)
-    doc: dict[str, Any] = {"frame_id": fid, "entities": entities}
-    if (world := (place if place is not None else FramePlace.of(rows)).world) is not None:
-        doc["world"] = world
-    try:
-        scene = scene_from_dict(doc)
-    except SceneError as exc:
-        raise FramesError(f"frame {fid!r}: {exc}") from None
-    return scene if road is None else replace(scene, road=road)
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:

@@ -15,8 +15,8 @@ import sys
 import pandas as pd
 import pyarrow as pa
 
-from frames.ego_place import FramePlace
 from frames.rows import frame_to_scene, to_table, validate_frames
+from frames.scene import EgoPlace, FrameColumns
 from pipeline.errors import UserError
 from synth.scene import Scene
 
@@ -70,13 +70,13 @@ def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
     table = dataset.find(frame_id)
     if table is None:
         raise UserError(f"{frames} has no frame {frame_id!r}{_hint(dataset, frame_id)}")
-    rows = table.to_pandas()
-    validate_frames(rows)
-    place = FramePlace.of(rows)  # the ego row read once, for the road and the world
+    validate_frames(table.to_pandas())
+    rows = FrameColumns.of(table)  # read once, and the ego row once, for the road and the world
+    place = EgoPlace.of(rows)
     return frame_to_scene(rows, _road(frames, rows, radius, place), place)
 
 
-def _road(frames: str, rows: pd.DataFrame, radius: float, place: FramePlace):
+def _road(frames: str, rows: FrameColumns, radius: float, place: EgoPlace):
     """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
     from frames.maps import FrameRoads, maps_dir
 

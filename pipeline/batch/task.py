@@ -25,10 +25,10 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from frames.dataset import read_frame_rows
-from frames.ego_place import FramePlace
 from frames.frame_hash import Coverage, frame_hashes_of, to_hex
 from frames.maps import FrameRoads
 from frames.rows import FramesError, frame_to_scene
+from frames.scene import EgoPlace, FrameColumns
 from pipeline.programs import failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.errors import InternalError
@@ -160,7 +160,6 @@ def run_chunk(task: ChunkTask) -> pa.Table:
     cannot be read at all (ChunkUnreadable)."""
     roads = task.roads()
     table, first, hashes = task.read(roads)
-    rows = table.to_pandas()
     marker = task.marker()
     out = []
     for i, ((frame_id, start, n), frame_hash) in enumerate(zip(task.frames, hashes)):
@@ -168,8 +167,7 @@ def run_chunk(task: ChunkTask) -> pa.Table:
             with open(marker, "w") as f:  # its mtime is when this frame started (the wall-clock guard reads it)
                 f.write(str(i))
         try:
-            frame_rows = rows.iloc[start - first: start - first + n]
-            scene = frame_scene(frame_rows, roads)
+            scene = frame_scene(table.slice(start - first, n), roads)
         except FramesError as exc:  # one bad frame is an error row; the rest of the chunk goes on
             out.append(failure_row(frame_id, "error", str(exc), n - 1, task.config, frame_hash=frame_hash))
             continue
@@ -195,10 +193,12 @@ def hash_rows(rows: pa.Table, starts: np.ndarray, roads: FrameRoads | None) -> t
         raise ChunkInvalid(one_line(str(exc), 400)) from None
 
 
-def frame_scene(rows, roads: FrameRoads | None) -> Scene:
-    """A frame's rows as its Scene, with (given `roads`: --lanes) the road r2s scene gives it; the ego row is read
-    once for both (frames.ego_place). A map the frame names but the maps lack is a FramesError."""
-    place = FramePlace.of(rows)
+def frame_scene(rows: pa.Table, roads: FrameRoads | None) -> Scene:
+    """A frame's rows as its Scene, with (given `roads`: --lanes) the road r2s scene gives it; the rows and the ego
+    row are read once for both (frames.scene). A map the frame names but the maps lack is a
+    FramesError."""
+    rows = FrameColumns.of(rows)  # read once, column by column
+    place = EgoPlace.of(rows)
     road = None
     if roads is not None:
         road, missing = roads.road(rows, place)

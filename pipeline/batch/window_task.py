@@ -52,7 +52,7 @@ class WindowTask(Units):
     maps: str | None = None  # with lanes: the maps beside the frames, each frame's road as r2s scene gives it
 
     def read(self, unit: WindowUnit, roads: FrameRoads | None) -> tuple[list, str]:
-        """The window's frames' rows (one DataFrame each, in order) and the window's hash of them as read (with
+        """The window's frames' rows (one Arrow table each, in order) and the window's hash of them as read (with
         `roads`, --lanes: of the maps they name too)."""
         frames, lanes = [], []
         for k in sorted({p.part for p in unit.frames}):
@@ -75,7 +75,7 @@ class WindowTask(Units):
         ids = [f[0] for f, _ in ranked]
         digest = window_hash(unit, ids, np.array([a for _, (a, _) in ranked], dtype=np.uint64),
                              np.array([b for _, (_, b) in ranked], dtype=np.uint64))
-        return [f[1].to_pandas() for f, _ in ranked], digest
+        return [f[1] for f, _ in ranked], digest
 
     def run(self) -> pa.Table:
         """A row per window, in order. Never raises for a window, only when rows cannot be read at all."""

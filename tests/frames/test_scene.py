@@ -1,4 +1,4 @@
-"""A frame read into a Scene: its ego row's place read once (frames.ego_place) for both its `world` and its
+"""A frame read into a Scene: its ego row's place read once (frames.scene) for both its `world` and its
 road, and the box rule of each path as docs/formats.md states it (a frames row's null, NaN, infinite, zero or
 negative length / width is no box; scene JSON refuses one), all through `r2s` as a user runs it."""
 
@@ -11,10 +11,11 @@ import shutil
 import pyarrow.parquet as pq
 import pytest
 
-from frames.ego_place import FramePlace
 from frames.maps import FrameRoads, maps_dir
 from frames.rows import read_frames, write_frames
+from frames.scene import EgoPlace, FrameColumns, frame_to_scene
 from synth.road.roadmap import in_ego_frame
+from synth.scene import scene_from_dict
 from tests.support import ROOT, assert_one_line_error, run_r2s
 
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
@@ -103,7 +104,7 @@ def test_an_ego_row_without_a_pose_has_no_world_and_no_road(tmp_path, missing):
     df.loc[df["is_ego"], missing] = math.nan
     write_frames(df, frames)
     fid = df["frame_id"].iloc[0]
-    assert FramePlace.of(df[df["frame_id"] == fid]) == FramePlace(df["map_id"].iloc[0], None)
+    assert EgoPlace.of(FrameColumns.of(df[df["frame_id"] == fid])) == EgoPlace(df["map_id"].iloc[0], None)
     proc = run_r2s("scene", str(frames), fid)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)
@@ -116,10 +117,49 @@ def test_an_ego_row_without_a_map_has_its_world_and_no_road(tmp_path):
     df.loc[df["is_ego"], "map_id"] = None
     write_frames(df, frames)
     fid = df["frame_id"].iloc[0]
-    place = FramePlace.of(df[df["frame_id"] == fid])
+    place = EgoPlace.of(FrameColumns.of(df[df["frame_id"] == fid]))
     assert place.map_id is None and place.road_pose is None and place.world is not None
     proc = run_r2s("scene", str(frames), fid)
     doc = json.loads(proc.stdout)
     assert proc.returncode == 0 and "road" not in doc and "map_id" not in doc["world"]
     assert doc["world"]["x"] == place.world["x"]
 
+
+
+def _by_hand(rows) -> dict:
+    """A frame's scene JSON from its DataFrame rows one at a time, each missing value (None, NaN) left out: the
+    reading of docs/formats.md, written without frames.scene."""
+    def known(v):
+        return v is not None and not (isinstance(v, float) and math.isnan(v))
+
+    entities = []
+    for r in rows.to_dict("records"):
+        d = {k: r[k] for k in ("entity_id", "type", "x", "y", "heading")}
+        d["id"] = d.pop("entity_id")
+        d.update({k: float(r[k]) for k in ("length", "width") if known(r[k]) and math.isfinite(r[k]) and r[k] > 0})
+        d.update({k: r[k] for k in ("speed", "pos_sigma", "heading_sigma", "speed_sigma") if known(r.get(k))})
+        if r.get("lanes") is not None:
+            d["lanes"] = list(r["lanes"])
+            d.update({k: r[k] for k in ("lane", "in_intersection", "on_crosswalk", "off_road") if known(r.get(k))})
+        entities.append(d)
+    doc = {"frame_id": rows["frame_id"].iloc[0], "entities": entities}
+    ego = rows[rows["is_ego"]].iloc[0]
+    if all(known(ego.get(k)) for k in ("map_x", "map_y", "map_heading")):
+        doc["world"] = {"x": ego["map_x"], "y": ego["map_y"], "heading": ego["map_heading"],
+                        "frame_index": int(ego["frame_index"]),
+                        **({"timestamp_us": int(ego["timestamp_us"])} if known(ego.get("timestamp_us")) else {}),
+                        **{k: ego[k] for k in ("source", "scene", "map_id") if isinstance(ego.get(k), str)}}
+    return doc
+
+
+@pytest.mark.parametrize("frames", [AV2, ROOT / "data" / "nuscenes-mini-keyframes" / "frames.parquet"])
+def test_arrow_and_pandas_rows_are_one_scene_the_one_read_by_hand(frames):
+    table = pq.read_table(frames)
+    df = table.to_pandas()
+    starts = df.index[df["frame_id"] != df["frame_id"].shift()].tolist() + [len(df)]
+    assert len(starts) > 5
+    for a, b in zip(starts[:-1], starts[1:]):
+        rows = df.iloc[a:b]
+        scene = frame_to_scene(table.slice(a, b - a))
+        assert scene == frame_to_scene(rows) == scene_from_dict(_by_hand(rows))
+        assert scene.world == scene_from_dict(_by_hand(rows)).world
