@@ -18,7 +18,7 @@ import pyarrow.parquet as pq
 
 from frames.dataset import FramesDataset, check_table
 from frames.naming import SceneNames
-from frames.scene import frame_to_scene
+from frames.scene import arrow_rows, frame_to_scene
 from frames.schema import (
     EXTRACTED_SCHEMA,
     FRAMES_COLUMNS,
@@ -94,7 +94,10 @@ def to_table(rows: pd.DataFrame | list[dict[str, Any]]) -> pa.Table:
     types = {**OPTIONAL_COLUMNS, **ROAD_COLUMNS}
     extra = [c for c in types if c in df.columns]
     schema = pa.schema(list(FRAMES_SCHEMA) + [(c, types[c]) for c in extra])
-    return pa.Table.from_pandas(df[list(FRAMES_COLUMNS) + extra], schema=schema, preserve_index=False)
+    try:
+        return pa.Table.from_pandas(df[list(FRAMES_COLUMNS) + extra], schema=schema, preserve_index=False)
+    except (pa.ArrowException, TypeError, ValueError) as exc:  # a column the check does not read, of the wrong type
+        raise FramesError(f"a column has values of the wrong type ({str(exc)[:120]})") from None
 
 
 def write_frames(rows: pd.DataFrame | list[dict[str, Any]] | pa.Table, path: str | os.PathLike) -> int:
@@ -137,9 +140,11 @@ def validate_frames(df: pd.DataFrame) -> None:
 
 
 def iter_scenes(df: pd.DataFrame) -> Iterator[Scene]:
-    """Every frame of a frames table as a Scene, in order of first appearance."""
-    for _, rows in df.groupby("frame_id", sort=False):
-        yield frame_to_scene(rows)
+    """Every frame of a frames table as a Scene, in order of first appearance (the table made Arrow once)."""
+    table = arrow_rows(df)
+    rows = df.groupby("frame_id", sort=False).indices
+    for fid in df["frame_id"].unique():
+        yield frame_to_scene(table.take(rows[fid]))
 
 
 def scene_to_rows(scene: Scene, source: str = "scene", scene_name: str | None = None, frame_index: int = 0) -> list[dict[str, Any]]:

@@ -47,6 +47,17 @@ def box(v: Any) -> float | None:
     return f if math.isfinite(f) and f > 0 else None
 
 
+def arrow_rows(rows: pa.Table | pd.DataFrame) -> pa.Table:
+    """Rows as an Arrow table: NaN and pd.NA become nulls, as Arrow holds them; a column pandas holds in a way no
+    Arrow column can (mixed types) is a FramesError."""
+    if isinstance(rows, pa.Table):
+        return rows
+    try:
+        return pa.Table.from_pandas(rows, preserve_index=False)
+    except (pa.ArrowException, TypeError, ValueError) as exc:
+        raise FramesError(f"a column has values of the wrong type ({str(exc)[:120]})") from None
+
+
 @dataclass(frozen=True)
 class FrameColumns:
     """One frame's rows, a list of Python values per column (a null is None), read once."""
@@ -57,12 +68,8 @@ class FrameColumns:
     def of(cls, rows: FrameColumns | pa.Table | pd.DataFrame) -> FrameColumns:
         if isinstance(rows, FrameColumns):
             return rows
-        if not isinstance(rows, pa.Table):
-            try:  # NaN and pd.NA become nulls, as Arrow holds them
-                rows = pa.Table.from_pandas(rows, preserve_index=False)
-            except (pa.ArrowException, TypeError, ValueError) as exc:
-                raise FramesError(f"a column has values of the wrong type ({str(exc)[:120]})") from None
-        return cls({c: rows.column(c).to_pylist() for c in rows.column_names})
+        table = arrow_rows(rows)
+        return cls({c: table.column(c).to_pylist() for c in table.column_names})
 
     def __len__(self) -> int:
         return len(self.columns["frame_id"])
@@ -144,8 +151,12 @@ def frame_to_scene(rows: FrameColumns | pa.Table | pd.DataFrame, road: RoadMap |
     world of `place` (the ego row's, read once by whoever placed the road; EgoPlace.of the rows if not given)."""
     rows = FrameColumns.of(rows)
     fid = str(rows.columns["frame_id"][0])
-    doc: dict[str, Any] = {"frame_id": fid, "entities": list(_entities(rows))}
-    if (world := (place if place is not None else EgoPlace.of(rows)).world) is not None:
+    try:
+        doc: dict[str, Any] = {"frame_id": fid, "entities": list(_entities(rows))}
+        world = (place if place is not None else EgoPlace.of(rows)).world
+    except (TypeError, ValueError) as exc:  # text where a number belongs (rows in memory: the Python API)
+        raise FramesError(f"frame {fid!r}: a value is not a number ({str(exc)[:120]})") from None
+    if world is not None:
         doc["world"] = world
     try:
         scene = scene_from_dict(doc)

@@ -8,12 +8,14 @@ import json
 import math
 import shutil
 
+import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
 from frames.maps import FrameRoads, maps_dir
-from frames.rows import read_frames, write_frames
+from frames.rows import FramesError, iter_scenes, read_frames, write_frames
 from frames.scene import EgoPlace, FrameColumns, frame_to_scene
+from pipeline import scene
 from synth.road.roadmap import in_ego_frame
 from synth.scene import scene_from_dict
 from tests.support import ROOT, assert_one_line_error, run_r2s
@@ -163,3 +165,15 @@ def test_arrow_and_pandas_rows_are_one_scene_the_one_read_by_hand(frames):
         scene = frame_to_scene(table.slice(a, b - a))
         assert scene == frame_to_scene(rows) == scene_from_dict(_by_hand(rows))
         assert scene.world == scene_from_dict(_by_hand(rows)).world
+    assert list(iter_scenes(df)) == [frame_to_scene(table.slice(a, b - a)) for a, b in zip(starts[:-1], starts[1:])]
+
+
+@pytest.mark.parametrize("as_rows", [pd.DataFrame, list])
+@pytest.mark.parametrize("column", ["length", "speed", "map_x"])
+def test_rows_in_memory_with_text_for_a_number_are_one_frames_error(as_rows, column):
+    rows = [{"frame_id": "f", "source": "s", "scene": "s", "frame_index": 0, "timestamp_us": None, "entity_id": "ego",
+             "track_id": "ego", "type": "Car", "category": "Car", "x": 0.0, "y": 0.0, "heading": 0.0, "length": 4.0,
+             "width": None, "is_ego": True, "speed": 1.0, "map_x": 1.0, "map_y": 2.0, "map_heading": 3.0}]
+    rows[0][column] = "abc"
+    with pytest.raises(FramesError, match="abc"):
+        scene(as_rows(rows))
