@@ -3,13 +3,13 @@ use so that `r2s synth` never pays for pandas or pyarrow: `pipeline.extract` (r2
 (r2s scene), `pipeline.run_frames` (r2s run, the batch stage), `pipeline.sample` (r2s sample), `pipeline.render`
 (r2s render), and in the rooms of the same name (so not here) `pipeline.query.query` and `pipeline.report.report`."""
 
+import importlib
+
 _API = {"extract": "pipeline.batch.extract", "scene": "pipeline.scenes", "run_frames": "pipeline.batch.stage",
         "sample": "pipeline.variants.sample", "render": "pipeline.variants.picture"}
 
 
 def __getattr__(name: str):
     if name in _API:
-        import importlib
-
         return getattr(importlib.import_module(_API[name]), name)
     raise AttributeError(f"module 'pipeline' has no attribute {name!r}")

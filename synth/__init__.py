@@ -15,6 +15,8 @@ Importing the package loads only the scene and configuration modules; the DSL, t
 search load on first use (`Program`, `parse_program`, `check` by name, the rest inside synthesize).
 """
 
+import importlib
+
 # synthesize shares its name with its module, which every import of that module would bind here (the import
 # system sets the attribute after loading a submodule): importing the module now binds the function for good.
 from synth.config import ConfigError, SynthConfig  # noqa: E402
@@ -53,8 +55,6 @@ __all__ = [
 
 def __getattr__(name: str):
     if name in _LAZY:
-        import importlib
-
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value

@@ -16,14 +16,12 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 from synth.errors import InputError
 from synth.geometry import normalize
 from synth.pose import SE2
-
-if TYPE_CHECKING:
-    from synth.road.roadmap import Points, RoadMap
+from synth.road.roadmap import Points, RoadMap
 
 WORLD_KEYS = ("source", "scene", "frame_index", "timestamp_us", "map_id", "x", "y", "heading")
 MAX_TIMESTAMP_US = 2**62  # microseconds: any recording's clock, far below int64's end
@@ -114,8 +112,6 @@ def in_world(pose: WorldPose, e: Placed) -> WorldEntity:
 
 def road_in_world(pose: WorldPose, road: RoadMap) -> RoadMap:
     """A scene's road (in its ego frame) back in the world frame."""
-    from synth.road.roadmap import RoadMap
-
     return RoadMap.of(road.map_id, [replace(f, polygon=pose.points(f.polygon), line=pose.points(f.line))
                                     for f in road.features])
 

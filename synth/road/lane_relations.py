@@ -37,7 +37,7 @@ import numpy as np
 
 from synth.road.lane_facts import PolygonIndex, Segments
 from synth.road.lane_geometry import NEIGHBOUR_ANGLE, halfway, width_at
-from synth.road.roadmap import LANE, MapFeature, RoadMap
+from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 
 CHAIN_ANGLE = 30.0  # degrees: a successor turning more than this does not continue the lane straight
 CHAIN_LENGTH = 100.0  # metres of lanes between two lanes of one chain, at most
@@ -260,8 +260,6 @@ def places(graph: LaneGraph, x: float, y: float, lane: str | None, lanes: tuple[
         # Only the heading moves: the lanes containing the centre stay, any of them may be the chosen one.
         return Places(frozenset(lanes) if heading_free else frozenset({lane} - {None}), lane is None, facts)
     import shapely
-
-    from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION
 
     def memo(key, make):
         return graph._memo(("union", key), make)

@@ -62,7 +62,9 @@ from synth.dsl import Program, Statement, parse_program
 from synth.errors import InputError
 from synth.parts import all_parts
 from synth.parts.position import DIRECTIONS, MIN_DISTANCE
+from synth.road.roadmap import road_to_dict
 from synth.scene import ENTITY_TYPES, Entity, Scene, SceneError, scene_from_dict
+from synth.scenic.road import road_scenic
 from synth.syntax import fmt_number
 from synth.variants.collision_rule import collision_rule
 
@@ -166,8 +168,6 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
     carried = {name for st in program.statements for name, _ in st.parts}
     lines += [text for p in all_parts() if p.name in carried and (text := p.scenic_prelude(config))]
     if scene.road is not None:
-        from synth.scenic.road import road_scenic  # numpy (synth.road.roadmap): loaded only for a scene with a road
-
         lines += road_scenic(scene.road)
     if motion:
         if ego.speed is None:
@@ -258,8 +258,6 @@ def _source_record(program: Program, scene: Scene, config: SynthConfig, header: 
     consts = {"v_stop": config.v_stop, "dv": config.dv} if motion else {}
     road = {}
     if scene.road is not None:
-        from synth.road.roadmap import road_to_dict
-
         road = {"road": road_to_dict(scene.road)}
     return {"frame_id": scene.frame_id, "header": header, "delta1": config.delta1, "delta2": config.delta2,
             **consts, "entities": [_entity_record(scene.ego, motion), *others], "program": str(program), **road}

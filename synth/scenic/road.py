@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 
+from synth.road.lane_relations import SIDES, LaneGraph
 from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 
 # (kind, the Scenic table of its regions), in the order the text defines them.
@@ -123,8 +124,6 @@ def _related(road: RoadMap) -> str:
     """The lane relations (synth.road.lane_relations.LaneGraph.related) as data: for each side (same, left, right,
     oncoming), each lane that has related lanes -> the lanes a target's lane must be in for that relation with a
     reference in it (sorted), a side a line."""
-    from synth.road.lane_relations import SIDES, LaneGraph  # the map's relations, computed here only
-
     graph = LaneGraph(road)
     rows = []
     for side in SIDES:

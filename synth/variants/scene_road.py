@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from synth.road.lane_facts import Banded, Cells, LaneFacts, RoadIndex
+from synth.road.lane_relations import LaneGraph
 from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, INTERSECTION, LANE, MapFeature, RoadMap
 from synth.scene import Entity, Scene
 
@@ -59,8 +60,6 @@ class SceneRoad:
     def graph(self):
         """The lane graph of the road (synth.road.lane_relations), built once: what a lane relation reads."""
         if self._graph is None:
-            from synth.road.lane_relations import LaneGraph
-
             self._graph = LaneGraph(self.road)
         return self._graph
 

@@ -24,16 +24,20 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, ClassVar
 
+import numpy as np
+
 from synth.config import ConfigError, SynthConfig, as_config
 from synth.driver import Frame, Oracles, drive
-from synth.dsl import Program, Statement
+from synth.dsl import Program, Statement, parse_program
 from synth.oracle import RelationOracle, make_oracle
 from synth.parts import parts_for
 from synth.result import SynthResult
 from synth.road.roadmap import RoadMap
 from synth.scene import Entity, Scene, SceneError, as_scene
 from synth.scenic.emit import render_scenic
+from synth.semantics import check
 from synth.statement import choose_references, write_statements
+from synth.tables import NONE, RelationTable
 from synth.version import __version__
 from synth.window.road import window_road
 
@@ -80,9 +84,6 @@ def frame_program(program: Program, scene: Scene) -> Program:
 def check_window(program: Program | str, scenes: Sequence[Scene | Mapping[str, Any]],
                  config: SynthConfig | Mapping[str, Any] | None = None) -> tuple[CheckResult, ...]:
     """r2s check's verdict on every frame of a window: `check(frame_program(program, scene), scene)` per frame."""
-    from synth.dsl import parse_program
-    from synth.semantics import check
-
     if isinstance(program, str):
         program = parse_program(program)
     config = as_config(config)
@@ -140,10 +141,6 @@ def window_table(oracles: Sequence[Any], ids: tuple[str, ...]):
     """The window's relation table (ids: ego, then the clip's entities): per part, a relation holds between r and
     e iff it holds in every frame where e is present, r present in each (RelationOracle.holds, relation by
     relation); where several hold, the first a reference is asked in (Part.codes_from), as the oracles record."""
-    import numpy as np
-
-    from synth.tables import NONE, RelationTable
-
     n = len(ids)
     where = {i: k for k, i in enumerate(ids)}
     codes = {}
