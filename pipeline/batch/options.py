@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
+from pipeline.errors import UserError
 
 BACKENDS = ("loky", "dask")
 
@@ -47,8 +48,6 @@ class RunOptions:
 
     def check(self) -> None:
         """Refuse values no run can use (UserError: one line, exit 2), before anything is read or written."""
-        from pipeline.errors import UserError
-
         if self.jobs is not None and self.jobs < 1:
             raise UserError(f"--jobs must be at least 1, got {self.jobs}")
         if self.chunk_size < 1:

@@ -6,6 +6,7 @@ Light on purpose (no numpy, no synth): it is the workers' initializer, imported 
 from __future__ import annotations
 
 import os
+import threading
 import time
 
 
@@ -16,8 +17,6 @@ def watch_parent(parent: int, every_s: float = 0.5) -> None:
     A thread polls the parent id (it changes when the parent dies: the orphan is re-parented); os._exit, since
     the worker has nothing to save. Not prctl(PR_SET_PDEATHSIG): it fires when the thread that forked the
     worker ends, and loky forks from threads that may end before the run does."""
-    import threading
-
     def watch() -> None:
         while os.getppid() == parent:
             time.sleep(every_s)

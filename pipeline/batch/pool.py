@@ -28,7 +28,10 @@ from typing import Any, Protocol
 
 import pyarrow as pa
 
+from pipeline.batch.parent import watch_parent
 from pipeline.batch.task import ChunkTask, one_line, run_task
+from pipeline.errors import UserError
+from storage.parquet import filesystem
 from synth.errors import InternalError
 
 
@@ -220,8 +223,6 @@ class LokyPool:
     def map_unordered(self, queue: TaskQueue) -> Iterator[pa.Table | Lost | None]:
         from joblib.externals.loky import get_reusable_executor
 
-        from pipeline.batch.parent import watch_parent
-
         # A fresh one after a death or a kill; its workers end when this process does, however it ends.
         executor = get_reusable_executor(max_workers=self.jobs, initializer=watch_parent, initargs=(os.getpid(),))
 
@@ -276,8 +277,6 @@ class DaskPool:
     def check_readable(self, url: str, path: str) -> None:
         """Every worker must read the frames itself (nothing passes through the coordinator): ask each one
         before anything is written."""
-        from pipeline.errors import UserError
-
         answers = self.client.run(_can_read, url, path)
         blind = sorted(worker for worker, error in answers.items() if error)
         if blind:
@@ -309,8 +308,6 @@ class DaskPool:
 
 
 def _can_read(url: str, path: str) -> str:
-    from storage.parquet import filesystem
-
     try:
         pafs, _ = filesystem(url) if url else filesystem(path)
         with pafs.open_input_file(path) as f:

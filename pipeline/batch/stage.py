@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import shutil
 import signal
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -24,14 +25,29 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
+import pyarrow as pa
+
+from frames.dataset import FramesDataset
+from frames.frame_hash import Coverage, FrameHasher, frame_keys, from_hex
+from frames.maps import map_digests, maps_dir
 from pipeline.batch import DEFAULT_CHUNK_SIZE, DEFAULT_PART_ROWS
+from pipeline.batch.cluster import dask_pool
 from pipeline.batch.options import RunOptions
-from pipeline.batch.rules import Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
+from pipeline.batch.pool import LokyPool, compute, wall_guard_s
+from pipeline.batch.progress import Progress
+from pipeline.batch.rules import PartBuffer, Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
+from pipeline.batch.store import RunStore, is_single_file
+from pipeline.batch.task import ChunkTask, ChunkUnreadable
+from pipeline.batch.window_task import WindowTask
+from pipeline.batch.windows import plan_windows
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart
-from storage.frame_index import frame_hashes
+from pipeline.programs import PROGRAMS_SCHEMA, WINDOW_SCHEMA
+from storage.atomic import temp_directory
+from storage.frame_index import FrameIndex, frame_hashes
 from synth.config import SynthConfig, as_config
 from synth.version import ROWS_VERSION
+from synth.window.program import check_window_config
 
 PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
 MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
@@ -70,12 +86,8 @@ def run_frames(
 def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, options: RunOptions,
         log: Callable[[str], None]) -> Summary:
     """run_frames with its options as one value."""
-    from pipeline.batch.store import is_single_file
-
     options.check()
     if options.window is not None:
-        from synth.window.program import check_window_config
-
         check_window_config(config)
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
@@ -85,8 +97,6 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
 
 
 def _stderr(line: str) -> None:
-    import sys
-
     sys.stderr.write(f"r2s run: {line}\n")
     sys.stderr.flush()
 
@@ -110,9 +120,6 @@ class _Run:
     unit = "frames"  # what a row is of (log lines, the summary)
 
     def go(self) -> Summary:
-        from frames.dataset import FramesDataset
-        from pipeline.batch.store import RunStore
-
         store = RunStore(self.out, self.schema)
         store.check_writable()
         dataset = FramesDataset.open(self.frames)  # bad input is refused before even the lock file is made
@@ -127,15 +134,11 @@ class _Run:
 
     @property
     def schema(self):
-        from pipeline.programs import PROGRAMS_SCHEMA
-
         return PROGRAMS_SCHEMA
 
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         """Check the input (streaming) and say what rows the run makes: how many, the index of their keys (frame
         ids), their keys with what each is computed from (the rows' hash: store.plan), and the config hash."""
-        from frames.frame_hash import FrameHasher
-
         hasher = FrameHasher(coverage=self._coverage(dataset))  # every frame hashed in the checking pass
         checked = dataset.check(hasher, road=self._maps(dataset) is not None)
         n_frames, index = checked.frames, checked.index
@@ -145,9 +148,6 @@ class _Run:
         """What a stored row must have been computed from to be kept (frames.frame_hash.Coverage): the frame's
         rows, and with each frame's road (--lanes) its road columns and the content of every map, each map read
         and hashed once here."""
-        from frames.frame_hash import Coverage
-        from frames.maps import map_digests
-
         maps = self._maps(dataset)
         return Coverage() if maps is None else Coverage.with_road(map_digests(maps))
 
@@ -193,13 +193,9 @@ class _Run:
 
     def _pool(self, todo: int):
         """A context that yields the pool (None when there is nothing to compute)."""
-        from pipeline.batch.pool import LokyPool, wall_guard_s
-
         if todo == 0:
             return nullcontext(None)
         if self.options.backend == "dask":
-            from pipeline.batch.cluster import dask_pool
-
             return dask_pool(self.options.scheduler, self.options.jobs)
         jobs = min(self.options.jobs or os.cpu_count() or 1, todo)
         return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
@@ -207,13 +203,9 @@ class _Run:
     def _maps(self, dataset) -> str | None:
         """With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only):
         the workers then read the road columns too (FramesPart.read_columns), and the check decodes them."""
-        from frames.maps import maps_dir
-
         return str(maps_dir(self.frames)) if self.config.lanes and not dataset.url else None
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
-        from pipeline.batch.task import ChunkTask
-
         def runs():
             for r in dataset.runs():
                 mask = ~done.contains(*frame_hashes(r.ids)) if len(done) else r.lengths > 0
@@ -229,12 +221,6 @@ class _Run:
                             progress_dir=progress_dir, maps=maps)
 
     def _compute(self, store, pool, dataset, done, n_frames: int, todo: int) -> int:
-        from pipeline.batch.pool import compute
-        from pipeline.batch.progress import Progress
-        from pipeline.batch.rules import PartBuffer
-        from pipeline.batch.task import ChunkUnreadable
-        from storage.atomic import temp_directory
-
         # Workers' progress markers, where the workers are processes of this machine's: in the temp directory (not
         # beside the output: a full output disk must not stop the markers), named by host and pid, so a killed
         # run's folder is removed by the next run.
@@ -302,17 +288,9 @@ class _WindowRun(_Run):
 
     @property
     def schema(self):
-        from pipeline.programs import WINDOW_SCHEMA
-
         return WINDOW_SCHEMA
 
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
-        import pyarrow as pa
-
-        from frames.frame_hash import FrameHasher, frame_keys, from_hex
-        from pipeline.batch.windows import plan_windows
-        from storage.frame_index import FrameIndex
-
         spec = self.options.window
         hasher = FrameHasher(keep_lanes=True, coverage=self._coverage(dataset))
         # Refuses bad input (every value the workers will read); the hasher keeps each frame's hash
@@ -325,8 +303,6 @@ class _WindowRun(_Run):
             spec.config_hash(self.config)
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
-        from pipeline.batch.window_task import WindowTask
-
         spec = self.options.window
         maps = self._maps(dataset)
         parts = tuple((p.path, p.read_columns(maps is not None)) for p in dataset.parts)

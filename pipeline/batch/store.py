@@ -34,6 +34,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from frames.frame_hash import frame_keys, from_hex
+from pipeline.batch.lock import OutputLock
 from pipeline.errors import UserError
 from pipeline.outputs import output_place
 from pipeline.programs import (
@@ -44,7 +45,7 @@ from pipeline.programs import (
     check_programs_schema,
     check_programs_values,
 )
-from storage.atomic import atomic_path
+from storage.atomic import atomic_path, temp_prefix
 from storage.frame_index import FrameIndex, frame_hashes
 
 PART_PREFIX, PART_SUFFIX = "part-", ".parquet"
@@ -113,8 +114,6 @@ class RunStore:
         """Hold `<out>`'s lock (pipeline.batch.lock: a file beside the output, locked by the kernel) until
         `unlock()` or the end of the process, or refuse: two runs on one output would overwrite each other's parts
         and merge under each other."""
-        from pipeline.batch.lock import OutputLock
-
         self._lock = OutputLock(self.out)
         self._lock.acquire()
 
@@ -275,8 +274,6 @@ def _existing(path: Path) -> Path:
 
 def _probe(directory: Path) -> None:
     """Create and remove a file in `directory`, or refuse with the system's reason (read-only, no permission)."""
-    from storage.atomic import temp_prefix
-
     try:
         fd, tmp = tempfile.mkstemp(prefix=temp_prefix(directory / "probe"), suffix=".tmp", dir=directory)
         os.close(fd)

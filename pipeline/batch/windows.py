@@ -14,6 +14,7 @@ options: another W is another configuration.
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -23,6 +24,7 @@ import pyarrow as pa
 
 from pipeline.errors import UserError
 from synth.config import SynthConfig
+from synth.window.program import tile
 
 PLACE_COLUMNS = ("frame_id", "scene", "frame_index", "timestamp_us")
 # The most frames all windows together may hold, a frame counted once in each window it is in (windows that
@@ -44,8 +46,6 @@ class WindowSpec:
 
     def check(self) -> None:
         """Refuse values no run can use (UserError: one line), before anything is read."""
-        import math
-
         for name, value in (("--window", self.window_s), ("--stride", self.stride_s), ("--max-gap", self.max_gap_s)):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise UserError(f"{name} must be a positive number of seconds, got {value}")
@@ -57,8 +57,6 @@ class WindowSpec:
         return None if seconds is None else max(1, round(seconds * 1e6))
 
     def tile(self, timestamps_us) -> list[tuple[int, int]]:
-        from synth.window.program import tile
-
         return tile(timestamps_us, self.us(self.window_s), self.us(self.stride_s), self.us(self.max_gap_s))
 
     @property

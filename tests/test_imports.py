@@ -1,0 +1,185 @@
+"""Imports are at the top of a module (docs/layout.md), but at the documented lazy boundaries: the verb table (a
+verb's module loads when it runs, and its `run` imports its stage), `import synth` staying light, and optional or
+heavy libraries imported where they are used. Every import inside a function of the code (synth, storage, frames,
+extractors, pipeline) is either of a library in HEAVY or an entry of LAZY, each with its reason; an entry whose
+import is gone fails too, so the list stays true. A local import of what the module's top already imports is
+never needed."""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from tests.support import ROOT as REPO
+
+ROOMS = ("synth", "storage", "frames", "extractors", "pipeline")
+
+# Optional or heavy libraries (top-level package -> why): imported in the function that uses them, anywhere, so
+# that a module that `r2s --help`, `r2s VERB --help`, `import synth` or another verb loads does not pay for them.
+HEAVY = {
+    "matplotlib": "heavy (~0.3 s): only drawing a plot or picture pays for it",
+    "scipy": "heavy: only matching detections pays for it",
+    "shapely": "~11 ms on top of numpy: the road modules load for `r2s extract --help`, which draws no polygon",
+    "pandas": "heavy (~0.2 s): light modules read by `r2s VERB --help` import it where rows are read",
+    "pyarrow": "pyarrow.parquet / pyarrow.dataset: loaded where a file is read or written, not by --help",
+    "scenic": "optional and heavy: Scenic loads only to compile or sample a program",
+    "z3": "heavy: the solver loads when a formula is first decided",
+    "nuscenes": "optional: nuscenes-devkit loads when a nuScenes dataset is read",
+    "mcap": "optional: mcap loads when an MCAP log is read",
+    "mcap_protobuf": "optional: decoders of MCAP messages, loaded when an MCAP log is read",
+    "mcap_ros2": "optional: decoders of MCAP messages, loaded when an MCAP log is read",
+    "rosbags": "optional: rosbags loads when a ROS bag is read",
+    "zstandard": "optional: a compression of MCAP chunks, loaded when a chunk uses it",
+    "lz4": "optional: a compression of MCAP chunks and ROS bags, loaded when one uses it",
+    "distributed": "heavy (dask): only --backend dask pays for it",
+    "joblib": "the loky pool: only a run with workers pays for it",
+    "fsspec": "heavy: remote filesystems, only a path with a protocol pays for it",
+    "scenariogeneration": "optional and heavy: OpenSCENARIO / OpenDRIVE export only",
+}
+
+VERB = "the verb table: a verb's module is light for `r2s VERB --help`; its `run` imports its stage"
+SYNTH_LIGHT = "`import synth` stays light: the DSL, the oracles, the search and the road load on first use"
+HELP = "`r2s --help` does not load it"
+
+# (module, imported module) -> why it is imported inside a function.
+LAZY: dict[tuple[str, str], str] = {
+    # synth: `import synth` loads the scene and the configuration only (synth/__init__.py)
+    ("synth.synthesize", "synth.driver"): SYNTH_LIGHT,
+    ("synth.scene", "synth.road.lane_relations"): SYNTH_LIGHT + " (numpy): only a scene with a road loads it",
+    ("synth.scene", "synth.road.roadmap"): SYNTH_LIGHT + " (numpy): only a scene with a road loads it",
+    ("synth.scene", "synth.world"): SYNTH_LIGHT + " (numpy, through synth.pose): only a scene with a world loads it",
+    ("synth.scene", "synth.geometry"): SYNTH_LIGHT + " (fractions, decimal)",
+    ("synth.scene", "difflib"): SYNTH_LIGHT + ": only a misspelt key loads it",
+    ("synth.config", "difflib"): SYNTH_LIGHT + ": only a misspelt key loads it",
+    ("synth.config", "hashlib"): SYNTH_LIGHT + " (OpenSSL): only a configuration's hash loads it",
+    # pipeline.batch
+    ("pipeline.batch.options", "pipeline.batch.windows"): "options.py stays light for --help (docs/layout.md); the "
+                                                          "window planner loads numpy, pyarrow and the window synthesis",
+}
+
+
+@dataclass(frozen=True)
+class LocalImport:
+    """One import statement inside a function: where, and the module it imports."""
+
+    module: str
+    path: str
+    line: int
+    function: str
+    imported: str
+    text: str
+
+
+def _absolute(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    if not node.level:
+        return node.module or ""
+    package = module.split(".") if is_package else module.split(".")[:-1]
+    base = package[:len(package) - node.level + 1]
+    return ".".join([*base, *([node.module] if node.module else [])])
+
+
+def _imported(module: str, is_package: bool, node: ast.Import | ast.ImportFrom) -> list[str]:
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    return [_absolute(module, is_package, node)]
+
+
+def _is_type_checking(node: ast.AST) -> bool:
+    test = node.test if isinstance(node, ast.If) else None
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def local_imports(module: str, path: str, source: str) -> tuple[list[LocalImport], set[str]]:
+    """The function-local imports of a module's source, and the modules its top imports when it runs (under an `if`
+    or `try` at module level too, but not under `if TYPE_CHECKING:`, which never runs)."""
+    tree = ast.parse(source)
+    is_package = path.endswith("__init__.py")
+    local: list[LocalImport] = []
+    top: set[str] = set()
+
+    def visit(node: ast.AST, function: str | None, runs: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.Import, ast.ImportFrom)):
+                for name in _imported(module, is_package, child):
+                    if function is not None:
+                        local.append(LocalImport(module, path, child.lineno, function, name, ast.unparse(child)))
+                    elif runs:
+                        top.add(name)
+            inner = child.name if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)) else None
+            visit(child, function or inner, runs and not _is_type_checking(child))
+
+    visit(tree, None, True)
+    return local, top
+
+
+def _sources() -> Iterator[tuple[str, str, str]]:
+    for room in ROOMS:
+        for path in sorted((REPO / room).rglob("*.py")):
+            parts = path.relative_to(REPO).with_suffix("").parts
+            module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            yield module, str(path.relative_to(REPO)), path.read_text()
+
+
+def problems(sources: list[tuple[str, str, str]], lazy: dict[tuple[str, str], str],
+             heavy: dict[str, str]) -> list[str]:
+    """What breaks the rule in these (module, path, source): stray local imports, then stale allow-list entries."""
+    found: list[str] = []
+    used_lazy: set[tuple[str, str]] = set()
+    used_heavy: set[str] = set()
+    for module, path, source in sources:
+        local, top = local_imports(module, path, source)
+        for imp in local:
+            where = f"{imp.path}:{imp.line}: `{imp.text}` inside {imp.function}()"
+            if imp.imported in top:
+                found.append(f"{where}: the module's top already imports {imp.imported}; delete this one")
+                continue
+            library = imp.imported.split(".")[0]
+            if library in heavy:
+                used_heavy.add(library)
+            elif (imp.module, imp.imported) in lazy:
+                used_lazy.add((imp.module, imp.imported))
+            else:
+                found.append(f"{where}: move it to the top of the module (docs/layout.md); if it is a documented "
+                             f"lazy boundary, add ({imp.module!r}, {imp.imported!r}): <why> to LAZY in "
+                             "tests/test_imports.py")
+    for key in sorted(set(lazy) - used_lazy):
+        found.append(f"LAZY entry {key} in tests/test_imports.py: no such import inside a function any more; "
+                     "delete the entry")
+    for library in sorted(set(heavy) - used_heavy):
+        found.append(f"HEAVY entry {library!r} in tests/test_imports.py: no function imports it any more; delete "
+                     "the entry")
+    return found
+
+
+def test_imports_are_at_the_top_but_the_documented_lazy_ones():
+    assert problems(list(_sources()), LAZY, HEAVY) == []
+
+
+def test_a_stray_import_a_repeated_import_and_a_stale_entry_fail():
+    source = ("import json\n\nfrom synth.scene import Scene\n\n\ndef f():\n    from synth.dsl import parse_program\n"
+              "    import shapely\n    from . import helpers\n    import json\n    return Scene\n\n\n"
+              "class C:\n    def g(self):\n        from synth.geometry import normalize\n")
+    sources = [("pipeline.toy", "pipeline/toy.py", source)]
+    lazy = {("pipeline.toy", "synth.geometry"): "why", ("pipeline.toy", "synth.gone"): "why"}
+    found = problems(sources, lazy, {"shapely": "heavy", "z3": "heavy"})
+    assert found == [
+        "pipeline/toy.py:7: `from synth.dsl import parse_program` inside f(): move it to the top of the module "
+        "(docs/layout.md); if it is a documented lazy boundary, add ('pipeline.toy', 'synth.dsl'): <why> to LAZY in "
+        "tests/test_imports.py",
+        "pipeline/toy.py:9: `from . import helpers` inside f(): move it to the top of the module (docs/layout.md); "
+        "if it is a documented lazy boundary, add ('pipeline.toy', 'pipeline'): <why> to LAZY in "
+        "tests/test_imports.py",
+        "pipeline/toy.py:10: `import json` inside f(): the module's top already imports json; delete this one",
+        "LAZY entry ('pipeline.toy', 'synth.gone') in tests/test_imports.py: no such import inside a function any "
+        "more; delete the entry",
+        "HEAVY entry 'z3' in tests/test_imports.py: no function imports it any more; delete the entry",
+    ]
+
+
+def test_the_real_tree_has_function_local_imports_to_check():
+    # the walk sees into methods and nested functions: the tree's lazy boundaries are found where they are
+    local = [imp for module, path, source in _sources() for imp in local_imports(module, path, source)[0]]
+    assert {imp.imported.split(".")[0] for imp in local} >= {"matplotlib", "scenic", "z3"}
