@@ -10,7 +10,6 @@ from __future__ import annotations
 import ast
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 from tests.support import ROOT as REPO
 
@@ -57,6 +56,46 @@ LAZY: dict[tuple[str, str], str] = {
     # pipeline.batch
     ("pipeline.batch.options", "pipeline.batch.windows"): "options.py stays light for --help (docs/layout.md); the "
                                                           "window planner loads numpy, pyarrow and the window synthesis",
+    # pipeline.cli: each verb's module is light for `r2s VERB --help`; its run imports what it runs
+    ('pipeline.cli.check', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.check', 'synth.behaviour.program'): VERB,
+    ('pipeline.cli.check', 'synth.dsl'): VERB,
+    ('pipeline.cli.check', 'synth.semantics'): VERB,
+    ('pipeline.cli.check', 'synth.syntax'): VERB,
+    ('pipeline.cli.check', 'synth.behaviour.check'): VERB,
+    ('pipeline.cli.eval_frontend', 'frames.rows'): VERB,
+    ('pipeline.cli.eval_frontend', 'pipeline.evaluation.frontend'): VERB,
+    ('pipeline.cli.eval_frontend', 'pipeline.evaluation.plot'): VERB,
+    ('pipeline.cli.eval_frontend', 'pipeline.outputs'): VERB,
+    ('pipeline.cli.eval_frontend', 'storage.atomic'): VERB,
+    ('pipeline.cli.export', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.export', 'pipeline.export.stage'): VERB,
+    ('pipeline.cli.export', 'pipeline.export.opendrive'): VERB,
+    ('pipeline.cli.extract', 'pipeline.batch.extract'): VERB,
+    ('pipeline.cli.query', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.query', 'pipeline.query.mining'): VERB,
+    ('pipeline.cli.query', 'pipeline.query.stop'): VERB,
+    ('pipeline.cli.render', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.render', 'pipeline.variants.picture'): VERB,
+    ('pipeline.cli.report', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.report', 'pipeline.report.output'): VERB,
+    ('pipeline.cli.run', 'pipeline.batch.stage'): VERB,
+    ('pipeline.cli.sample', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.sample', 'pipeline.variants.sample'): VERB,
+    ('pipeline.cli.scene', 'pipeline.scenes'): VERB,
+    ('pipeline.cli.synth', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.synth', 'synth.behaviour.synthesize'): VERB,
+    ('pipeline.cli.synth', 'synth.window.program'): VERB,
+    ('pipeline.cli.synth', 'synth.behaviour.scenic'): VERB,
+    ("pipeline.cli", "textwrap"): HELP + " (only a verb's help text is wrapped)",
+    ("pipeline.cli.options", "pipeline.cli.inputs"): "options.py is loaded for `r2s VERB --help`; the config "
+                                                      "reader (the DSL) loads when a verb runs",
+    ("pipeline.cli.options", "pipeline.variants.sample"): "options.py is loaded for `r2s VERB --help`; the "
+                                                           "sampler loads when a verb samples",
+    ("pipeline.cli.inputs", "synth.patterns.temporal"): "only r2s query and r2s report read a pattern; the "
+                                                         "other verbs that read their inputs here do not pay for it",
+    ("pipeline.cli.inputs", "importlib.resources"): "only a preset's name loads it (r2s check does not)",
+    ("pipeline.cli.inputs", "difflib"): "only a misspelt preset loads it",
 }
 
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import sys
 import tomllib
 from pathlib import Path
 
 from pipeline.errors import UserError
 from storage.regular_files import FileTooLarge, NotRegularFile, read_regular
 from synth.config import ConfigError, SynthConfig, config_from_mapping
+from synth.dsl import DslError, parse_program
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, scene_from_json
 
 MAX_TEXT_BYTES = 64 * 1024 * 1024
@@ -35,8 +37,6 @@ def read_text_file(path: str, what: str) -> str:
 
 def read_program(path: str):
     """A DSL program file (r2s check, and the --program of r2s sample and r2s render)."""
-    from synth.dsl import DslError, parse_program
-
     try:
         return parse_program(read_text_file(path, "program"))
     except DslError as exc:
@@ -46,7 +46,6 @@ def read_program(path: str):
 def read_pattern(path: str):
     """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables, or a temporal
     pattern (steps, durations, behaviours: synth.patterns.temporal)."""
-    from synth.dsl import DslError
     from synth.patterns.temporal import parse_query_pattern
 
     try:
@@ -58,8 +57,6 @@ def read_pattern(path: str):
 def read_scene(path: str, max_entities: int | None = None) -> Scene:
     """A scene JSON file, or standard input for "-" (so `r2s scene F ID | r2s render - ...` works)."""
     if path == "-":
-        import sys
-
         text = sys.stdin.read(MAX_TEXT_BYTES + 1)
         if len(text) > MAX_TEXT_BYTES:
             raise UserError(f"the scene on standard input is larger than {MAX_TEXT_BYTES // 2**20} MB")

@@ -9,6 +9,7 @@ import argparse
 import sys
 
 from pipeline.outputs import check_apart, writing
+from storage.atomic import write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,7 +24,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.scenes import scene
-    from storage.atomic import write_text_atomic
 
     check_apart(args.out, [("input frames", args.frames)])
     text = scene(args.frames, args.frame_id, radius=args.radius).to_json()

@@ -13,6 +13,7 @@ from pathlib import Path
 from pipeline.cli.options import add_synthesis_options, synthesis_config
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart, writing
+from storage.atomic import write_text_atomic
 from synth.synthesize import synthesize
 
 
@@ -35,7 +36,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene
-    from storage.atomic import write_text_atomic
 
     check_apart(args.out, [*(("input scene", s) for s in args.scene), ("config", args.config)])
     if len(args.scene) > 1 and "-" in args.scene:
