@@ -24,7 +24,7 @@ from frames.scene import EgoPlace, FrameColumns, given
 from frames.schema import MAPS_DIR, FramesError
 from storage.atomic import parquet_writer
 from storage.folders import check_replaceable, replace_with
-from synth.road.roadmap import MapError, MapFeature, RoadMap, points
+from synth.road.roadmap import MapError, MapFeature, RoadMap, in_ego_frame, points
 
 _COORDS = pa.list_(pa.float64())
 MAPS_SCHEMA = pa.schema([
@@ -228,8 +228,6 @@ class FrameRoads:
         """(the frame's road in its ego frame, None) or (None, the map it names that is missing) for the rows of
         one frame (FrameColumns, an Arrow table or a DataFrame) at `place` (their ego row's, EgoPlace.of the rows
         if not given); (None, None) when the frame names no map or has no pose."""
-        from synth.road.roadmap import in_ego_frame
-
         rows = FrameColumns.of(rows)
         place = place if place is not None else EgoPlace.of(rows)
         if (pose := place.road_pose) is None:

@@ -15,6 +15,8 @@ import sys
 import pandas as pd
 import pyarrow as pa
 
+from frames.dataset import FramesDataset
+from frames.maps import FrameRoads, maps_dir
 from frames.rows import frame_to_scene, to_table, validate_frames
 from frames.scene import EgoPlace, FrameColumns
 from pipeline.errors import UserError
@@ -64,8 +66,6 @@ def _rows(frames) -> pd.DataFrame:
 
 
 def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
-    from frames.dataset import FramesDataset
-
     dataset = FramesDataset.open(frames)
     table = dataset.find(frame_id)
     if table is None:
@@ -78,8 +78,6 @@ def _from_file(frames: str, frame_id: str, radius: float) -> Scene:
 
 def _road(frames: str, rows: FrameColumns, radius: float, place: EgoPlace):
     """The frame's road in its ego frame, or None when the frame names no map (its maps missing: a warning)."""
-    from frames.maps import FrameRoads, maps_dir
-
     road, missing = FrameRoads(maps_dir(frames), radius).road(rows, place)
     if missing is not None:
         sys.stderr.write(f"r2s scene: warning: the frame names map {missing!r}, which is not in {maps_dir(frames)}; "
@@ -88,7 +86,7 @@ def _road(frames: str, rows: FrameColumns, radius: float, place: EgoPlace):
 
 
 def _hint(dataset, frame_id: str) -> str:
-    import difflib
+    import difflib  # only a frame that is not there loads it
 
     scene_name = frame_id.rsplit("/", 1)[0]
     pool, count, example = [], 0, None

@@ -17,6 +17,7 @@ import errno
 import hashlib
 import os
 import re
+import secrets
 import shutil
 import socket
 import tempfile
@@ -82,8 +83,6 @@ def _alive(pid: int) -> bool:
 def temp_directory(target: str | os.PathLike) -> Path:
     """A new empty directory beside `target`, named as this process's temporaries of it (the stale ones of
     crashed processes removed first). mkdir, not mkdtemp (0700): an output gets the user's usual permissions."""
-    import secrets
-
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(target)

@@ -15,14 +15,15 @@ from tests.support import ROOT as REPO
 
 ROOMS = ("synth", "storage", "frames", "extractors", "pipeline")
 
-# Optional or heavy libraries (top-level package -> why): imported in the function that uses them, anywhere, so
-# that a module that `r2s --help`, `r2s VERB --help`, `import synth` or another verb loads does not pay for them.
+# Optional or heavy libraries (a package or module, and what is in it -> why): imported in the function that uses
+# them, anywhere, so that a module that `r2s --help`, `r2s VERB --help`, `import synth` or another verb loads does not pay for them.
 HEAVY = {
     "matplotlib": "heavy (~0.3 s): only drawing a plot or picture pays for it",
     "scipy": "heavy: only matching detections pays for it",
     "shapely": "~11 ms on top of numpy: the road modules load for `r2s extract --help`, which draws no polygon",
     "pandas": "heavy (~0.2 s): light modules read by `r2s VERB --help` import it where rows are read",
-    "pyarrow": "pyarrow.parquet / pyarrow.dataset: loaded where a file is read or written, not by --help",
+    "pyarrow.parquet": "its Parquet reader and writer: storage.atomic, which --help loads, writes no Parquet",
+    "pyarrow.dataset": "its datasets (~40 ms): loaded where a dataset is read",
     "scenic": "optional and heavy: Scenic loads only to compile or sample a program",
     "z3": "heavy: the solver loads when a formula is first decided",
     "nuscenes": "optional: nuscenes-devkit loads when a nuScenes dataset is read",
@@ -96,6 +97,17 @@ LAZY: dict[tuple[str, str], str] = {
                                                          "other verbs that read their inputs here do not pay for it",
     ("pipeline.cli.inputs", "importlib.resources"): "only a preset's name loads it (r2s check does not)",
     ("pipeline.cli.inputs", "difflib"): "only a misspelt preset loads it",
+    # the Python API of a room loads on first use, as pipeline/__init__.py's: r2s render reads
+    # pipeline.query.matches without DuckDB, the report's modules load without the report
+    ("pipeline.query", "pipeline.query.mining"): "pipeline.query.query loads the miner (DuckDB) on first use",
+    ("pipeline.report", "pipeline.report.output"): "pipeline.report.report loads the report on first use",
+    # stages that read Parquet only for one option: r2s sample and r2s render of a scene JSON load no pyarrow, pandas
+    ("pipeline.variants.sample", "pipeline.programs"): "only `programs=` (--programs) reads a programs dataset",
+    ("pipeline.variants.picture", "pipeline.programs"): "only `programs=` (--programs) reads a programs dataset",
+    ("pipeline.variants.picture", "pipeline.query.matches"): "only `matches=` (--matches) reads a matches file",
+    ("pipeline.export.opendrive", "frames.maps"): "only a maps dataset is Parquet: r2s export of a scene JSON "
+                                                  "loads no pyarrow",
+    ("pipeline.scenes", "difflib"): "only a frame that is not there loads it (the hint of its nearest names)",
 }
 
 
@@ -175,8 +187,9 @@ def problems(sources: list[tuple[str, str, str]], lazy: dict[tuple[str, str], st
             if imp.imported in top:
                 found.append(f"{where}: the module's top already imports {imp.imported}; delete this one")
                 continue
-            library = imp.imported.split(".")[0]
-            if library in heavy:
+            library = next((name for name in heavy if imp.imported == name or imp.imported.startswith(name + ".")),
+                           None)
+            if library is not None:
                 used_heavy.add(library)
             elif (imp.module, imp.imported) in lazy:
                 used_lazy.add((imp.module, imp.imported))

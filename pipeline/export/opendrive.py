@@ -9,11 +9,16 @@ from __future__ import annotations
 import datetime
 import math
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
+from pipeline.outputs import writing
+from storage.atomic import atomic_path
 from synth.road.opendrive import Network, Road, network
 from synth.road.roadmap import RoadMap
+from synth.world import WorldPose, road_in_world
 
 DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
 VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
@@ -122,15 +127,11 @@ def opendrive(net: Network, name: str):
 
 def _set_offset(header, offset: tuple[float, float]) -> None:
     """The header's offset (OpenDRIVE 1.7 t_header_Offset: the recorded frame's coordinates of the origin)."""
-    import xml.etree.ElementTree as ET
-
     ET.SubElement(header, "offset", x=repr(offset[0]), y=repr(offset[1]), z="0.0", hdg="0.0")
 
 
 def write_xml(element, path: Path) -> None:
     """An XML tree to a file, indented."""
-    import xml.etree.ElementTree as ET
-
     ET.indent(element, space="    ")
     ET.ElementTree(element).write(path, encoding="utf-8", xml_declaration=True)
 
@@ -159,13 +160,8 @@ def linked(road: RoadMap, what: str) -> Network:
 def export_road(source: str, map_id: str | None, out: str) -> str:
     """`r2s export SOURCE --to opendrive --out F.xodr`: the road of a scene JSON (in its world) or one map of a
     maps dataset, written atomically to `out`; returns the line to tell the user."""
-    from pipeline.cli.inputs import read_scene
-    from pipeline.outputs import writing
-    from storage.atomic import atomic_path
-    from synth.world import WorldPose, road_in_world
-
     if Path(source).is_dir() or source.endswith(".parquet"):
-        from frames.maps import read_maps
+        from frames.maps import read_maps  # pyarrow: only a maps dataset is Parquet, a scene JSON is not
 
         maps = [m for m in read_maps(source) if map_id is None or m.map_id == map_id]
         if not maps:

@@ -11,6 +11,7 @@ does not grow with the number of scenarios (each is written and dropped).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import pickle
@@ -188,8 +189,6 @@ class _StreamedDict:
 
     @staticmethod
     def _body(value: Any) -> bytes:
-        import io
-
         buf = io.BytesIO()
         p = pickle.Pickler(buf, protocol=2)
         p.fast = True  # no memo: each fragment refers to nothing outside itself

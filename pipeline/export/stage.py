@@ -16,8 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
-from pipeline.export import TARGETS, slug
+from pipeline.export import TARGETS, openscenario, scenarionet, slug
+from pipeline.outputs import staged_directory
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose
@@ -86,8 +88,6 @@ def variant_files(paths: list[str]) -> list[Path]:
 
 def items(recorded: Scene, files: list[Path], max_entities: int | None = None) -> Iterator[Item]:
     """The recorded scene, then each variant as it is read (one in memory at a time)."""
-    from pipeline.cli.inputs import read_scene
-
     base = slug(recorded.frame_id)
     yield Item(recorded, base, None)
     for f in files:
@@ -103,18 +103,12 @@ def exported(entry: os.DirEntry) -> bool:
 
 
 def target(name: str) -> Target:
-    if name == "scenarionet":
-        from pipeline.export.scenarionet import TARGET
-    else:
-        from pipeline.export.openscenario import TARGET
-    return TARGET
+    return scenarionet.TARGET if name == "scenarionet" else openscenario.TARGET
 
 
 def export(recorded: Scene, files: list[Path], to: str, out: Path, options: ExportOptions) -> tuple[int, list[str]]:
     """Write the recorded scene and the variants into `out` (replaced whole); returns the number of scenarios
     and the notes to tell the user (no world pose, no road)."""
-    from pipeline.outputs import staged_directory
-
     chosen = target(to)
     notes = []
     if recorded.road is None:

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pipeline.report.stats import ProgramsDB
+from frames.dataset import FramesDataset
+from pipeline.report.stats import ProgramsDB, relation_usage
 
 # Distance bands from ego, metres (the last is open).
 BANDS = (0.0, 10.0, 20.0, 30.0, 50.0)
@@ -56,8 +57,6 @@ class DataLook:
 def load_frames(db: ProgramsDB, frames: str) -> tuple[list[str], bool]:
     """Table `d` in the programs' DuckDB: every non-ego box of the frames with its distance to its frame's ego (and
     speed, NULL where the frames have none). Returns the frames' files and whether any speed is known."""
-    from frames.dataset import FramesDataset
-
     dataset = FramesDataset.open(frames)
     files = [p.path for p in dataset.parts]
     has_speed = any("speed" in p.optional for p in dataset.parts)
@@ -125,8 +124,6 @@ def data_looks(db: ProgramsDB, overview: DataFrames | None, per_reason: int = PE
 
 def rarest_relations(db: ProgramsDB, per_reason: int = PER_REASON, kinds: int = 3) -> list[DataLook]:
     """The frames whose programs use the relation kinds used least (but used) over the whole run."""
-    from pipeline.report.stats import relation_usage
-
     counts = relation_usage(db).counts.sum(axis=1)
     used = sorted(((int(n), kind) for kind, n in counts.items() if n > 0))[:kinds]
     out = []

@@ -8,10 +8,16 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from frames.dataset import FramesDataset
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart, staged_directory
-from pipeline.report.document import HTML_NAME, MD_NAME
+from pipeline.report.document import HTML_NAME, MD_NAME, write_report
 from pipeline.report.plots import PLOT_FILES
+from pipeline.report.query_section import query_section
+from pipeline.report.stats import ProgramsDB, by_config
+from pipeline.report.window_section import window_section
+from synth.dsl import DslError
+from synth.patterns.temporal import parse_query_pattern
 
 
 def report_files() -> frozenset[str]:
@@ -43,10 +49,6 @@ def report(programs: str | os.PathLike, out: str | os.PathLike, *, frames: str |
     adds the section on the frames that match it; `frame_programs` (window programs only: the per-frame programs of
     the same frames; needs `frames`) compares each window's cost with its frames' own. Bad input raises an
     InputError before anything is written."""
-    from pipeline.report.document import HTML_NAME, write_report
-    from pipeline.report.stats import ProgramsDB, by_config
-    from pipeline.report.window_section import window_section
-
     programs, frames = str(programs), None if frames is None else str(frames)
     frame_programs = None if frame_programs is None else str(frame_programs)
     target = Path(out)
@@ -75,10 +77,6 @@ def report(programs: str | os.PathLike, out: str | os.PathLike, *, frames: str |
 def _query_sections(query, name: str, frames: str | None, top: int) -> tuple:
     if query is None:
         return ()
-    from frames.dataset import FramesDataset
-    from pipeline.report.query_section import query_section
-    from synth.dsl import DslError
-    from synth.patterns.temporal import parse_query_pattern
 
     if frames is None:
         raise UserError("--query needs --frames: the frames the programs came from, where the pattern is matched")

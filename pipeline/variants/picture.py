@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart, writing
 from pipeline.variants.render import FORMATS, View, draw, save
@@ -73,7 +74,7 @@ scene in messages). Returns the path written. Bad input raises an InputError
 
 def _bound(matches, scene: Scene) -> tuple[tuple[str, str], ...]:
     """(pattern name, entity id) for every binding of the scene's frame in the matches file."""
-    from pipeline.query.matches import bindings_of_frame
+    from pipeline.query.matches import bindings_of_frame  # pyarrow, pandas: only --matches reads Parquet
 
     bindings = bindings_of_frame(matches, scene.frame_id)
     if not bindings:
@@ -95,7 +96,6 @@ def _scene(scene) -> Scene:
             return scene_from_dict(scene)
         except SceneError as exc:
             raise UserError(str(exc)) from None
-    from pipeline.cli.inputs import read_scene
 
     return read_scene(str(scene))
 
@@ -103,7 +103,7 @@ def _scene(scene) -> Scene:
 def _program(program, programs, scene: Scene) -> tuple[Program | None, str]:
     """The program to draw and how to name it in a message."""
     if programs is not None:
-        from pipeline.programs import program_of_frame
+        from pipeline.programs import program_of_frame  # pyarrow, pandas: only --programs reads Parquet
 
         text = program_of_frame(programs, scene.frame_id)
         if text is None:

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from pipeline.variants.labels import place
 from storage.atomic import atomic_path
 from synth.dsl import Program
 from synth.geometry import heading_vector, normalize, to_local
@@ -334,8 +335,6 @@ def _label(fig, ax, boxes: dict[str, Footprint], view: View, colours: dict[str, 
     """Every entity's id (a match's with its pattern names), placed by pipeline.variants.labels where it overlaps
     no other label and no box, with a leader line when it sits away from its box. Last, once the layout is fixed:
     the labels are placed in its pixels, and kept out of it (set_in_layout) so that saving does not move it."""
-    from pipeline.variants.labels import place
-
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     to_px = ax.transData.transform

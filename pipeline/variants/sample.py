@@ -38,8 +38,8 @@ from tqdm import tqdm
 
 from pipeline.errors import SamplingError, UserError
 from pipeline.variants import DEFAULT_MAX_ITERATIONS, MAX_SEED, SAMPLERS
-from synth.config import SynthConfig
-from synth.dsl import Program
+from synth.config import SynthConfig, config_from_mapping
+from synth.dsl import DslError, Program, parse_program
 from synth.geometry import normalize
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, SceneError, scene_from_dict
 from synth.scenic.emit import (
@@ -330,7 +330,7 @@ def sample(program=None, scene=None, *, programs=None, frame_id: str | None = No
     The keywords after `config` are SampleOptions' fields (`r2s sample`'s options). Returns `Samples`: `.scenes`
     (Scenes), `.sampler`, `.describe()`. Bad input raises an InputError (UserError, one line); no variant within
     the budget raises SamplingFailed (exit 4 in `r2s sample`)."""
-    from pipeline.programs import scenic_of_frame
+    from pipeline.programs import scenic_of_frame  # pyarrow, pandas: only `programs=` reads Parquet
 
     options = SampleOptions(n=n, seed=seed, max_iterations=max_iterations, allow_collisions=allow_collisions,
                             sampler=sampler, burn_in=burn_in, thin=thin)
@@ -349,8 +349,6 @@ def sample(program=None, scene=None, *, programs=None, frame_id: str | None = No
         if not isinstance(program, str):
             raise UserError("a DSL program needs the scene it was synthesized for")
         return sample_scenic(program, options, trusted=trusted, progress=progress)
-    from synth.config import config_from_mapping
-    from synth.dsl import DslError, parse_program
 
     try:
         program = parse_program(program) if isinstance(program, str) else program
