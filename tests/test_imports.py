@@ -42,6 +42,7 @@ HEAVY = {
 VERB = "the verb table: a verb's module is light for `r2s VERB --help`; its `run` imports its stage"
 SYNTH_LIGHT = "`import synth` stays light: the DSL, the oracles, the search and the road load on first use"
 HELP = "`r2s --help` does not load it"
+WINDOW = "only `r2s run --window` loads the window synthesis (the DSL, the driver: ~70 ms of a run's start-up)"
 
 # (module, imported module) -> why it is imported inside a function.
 LAZY: dict[tuple[str, str], str] = {
@@ -57,6 +58,9 @@ LAZY: dict[tuple[str, str], str] = {
     # pipeline.batch
     ("pipeline.batch.options", "pipeline.batch.windows"): "options.py stays light for --help (docs/layout.md); the "
                                                           "window planner loads numpy, pyarrow and the window synthesis",
+    ("pipeline.batch.stage", "synth.window.program"): WINDOW,
+    ("pipeline.batch.stage", "pipeline.batch.windows"): WINDOW,
+    ("pipeline.batch.stage", "pipeline.batch.window_task"): WINDOW,
     # pipeline.cli: each verb's module is light for `r2s VERB --help`; its run imports what it runs
     ('pipeline.cli.check', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.check', 'synth.behaviour.program'): VERB,

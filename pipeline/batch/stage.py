@@ -38,8 +38,6 @@ from pipeline.batch.progress import Progress
 from pipeline.batch.rules import PartBuffer, Summary, chunk_size_for, chunk_sizes, chunks, status_counts, summarize
 from pipeline.batch.store import RunStore, is_single_file
 from pipeline.batch.task import ChunkTask, ChunkUnreadable
-from pipeline.batch.window_task import WindowTask
-from pipeline.batch.windows import plan_windows
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart
 from pipeline.programs import PROGRAMS_SCHEMA, WINDOW_SCHEMA
@@ -47,7 +45,6 @@ from storage.atomic import temp_directory
 from storage.frame_index import FrameIndex, frame_hashes
 from synth.config import SynthConfig, as_config
 from synth.version import ROWS_VERSION
-from synth.window.program import check_window_config
 
 PART_MAX_AGE_S = 30.0  # a part is written at the latest this long after its first row
 MAX_SPAN_ROWS = 131_072  # rows a chunk may span in its file (two of our writers' row groups)
@@ -88,6 +85,8 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
     """run_frames with its options as one value."""
     options.check()
     if options.window is not None:
+        from synth.window.program import check_window_config  # only --window loads the window synthesis
+
         check_window_config(config)
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
@@ -291,6 +290,8 @@ class _WindowRun(_Run):
         return WINDOW_SCHEMA
 
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
+        from pipeline.batch.windows import plan_windows
+
         spec = self.options.window
         hasher = FrameHasher(keep_lanes=True, coverage=self._coverage(dataset))
         # Refuses bad input (every value the workers will read); the hasher keeps each frame's hash
@@ -303,6 +304,8 @@ class _WindowRun(_Run):
             spec.config_hash(self.config)
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
+        from pipeline.batch.window_task import WindowTask
+
         spec = self.options.window
         maps = self._maps(dataset)
         parts = tuple((p.path, p.read_columns(maps is not None)) for p in dataset.parts)
