@@ -42,6 +42,7 @@ HEAVY = {
 VERB = "the verb table: a verb's module is light for `r2s VERB --help`; its `run` imports its stage"
 SYNTH_LIGHT = "`import synth` stays light: the DSL, the oracles, the search and the road load on first use"
 HELP = "`r2s --help` does not load it"
+QUERY = "only r2s report --query loads the miner, the pattern parser and the frames reader (~0.1 s)"
 WINDOW = "only `r2s run --window` loads the window synthesis (the DSL, the driver: ~70 ms of a run's start-up)"
 
 # (module, imported module) -> why it is imported inside a function.
@@ -111,6 +112,11 @@ LAZY: dict[tuple[str, str], str] = {
     ("pipeline.variants.picture", "pipeline.query.matches"): "only `matches=` (--matches) reads a matches file",
     ("pipeline.export.opendrive", "frames.maps"): "only a maps dataset is Parquet: r2s export of a scene JSON "
                                                   "loads no pyarrow",
+    ("pipeline.report.output", "frames.dataset"): QUERY,
+    ("pipeline.report.output", "pipeline.report.query_section"): QUERY,
+    ("pipeline.report.output", "synth.patterns.temporal"): QUERY,
+    ("pipeline.report.data", "frames.dataset"): "only r2s report --frames reads the frames",
+    ("pipeline.report.window_section", "frames.dataset"): "only r2s report --frames reads the frames",
     ("pipeline.scenes", "difflib"): "only a frame that is not there loads it (the hint of its nearest names)",
 }
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from frames.dataset import FramesDataset
 from pipeline.report.stats import ProgramsDB, relation_usage
 
 # Distance bands from ego, metres (the last is open).
@@ -57,6 +56,8 @@ class DataLook:
 def load_frames(db: ProgramsDB, frames: str) -> tuple[list[str], bool]:
     """Table `d` in the programs' DuckDB: every non-ego box of the frames with its distance to its frame's ego (and
     speed, NULL where the frames have none). Returns the frames' files and whether any speed is known."""
+    from frames.dataset import FramesDataset  # only --frames reads the frames
+
     dataset = FramesDataset.open(frames)
     files = [p.path for p in dataset.parts]
     has_speed = any("speed" in p.optional for p in dataset.parts)

@@ -8,16 +8,13 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from frames.dataset import FramesDataset
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart, staged_directory
 from pipeline.report.document import HTML_NAME, MD_NAME, write_report
 from pipeline.report.plots import PLOT_FILES
-from pipeline.report.query_section import query_section
 from pipeline.report.stats import ProgramsDB, by_config
 from pipeline.report.window_section import window_section
 from synth.dsl import DslError
-from synth.patterns.temporal import parse_query_pattern
 
 
 def report_files() -> frozenset[str]:
@@ -77,6 +74,10 @@ def report(programs: str | os.PathLike, out: str | os.PathLike, *, frames: str |
 def _query_sections(query, name: str, frames: str | None, top: int) -> tuple:
     if query is None:
         return ()
+    # only --query loads the miner and the frames reader (~0.1 s of a report's start-up)
+    from frames.dataset import FramesDataset
+    from pipeline.report.query_section import query_section
+    from synth.patterns.temporal import parse_query_pattern
 
     if frames is None:
         raise UserError("--query needs --frames: the frames the programs came from, where the pattern is matched")

@@ -9,7 +9,6 @@ references and relations, whatever the Range values).
 
 from __future__ import annotations
 
-from frames.dataset import FramesDataset
 from pipeline.errors import UserError
 from pipeline.programs import programs_files
 from pipeline.report.document import ReportContext, Section, SectionBuilder, Table, fmt_float, fmt_pct
@@ -81,6 +80,8 @@ def stability(ctx: ReportContext) -> tuple:
 
 
 def costs(ctx: ReportContext, frames: str | None, frame_programs: str) -> tuple:
+    from frames.dataset import FramesDataset  # only --frames reads the frames
+
     if frames is None:
         raise UserError("--frame-programs needs --frames: the frames both programs came from (where each frame is)")
     frame_files = [p.path for p in FramesDataset.open(frames).parts]
