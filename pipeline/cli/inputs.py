@@ -9,7 +9,6 @@ from pathlib import Path
 from pipeline.errors import UserError
 from storage.regular_files import FileTooLarge, NotRegularFile, read_regular
 from synth.config import ConfigError, SynthConfig, config_from_mapping
-from synth.dsl import DslError, parse_program
 from synth.scene import DEFAULT_MAX_ENTITIES, Scene, scene_from_json
 
 MAX_TEXT_BYTES = 64 * 1024 * 1024
@@ -37,6 +36,8 @@ def read_text_file(path: str, what: str) -> str:
 
 def read_program(path: str):
     """A DSL program file (r2s check, and the --program of r2s sample and r2s render)."""
+    from synth.dsl import DslError, parse_program  # python-flint: r2s export reads scene JSON only
+
     try:
         return parse_program(read_text_file(path, "program"))
     except DslError as exc:
@@ -46,6 +47,7 @@ def read_program(path: str):
 def read_pattern(path: str):
     """A pattern file (r2s query, r2s report --query): DSL statements whose names are variables, or a temporal
     pattern (steps, durations, behaviours: synth.patterns.temporal)."""
+    from synth.dsl import DslError
     from synth.patterns.temporal import parse_query_pattern
 
     try:

@@ -18,7 +18,7 @@ from typing import Protocol
 
 from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
-from pipeline.export import TARGETS, openscenario, scenarionet, slug
+from pipeline.export import TARGETS, slug
 from pipeline.outputs import staged_directory
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
@@ -103,7 +103,12 @@ def exported(entry: os.DirEntry) -> bool:
 
 
 def target(name: str) -> Target:
-    return scenarionet.TARGET if name == "scenarionet" else openscenario.TARGET
+    # a target's writer loads when it is chosen: --to scenarionet does not load OpenSCENARIO's (xml, the road network)
+    if name == "scenarionet":
+        from pipeline.export.scenarionet import TARGET
+    else:
+        from pipeline.export.openscenario import TARGET
+    return TARGET
 
 
 def export(recorded: Scene, files: list[Path], to: str, out: Path, options: ExportOptions) -> tuple[int, list[str]]:
