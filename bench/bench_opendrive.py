@@ -17,6 +17,7 @@ three links after its own. Writes bench/results/opendrive.json and opendrive.md.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -34,7 +35,14 @@ SHARED = ROOT.parent / "shared" / "data" / "waymo"
 
 
 def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
-    """Cars that drove from their lane into a successor, cars started, and the lanes of those that did not."""
+    """Cars that drove from their lane into a successor, cars started, and the lanes of those that did not.
+
+    Recorded lanes overlap (Waymo's merging lanes run over each other for metres, junction lanes cross): a car
+    set at a point only would take the lane and heading Scenic finds first there, often a neighbour's. So each
+    car faces its recorded lane's heading and follows the Scenic lane of its own recorded lane there
+    (FollowLaneBehavior's laneToFollow); it drove on when at some step it is inside a Scenic lane of a recorded
+    lane within three links after its own and no longer inside its own (every lane holding the point, not the
+    one Scenic's laneAt picks)."""
     import scenic
     import shapely
     from scenic.simulators.newtonian import NewtonianSimulator
@@ -48,29 +56,37 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
         if not succ[k]:
             continue
         line = shapely.LineString([(x - shift[0], y - shift[1]) for x, y in lanes[k].line])
-        p = line.interpolate(line.length / 2 if line.length < 8 else line.length - 6)
+        at = line.length / 2 if line.length < 8 else line.length - 6
+        p, q = line.interpolate(at), line.interpolate(min(line.length, at + 0.5))
+        if q.distance(p) < 1e-6:
+            p, q = line.interpolate(at - 0.5), p
+        heading = math.atan2(q.y - p.y, q.x - p.x) - math.pi / 2  # Scenic's headings start at the y axis
         starts.append(k)
-        lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), with behavior FollowLaneBehavior("
-                     "target_speed=6), with allowCollisions True, with requireVisible False, "
-                     "with regionContainedIn everywhere")
+        lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), facing {heading!r}, with behavior "
+                     f"FollowLaneBehavior(target_speed=6, laneToFollow=lane_of({k!r}, {p.x!r}, {p.y!r})), "
+                     "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
     code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
+            "def lane_of(name, x, y):\n"
+            "    here = [l for l in network.lanes if name in l.road.name.split(' > ') and l.containsPoint((x, y))]\n"
+            "    return here[0] if here else network.laneAt((x, y))\n"
             + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
     scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
     scene, _ = scenario.generate(maxIterations=1)
     trajectory = NewtonianSimulator().simulate(scene, maxSteps=STEPS).trajectory
     network = scene.workspace.network
+    names = [set(lane.road.name.split(" > ")) for lane in network.lanes]
+    tree = shapely.STRtree([lane.polygon for lane in network.lanes])
+    inside = [[set() for _ in starts] for _ in trajectory]  # step -> car -> the recorded lanes holding it
+    points = shapely.points([tuple(step[i])[:2] for step in trajectory for i in range(len(starts))])
+    for where, lane in zip(*tree.query(points, predicate="intersects")):
+        inside[where // len(starts)][where % len(starts)] |= names[lane]
     ok, failed = 0, []
     for i, k in enumerate(starts):
         after, frontier = set(), {k}
         for _ in range(3):
             frontier = {s for f in frontier for s in succ[f]} - after
             after |= frontier
-        reached = False
-        for step in trajectory:
-            lane = network.laneAt(step[i])
-            if lane is not None and set(lane.road.name.split(" > ")) & after:
-                reached = True
-                break
+        reached = any(step[i] & after and k not in step[i] for step in inside)
         ok += reached
         if not reached:
             end = network.laneAt(trajectory[-1][i])
