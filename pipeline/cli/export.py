@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pipeline.cli.options import bounded_int
 from pipeline.errors import UserError
-from pipeline.export import ROAD_ONLY, TARGETS
+from pipeline.export import FRAMES, ROAD_ONLY, TARGETS
 from pipeline.outputs import check_apart, check_folder
 
 
@@ -29,6 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="the output directory, replaced whole: absent, empty "
                    "or an earlier export (--to opendrive: the .xodr file, written atomically)")
     p.add_argument("--map", metavar="ID", help="--to opendrive from a maps dataset of several maps: the map to write")
+    p.add_argument("--frame", choices=FRAMES, default="world", help="--to opendrive from a scene JSON: world (the "
+                   "source's world frame, recentred; default) or ego (the scene's ego frame, which its Scenic text "
+                   "is in: r2s synth --road)")
     p.add_argument("--program", metavar="P", help="the program the variants were sampled from (.dsl or .scenic): "
                    "named in every scenario's metadata")
     p.add_argument("--steps", type=bounded_int(1, 10_000), default=1, metavar="T",
@@ -44,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
         return _road(args)
     if args.map is not None:
         raise UserError("--map is for --to opendrive from a maps dataset")
+    if args.frame != "world":
+        raise UserError("--frame is for --to opendrive: the frame of the road written alone")
     out = Path(args.out)
     check_apart(out, [("scene", args.scene), ("program", args.program)]
                 + [("variant", v) for v in args.variants], directory=True)
@@ -64,5 +69,5 @@ def _road(args: argparse.Namespace) -> int:
     if args.variants or args.program:
         raise UserError("--to opendrive writes the road alone: give no variants and no --program")
     check_apart(args.out, [("input", args.scene)])
-    print(export_road(args.scene, args.map, args.out))
+    print(export_road(args.scene, args.map, args.out, args.frame))
     return 0

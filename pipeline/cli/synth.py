@@ -12,8 +12,10 @@ from pathlib import Path
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
 from pipeline.errors import UserError
+from pipeline.export.opendrive import check_road_frame, map_path
 from pipeline.outputs import check_apart, writing
 from storage.atomic import write_text_atomic
+from synth.scenic.emit import on_map
 from synth.synthesize import synthesize
 
 
@@ -29,8 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the clip's program: its first frame's program plus a minimum-cost behaviour per entity, "
                         "ego included (docs/dsl.md, Behaviour programs; frames need times and speeds)")
     p.add_argument("--road", metavar="XODR",
-                   help="with --behaviours --format scenic: the clip's road as OpenDRIVE, which the dynamic scenario "
-                        "loads (r2s export FIRST.json --to openscenario --out DIR writes it)")
+                   help="with --format scenic: the road as OpenDRIVE that the Scenic text names (param map) and "
+                        "Scenic's driving domain loads: the scene's road in its ego frame (r2s export SCENE.json --to "
+                        "opendrive --frame ego --out F.xodr); with --behaviours the clip's road in the world frame "
+                        "(r2s export FIRST.json --to openscenario --out DIR writes it)")
     add_synthesis_options(p)
 
 
@@ -40,9 +44,8 @@ def run(args: argparse.Namespace) -> int:
     check_apart(args.out, [*(("input scene", s) for s in args.scene), ("config", args.config)])
     if len(args.scene) > 1 and "-" in args.scene:
         raise UserError("a clip is read from files: standard input (-) holds one scene")
-    if args.road is not None and not (args.behaviours and args.format == "scenic"):
-        raise UserError("--road is the OpenDRIVE road of a behaviour program's Scenic text: give it with "
-                        "--behaviours --format scenic")
+    if args.road is not None and args.format != "scenic":
+        raise UserError("--road is the OpenDRIVE road a program's Scenic text names: give it with --format scenic")
     if args.behaviours and args.format == "scenic" and args.road is None:
         raise UserError("--behaviours --format scenic needs --road FILE.xodr, the road the scenario is simulated on "
                         "(r2s export FIRST.json --to openscenario --out DIR writes it)")
@@ -51,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
                         "writes the .xodr)")
     config = synthesis_config(args)
     scenes = [read_scene(path, max_entities=args.max_entities) for path in args.scene]
+    if args.road is not None and not args.behaviours:
+        check_road_frame(args.road, scenes[0])
     if args.behaviours:
         from synth.behaviour.synthesize import synthesize_behaviours
 
@@ -67,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
         from synth.behaviour.scenic import clip_scenic
 
         text = clip_scenic(result, str(Path(args.road).resolve()), config.v_stop)
+    elif args.format == "scenic" and args.road is not None:
+        text = on_map(result.scenic, map_path(args.road, args.out))
     elif args.format == "scenic":
         text = result.scenic
     else:

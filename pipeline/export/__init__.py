@@ -8,6 +8,7 @@ import re
 
 TARGETS = ("scenarionet", "openscenario")  # the targets that write a folder of scenarios
 ROAD_ONLY = "opendrive"  # --to opendrive: the road alone, one .xodr file (pipeline/export/opendrive.py)
+FRAMES = ("world", "ego")  # --frame: the source's world, recentred; a scene's ego frame (its Scenic text's)
 
 
 def slug(text: str) -> str:

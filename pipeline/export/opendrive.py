@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime
 import math
+import os
 import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -16,10 +17,12 @@ from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
 from pipeline.outputs import writing
 from storage.atomic import atomic_path
-from synth.road.opendrive import Network, Road, network
+from synth.road.opendrive import MAP_SUFFIX, Network, Road, network
 from synth.road.roadmap import RoadMap
+from synth.scene import Scene
 from synth.world import WorldPose, road_in_world
 
+FRAME_TOLERANCE = 1e-9  # metres, radians: a file's header offset this near a scene's ego pose is its frame
 DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
 VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
@@ -92,8 +95,9 @@ def _profile(road: Road):
     return profile
 
 
-def opendrive(net: Network, name: str):
-    """The XML element of a network (module docstring)."""
+def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None = None):
+    """The XML element of a network (module docstring); `frame`: the header offset, the world pose (x, y, hdg)
+    of the file's origin (default: the network's recentring offset, hdg 0)."""
     from scenariogeneration import xodr
 
     odr = xodr.OpenDrive(xml_text(name), revMinor="7")  # 1.7: the newest every ASAM check applies to
@@ -121,13 +125,64 @@ def opendrive(net: Network, name: str):
     header = element.find("header")
     header.set("date", DATE.isoformat())
     header.set("vendor", VENDOR)
-    _set_offset(header, net.offset)
+    _set_offset(header, frame if frame is not None else (net.offset[0], net.offset[1], 0.0))
     return element
 
 
-def _set_offset(header, offset: tuple[float, float]) -> None:
-    """The header's offset (OpenDRIVE 1.7 t_header_Offset: the recorded frame's coordinates of the origin)."""
-    ET.SubElement(header, "offset", x=repr(offset[0]), y=repr(offset[1]), z="0.0", hdg="0.0")
+def _set_offset(header, frame: tuple[float, float, float]) -> None:
+    """The header's offset (OpenDRIVE 1.7 t_header_Offset): the recorded world's pose of the file's origin, a
+    point (u, v) of the file being (x, y) + (u, v) turned by hdg there."""
+    x, y, hdg = frame
+    ET.SubElement(header, "offset", x=repr(x), y=repr(y), z="0.0", hdg=repr(hdg))
+
+
+def ego_frame(world: WorldPose | None) -> tuple[float, float, float]:
+    """The header offset of a scene's road in its ego frame: the ego's world pose, hdg the direction of the ego
+    frame's +x (the heading less 90 degrees, in radians); (0, 0, 0) for a scene with no world."""
+    if world is None:
+        return (0.0, 0.0, 0.0)
+    return (world.x, world.y, math.radians(world.heading - 90.0))
+
+
+def header_frame(path: str) -> tuple[float, float, float] | None:
+    """The header offset (x, y, hdg) of an OpenDRIVE file, None where its header has none; a UserError where
+    the file is not OpenDRIVE. Reads up to the header only."""
+    try:
+        for n, (event, el) in enumerate(ET.iterparse(path, events=("start", "end"))):
+            if n == 0 and el.tag != "OpenDRIVE":
+                raise UserError(f"{path} is not an OpenDRIVE file (its root is <{xml_text(el.tag)[:40]}>)")
+            if event == "end" and el.tag == "offset":
+                return tuple(float(el.get(k, "0")) for k in ("x", "y", "hdg"))  # type: ignore[return-value]
+            if event == "end" and el.tag == "header":
+                return None
+    except (ET.ParseError, ValueError, OSError) as exc:
+        raise UserError(f"{path} is not an OpenDRIVE file ({xml_text(str(exc))[:100]})") from None
+    raise UserError(f"{path} is not an OpenDRIVE file (no header)")
+
+
+def check_road_frame(path: str, scene: Scene) -> None:
+    """A UserError unless the OpenDRIVE file at `path` is in the scene's ego frame (its header offset the ego's
+    world pose, as --frame ego writes it); a file without a header offset is taken as in it."""
+    if not Path(path).is_file():
+        raise UserError(f"--road {path} is not a file (r2s export SCENE.json --to opendrive --frame ego --out "
+                        "F.xodr writes it)")
+    if not path.lower().endswith(MAP_SUFFIX):
+        raise UserError(f"--road {path} is not an OpenDRIVE file: its name must end in {MAP_SUFFIX}")
+    frame = header_frame(path)
+    want = ego_frame(scene.world)
+    if frame is not None and any(abs(a - b) > FRAME_TOLERANCE for a, b in zip(frame, want)):
+        raise UserError(f"--road {path} is not in the ego frame of {scene.frame_id!r} (its header offset is "
+                        f"{frame[0]:g}, {frame[1]:g}, {frame[2]:g}): write it with r2s export SCENE.json --to "
+                        "opendrive --frame ego --out F.xodr")
+
+
+def map_path(road: str, out: str | None) -> str:
+    """How a Scenic text names its map: relative to the text's file where it is written to one (localPath
+    resolves it there, so the two move together), absolute on standard output."""
+    target = Path(road).resolve()
+    if out is None:
+        return str(target)
+    return os.path.relpath(target, Path(out).resolve().parent)
 
 
 def write_xml(element, path: Path) -> None:
@@ -136,15 +191,16 @@ def write_xml(element, path: Path) -> None:
     ET.ElementTree(element).write(path, encoding="utf-8", xml_declaration=True)
 
 
-def linked(road: RoadMap, what: str) -> Network:
-    """The linked network of a road in its source's world (synth.road.opendrive), or one line (UserError) where
-    OpenDRIVE cannot be had: no lane with a centre line, or more than MAX_GEOMETRIES line geometries."""
+def linked(road: RoadMap, what: str, recentre: bool = True) -> Network:
+    """The linked network of a road (synth.road.opendrive; recentred, or in the road's own frame), or one line
+    (UserError) where OpenDRIVE cannot be had: no lane with a centre line, or more than MAX_GEOMETRIES line
+    geometries."""
     try:
         import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
     except ImportError:
         raise UserError("OpenDRIVE needs scenariogeneration (pip install scenariogeneration==0.16.7)") from None
     try:
-        net = network(road)
+        net = network(road, recentre)
     except ValueError as exc:  # too many paths through junctions
         raise UserError(f"the road of {what}: {exc}") from None
     geometries = sum(len(straight_runs(r.points)) for r in net.roads)  # counted before the costly XML is built
@@ -157,9 +213,10 @@ def linked(road: RoadMap, what: str) -> Network:
     return net
 
 
-def export_road(source: str, map_id: str | None, out: str) -> str:
-    """`r2s export SOURCE --to opendrive --out F.xodr`: the road of a scene JSON (in its world) or one map of a
-    maps dataset, written atomically to `out`; returns the line to tell the user."""
+def export_road(source: str, map_id: str | None, out: str, frame: str = "world") -> str:
+    """`r2s export SOURCE --to opendrive --out F.xodr [--frame world|ego]`: the road of a scene JSON (in its
+    world, recentred; or in its ego frame, the frame of its Scenic text) or one map of a maps dataset, written
+    atomically to `out`; returns the line to tell the user."""
     if Path(source).is_dir() or source.endswith(".parquet"):
         from frames.maps import read_maps  # pyarrow: only a maps dataset is Parquet, a scene JSON is not
 
@@ -168,6 +225,8 @@ def export_road(source: str, map_id: str | None, out: str) -> str:
             raise UserError(f"{source} holds no map" + (f" {map_id!r}" if map_id is not None else ""))
         if len(maps) > 1:
             raise UserError(f"{source} holds {len(maps)} maps: name one with --map ID")
+        if frame == "ego":
+            raise UserError("--frame ego is a scene's ego frame: a maps dataset has no ego (export a scene JSON)")
         road, what = maps[0], f"map {maps[0].map_id!r}"
     else:
         if map_id is not None:
@@ -175,12 +234,16 @@ def export_road(source: str, map_id: str | None, out: str) -> str:
         scene = read_scene(source)
         if scene.road is None:
             raise UserError(f"the scene {scene.frame_id!r} has no road: export a frame whose source has a map")
-        road, what = road_in_world(scene.world or WorldPose.identity(), scene.road), f"the scene {scene.frame_id!r}"
-    net = linked(road, what)
-    element = opendrive(net, road.map_id)
+        what = f"the scene {scene.frame_id!r}"
+        road = scene.road if frame == "ego" else road_in_world(scene.world or WorldPose.identity(), scene.road)
+    net = linked(road, what, recentre=frame == "world")
+    header = ego_frame(scene.world) if frame == "ego" else None
+    element = opendrive(net, road.map_id, header)
     with writing(out), atomic_path(out) as tmp:
         write_xml(element, tmp)
     connecting = sum(r.junction != -1 for r in net.roads)
     return (f"wrote {out}: {len(net.roads) - connecting} roads and {connecting} connecting roads in "
-            f"{len(net.junctions)} junctions from {what}, offset ({net.offset[0]:g}, {net.offset[1]:g})"
+            f"{len(net.junctions)} junctions from {what}, "
+            + (f"in its ego frame (ego at {header[0]:g}, {header[1]:g} in the world)" if header is not None
+               else f"offset ({net.offset[0]:g}, {net.offset[1]:g})")
             + "".join(f"; {n}" for n in net.notes))

@@ -154,14 +154,17 @@ def _seeded(seed: int) -> Iterator[None]:
         numpy.random.set_state(saved[1])
 
 
-def compile_scenic(text: str, options: SampleOptions, filename: str = "<program>"):
-    """The Scenic scenario of a text, with the collision switch of the options (a UserError if it fails)."""
+def compile_scenic(text: str, options: SampleOptions, filename: str = "<program>", generated: bool = False):
+    """The Scenic scenario of a text, with the collision switch of the options (a UserError if it fails). A
+    `generated` text (r2sgen's own, checked against its record) that names a map has it parsed afresh: Scenic
+    would otherwise load a pickled cache found beside the .xodr, which a received folder could hold."""
     import scenic
 
+    params = {COLLISIONS_PARAM: options.allow_collisions}
+    if generated:
+        params["map_options"] = {"useCache": False, "writeCache": False}
     try:
-        scenario = scenic.scenarioFromString(
-            text, params={COLLISIONS_PARAM: options.allow_collisions}, filename=filename, mode2D=True
-        )
+        scenario = scenic.scenarioFromString(text, params=params, filename=filename, mode2D=True)
     except Exception as exc:  # any failure of a program text is the text's: Scenic raises all kinds
         raise ScenicProgramError(f"{filename}: Scenic cannot compile it: {_first_line(exc)}") from None
     if options.allow_collisions and any(o.allowCollisions is False for o in scenario.objects):
@@ -287,7 +290,8 @@ def _sample(program: Program, scene: Scene, config: SynthConfig, options: Sample
     else:
         text = text if text is not None else render_scenic(program, scene, config)
         try:
-            samples = draw_scenes(compile_scenic(text, options, filename), options, filename, progress)
+            samples = draw_scenes(compile_scenic(text, options, filename, generated=True), options, filename,
+                                  progress)
         except SamplingFailed as exc:
             if options.allow_collisions:
                 raise

@@ -37,6 +37,7 @@ import numpy as np
 
 from synth.road.roadmap import MapFeature, RoadMap
 
+MAP_SUFFIX = ".xodr"  # an OpenDRIVE file's; the only map a Scenic text names (Scenic unpickles a .snet map)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerate polygon's, clamped
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
 ENDING = 0.05  # metres: the straight piece at a road's end in its node's heading (at most a quarter of the road)
@@ -187,8 +188,9 @@ def roles(lanes: dict[str, MapFeature], succ: dict[str, list[str]], pred: dict[s
     return junction
 
 
-def network(road: RoadMap) -> Network:
-    """The linked network of a road's lanes (in its frame; module docstring)."""
+def network(road: RoadMap, recentre: bool = True) -> Network:
+    """The linked network of a road's lanes (in its frame, recentred unless `recentre` is false: then the
+    offset is (0, 0); module docstring)."""
     lanes = {f.feature_id: f for f in road.lanes if len(_clean(f.line)) >= 2}
     succ, pred = lane_graph(lanes)
     junction = roles(lanes, succ, pred)
@@ -311,7 +313,7 @@ def network(road: RoadMap) -> Network:
         pose[root] = (tuple(pts.mean(axis=0).tolist()), h, w, spread)
 
     all_pts = np.concatenate([np.asarray(line) for line in lines]) if lines else np.zeros((1, 2))
-    offset = tuple(float(v) for v in np.round(all_pts.mean(axis=0)))
+    offset = tuple(float(v) for v in np.round(all_pts.mean(axis=0))) if recentre else (0.0, 0.0)
     roads = []
     for i, (line, ws) in enumerate(zip(lines, wids)):
         start = pose.get(nodes.find((i, 0))) if (i, 0) in nodes.parent else None

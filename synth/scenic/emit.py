@@ -48,6 +48,12 @@ and runs every sampled scene through synth.semantics.check):
   orientation, so the velocity follows the heading), ego its recorded speed; speeds are never negative (the
   helpers clamp at 0, and a relative speed Range wholly below the reference's speed is required away), and
   `param r2s_motion = True` tells `r2s sample` to write each object's speed into the variants.
+- The map (on_map), only where the user names one (`r2s synth --road F.xodr`): `param map = localPath(...)` and
+  `model scenic.domains.driving.model` (Scenic's driving domain: any driving simulator's model replaces it with
+  `scenic --model`), the classes the domain's (Car from its Car, the other vehicles from its Vehicle, Pedestrian
+  from its Pedestrian, the rest plain), each with `regionContainedIn: None` (a recorded entity may stand off the
+  map's lanes: the DSL's scenes, not the domain's, are the program's) and `parentOrientation: 0` (its default
+  is the road's direction; a global parent keeps the heading exactly the yaw); the record then holds the path.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ from synth.dsl import Program, Statement, parse_program
 from synth.errors import InputError
 from synth.parts import all_parts
 from synth.parts.position import DIRECTIONS, MIN_DISTANCE
+from synth.road.opendrive import MAP_SUFFIX
 from synth.road.roadmap import road_to_dict
 from synth.scene import ENTITY_TYPES, Entity, Scene, SceneError, scene_from_dict
 from synth.scenic.road import road_scenic
@@ -74,6 +81,11 @@ MOTION_PARAM = "r2s_motion"
 POSITION_SUFFIX = "__at"
 OBJECTS = "dsl__objects"
 SOURCE_PREFIX = "# r2s-source: "
+DRIVING_MODEL = "scenic.domains.driving.model"  # Scenic's driving domain (simulator-agnostic: `scenic --model`)
+# Each entity type's class in the driving domain (its base there); a type not named is a plain object.
+DRIVING_CLASSES = {"Car": "Car", "Truck": "Vehicle", "Bus": "Vehicle", "Trailer": "Vehicle",
+                   "ConstructionVehicle": "Vehicle", "EmergencyVehicle": "Vehicle", "Motorcycle": "Vehicle",
+                   "Bicycle": "Vehicle", "Pedestrian": "Pedestrian"}
 # How to run the file with Scenic's own command (headless: Scenic's viewer refuses a non-interactive matplotlib
 # backend, while --gather-stats samples without drawing), and where Scenic's whole-scene rejection gives up.
 RUN_NOTE = (
@@ -135,16 +147,33 @@ def _props(e: Entity) -> str:
     return out
 
 
-def _classes(types: list[str]) -> list[str]:
+def _classes(types: list[str], driving: bool = False) -> list[str]:
+    """One class per type; in the driving domain (a map named) derived from the domain's (DRIVING_CLASSES)."""
     lines = []
     for t in types:
         length, width = ENTITY_TYPES[t]
-        lines += [f"class {t}:", f"    length: {fmt_number(length)}", f"    width: {fmt_number(width)}",
-                  "    requireVisible: False", "    allowCollisions: True  # the recording's rule instead: see the end", ""]
+        base = DRIVING_CLASSES.get(t) if driving else None
+        lines += [f"class {t}({base}):" if base else f"class {t}:", f"    length: {fmt_number(length)}",
+                  f"    width: {fmt_number(width)}", "    requireVisible: False",
+                  "    allowCollisions: True  # the recording's rule instead: see the end"]
+        if base:
+            lines += ["    regionContainedIn: None  # where the recording has it, on the map's lanes or not",
+                      "    parentOrientation: 0  # the domain's is the road's direction: the heading stays the yaw"]
+        lines.append("")
     return lines
 
 
-def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: str = "") -> str:
+def _map_lines(road_map: str) -> list[str]:
+    """The map a text names and the driving domain's model, which loads it."""
+    return [f"param map = localPath({road_map!r})  # the recorded road as OpenDRIVE, in this scene's frame",
+            f"model {DRIVING_MODEL}"]
+
+
+def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: str = "",
+                  road_map: str | None = None) -> str:
+    """The Scenic text of a program on its scene (module docstring); `road_map`: an OpenDRIVE file of the
+    scene's road in its frame that the text names (Scenic's driving domain then loads it), relative to the text's
+    file or absolute."""
     by_id = scene.by_id()
     assert set(DIRECTIONS) == {"ahead", "left", "behind", "right"}  # the four dsl__sector_* helpers
     types = sorted({scene.ego.type} | {s.type for s in program.statements})
@@ -157,8 +186,9 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
         f"param {FRAME_PARAM} = {scene.frame_id!r}",
         f"param {COLLISIONS_PARAM} = False",
         *([f"param {MOTION_PARAM} = True"] if motion else []),
+        *(_map_lines(road_map) if road_map is not None else []),
         "",
-        *_classes(types),
+        *_classes(types, driving=road_map is not None),
         PRELUDE.format(delta1=fmt_number(config.delta1), delta2=fmt_number(config.delta2),
                        min_distance=fmt_number(MIN_DISTANCE)),
     ]
@@ -178,7 +208,10 @@ def render_scenic(program: Program, scene: Scene, config: SynthConfig, header: s
     for st in program.statements:
         lines += _statement(st, by_id[st.id])
     lines += _collision_rule(program, scene, config)
-    lines.append(SOURCE_PREFIX + json.dumps(_source_record(program, scene, config, header), separators=(",", ":")))
+    record = _source_record(program, scene, config, header)
+    if road_map is not None:
+        record["map"] = road_map
+    lines.append(SOURCE_PREFIX + json.dumps(record, separators=(",", ":")))
     return "\n".join(lines) + "\n"
 
 
@@ -275,6 +308,7 @@ class Source:
     scene: Scene
     config: SynthConfig
     header: str
+    road_map: str | None = None  # the OpenDRIVE file the text names (param map), if any
 
 
 def read_source(text: str) -> Source:
@@ -298,7 +332,10 @@ def read_source(text: str) -> Source:
         header = rec["header"]
         if not isinstance(header, str):
             raise ValueError("the header is not a string")
-        return Source(program, scene, config, header)
+        road_map = rec.get("map")
+        if road_map is not None and not (isinstance(road_map, str) and road_map.lower().endswith(MAP_SUFFIX)):
+            raise ValueError(f"the map is not the path of a {MAP_SUFFIX} file")
+        return Source(program, scene, config, header, road_map)
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:  # Scene/Dsl/ConfigError, JSON
         raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None
 
@@ -311,6 +348,13 @@ def rebuild_from_source(text: str) -> str:
     """
     src = read_source(text)
     try:
-        return render_scenic(src.program, src.scene, src.config, src.header)
+        return render_scenic(src.program, src.scene, src.config, src.header, src.road_map)
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
         raise NotGenerated(f"its r2s-source record is not valid ({type(exc).__name__}: {str(exc)[:100]})") from None
+
+
+def on_map(text: str, road_map: str) -> str:
+    """The Scenic text this emitter wrote (its record), rendered again naming an OpenDRIVE map: `road_map`, the
+    path of the scene's road in its frame, relative to where the text will be (localPath) or absolute."""
+    src = read_source(text)
+    return render_scenic(src.program, src.scene, src.config, src.header, road_map)
