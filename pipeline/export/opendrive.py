@@ -1,8 +1,8 @@
 """A linked road network (synth.road.opendrive.Network) as OpenDRIVE 1.7 XML, written with scenariogeneration
 (docs/formats.md, "OpenDRIVE"): one road per Network road, its reference line as line geometries, its one
 driving lane (-1) centred on it by a lane offset of half its width, widths and offsets linear between the
-reference line's points; road and lane links; junctions with their connections; the recentring offset in the
-header. `r2s export --to opendrive` writes this alone; `--to openscenario` writes it beside its scenarios."""
+reference line's points; road marks on both lane edges; crosswalks as objects with their outline; road and lane
+links; junctions with their connections; the header offset (the recentring offset, or a scene's ego pose). `r2s export --to opendrive` writes this alone; `--to openscenario` writes it beside its scenarios."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
 from pipeline.outputs import writing
 from storage.atomic import atomic_path
-from synth.road.opendrive import MAP_SUFFIX, Network, Road, network
+from synth.road.opendrive import MAP_SUFFIX, Crosswalk, Network, Road, network
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose, road_in_world
@@ -62,6 +62,28 @@ def _same_line(p: tuple[float, float, float], q: tuple[float, float, float]) -> 
     return abs(a1 - a2 - b1 * s1 + b2 * s2) < SAME and abs(b1 - b2) < SAME
 
 
+def _mark(mark: tuple[str, str, str]):
+    """A road mark (type, colour, laneChange: synth.road.opendrive.ROAD_MARKS) as scenariogeneration's."""
+    from scenariogeneration import xodr
+
+    kind, colour, change = mark
+    return xodr.RoadMark(getattr(xodr.RoadMarkType, kind), color=getattr(xodr.RoadMarkColor, colour),
+                         laneChange=getattr(xodr.LaneChange, change))
+
+
+def _crosswalk(c: Crosswalk, n: int):
+    """A crosswalk as an OpenDRIVE object (id n, unique in the file): type crosswalk at (s, t), its outline's
+    local corners, closed."""
+    from scenariogeneration import xodr
+
+    obj = xodr.Object(c.s, c.t, Type=xodr.ObjectType.crosswalk, id=str(n), name=xml_text(c.feature_id), zOffset=0)
+    outline = xodr.Outline(closed=True, outer=True, id=0)
+    for n, (u, v) in enumerate(c.outline):
+        outline.add_corner(xodr.CornerLocal(u, v, 0, 0, id=n))
+    obj.add_outline(outline)
+    return obj
+
+
 def _profile(road: Road):
     """The road's lanes: a centre lane and lane -1 with its width linear between points, and the lane offsets
     that centre it (half the width); an entry only where the slope changes (ASAM flags repeated ones)."""
@@ -75,13 +97,13 @@ def _profile(road: Road):
             continue
         pieces.append((s[i], w[i], slope))
     centre = xodr.Lane(a=0)
-    centre.add_roadmark(xodr.RoadMark(xodr.RoadMarkType.none))
+    centre.add_roadmark(_mark(road.marks[0]))  # the centre lane's mark is lane -1's left edge
     section = xodr.LaneSection(0, centre)
     s0, a, b = pieces[0]
     lane = xodr.Lane(xodr.LaneType.driving, a=a, b=b)
     for s0, a, b in pieces[1:]:
         lane.add_lane_width(a=a, b=b, soffset=s0)
-    lane.add_roadmark(xodr.RoadMark(xodr.RoadMarkType.solid, laneChange=xodr.LaneChange.none))
+    lane.add_roadmark(_mark(road.marks[1]))
     pre, suc = road.predecessor, road.successor
     if pre is not None and pre.kind == "road":
         lane.add_link("predecessor", -1)
@@ -103,6 +125,9 @@ def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None 
     odr = xodr.OpenDrive(xml_text(name), revMinor="7")  # 1.7: the newest every ASAM check applies to
     types = {"road": xodr.ElementType.road, "junction": xodr.ElementType.junction}
     contact = {"start": xodr.ContactPoint.start, "end": xodr.ContactPoint.end, None: None}
+    walks: dict[int, list[tuple[int, Crosswalk]]] = {}
+    for n, c in enumerate(net.crosswalks):
+        walks.setdefault(c.road, []).append((n, c))
     for road in net.roads:
         plan = xodr.PlanView()
         for (x0, y0), (x1, y1) in straight_runs(road.points):
@@ -113,6 +138,8 @@ def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None 
             r.add_predecessor(types[road.predecessor.kind], road.predecessor.id, contact[road.predecessor.contact])
         if road.successor is not None:
             r.add_successor(types[road.successor.kind], road.successor.id, contact[road.successor.contact])
+        for n, c in walks.get(road.id, ()):
+            r.add_object(_crosswalk(c, n))
         odr.add_road(r)
     for j in net.junctions:
         junction = xodr.Junction(f"junction {j.id}", j.id)
@@ -122,6 +149,9 @@ def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None 
             junction.add_connection(c)
         odr.add_junction(junction)
     element = odr.get_element()
+    for obj in element.iter("object"):  # scenariogeneration writes an absent subtype as the text "None"
+        if obj.get("subtype") == "None":
+            del obj.attrib["subtype"]
     header = element.find("header")
     header.set("date", DATE.isoformat())
     header.set("vendor", VENDOR)

@@ -24,6 +24,10 @@ linked lanes meet edge to edge (ASAM's check allows 0.01 m). Widths are the lane
 centre line at each vertex (clamped to [MIN_WIDTH, MAX_WIDTH]; the polygon's area over the line's length where
 the chord cannot be had), linear between vertices, the node's mean at a node. Coordinates are recentred: the
 whole metres nearest the lanes' mean point are subtracted (`offset`, which the header keeps).
+
+Marks and crosswalks. Each ordinary road's lane edges carry the recorded road line of a known type (ROAD_MARKS)
+that runs along them (within MARK_DISTANCE of at least MARK_SHARE of the edge's points); each recorded
+crosswalk is an object of the ordinary road nearest its centroid, its outline in the road's frame there.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.road.roadmap import MapFeature, RoadMap
+from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
 MAP_SUFFIX = ".xodr"  # an OpenDRIVE file's; the only map a Scenic text names (Scenic unpickles a .snet map)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerate polygon's, clamped
@@ -47,6 +51,27 @@ MAX_PATH_LANES = 64  # junction lanes in one path at most
 # ordinary lane's
 TAIL, MIDDLE, BRIDGE = "\x00tail", "\x00middle", "\x00to\x00"
 LINK_GAP = 0.1  # metres: linked lane ends farther apart are bridged (nearer ones meet at their mean point)
+MARK_DISTANCE = 0.5  # metres: a recorded road line this near a point of a road's edge runs along it there
+MARK_SHARE = 0.5  # a road line near this share of an edge's points (sampled every MARK_STEP) marks the edge
+MARK_STEP = 1.0  # metres
+
+# A recorded road line's type (ScenarioNet's, which the nuScenes and Waymo readers keep) as an OpenDRIVE road
+# mark: (type, colour, laneChange). A passing double yellow is written solid_broken with no lane change (which
+# side may pass is not recorded); a road edge is a curb. An edge no such line runs along has NO_MARK.
+ROAD_MARKS = {
+    "ROAD_LINE_BROKEN_SINGLE_WHITE": ("broken", "white", "both"),
+    "ROAD_LINE_BROKEN_DOUBLE_WHITE": ("broken_broken", "white", "both"),
+    "ROAD_LINE_SOLID_SINGLE_WHITE": ("solid", "white", "none"),
+    "ROAD_LINE_SOLID_DOUBLE_WHITE": ("solid_solid", "white", "none"),
+    "ROAD_LINE_BROKEN_SINGLE_YELLOW": ("broken", "yellow", "both"),
+    "ROAD_LINE_BROKEN_DOUBLE_YELLOW": ("broken_broken", "yellow", "both"),
+    "ROAD_LINE_SOLID_SINGLE_YELLOW": ("solid", "yellow", "none"),
+    "ROAD_LINE_SOLID_DOUBLE_YELLOW": ("solid_solid", "yellow", "none"),
+    "ROAD_LINE_PASSING_DOUBLE_YELLOW": ("solid_broken", "yellow", "none"),
+    "ROAD_EDGE_BOUNDARY": ("curb", "standard", "none"),
+    "ROAD_EDGE_MEDIAN": ("curb", "standard", "none"),
+}
+NO_MARK = ("none", "standard", "both")
 
 
 @dataclass(frozen=True)
@@ -70,6 +95,7 @@ class Road:
     junction: int = -1
     predecessor: Link | None = None
     successor: Link | None = None
+    marks: tuple[tuple[str, str, str], tuple[str, str, str]] = (NO_MARK, NO_MARK)  # left and right edge (ROAD_MARKS)
 
     @property
     def name(self) -> str:
@@ -92,6 +118,18 @@ class Junction:
 
 
 @dataclass(frozen=True)
+class Crosswalk:
+    """A recorded crosswalk as an object of the road nearest its centroid: at (s, t) on the road's reference
+    line, its outline's corners (u, v) in the frame there (u along the reference line, v to its left)."""
+
+    feature_id: str
+    road: int
+    s: float
+    t: float
+    outline: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
 class Network:
     """A linked road network: roads, junctions, the offset subtracted from every coordinate (the recorded frame's
     point that is the network's origin) and what could not be kept (notes for the user)."""
@@ -100,6 +138,7 @@ class Network:
     junctions: tuple[Junction, ...]
     offset: tuple[float, float]
     notes: tuple[str, ...] = ()
+    crosswalks: tuple[Crosswalk, ...] = ()
 
 
 def _clean(line: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -326,8 +365,84 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
     junctions = defaultdict(list)
     for n, (inc, _, _) in enumerate(paths):
         junctions[path_junction[n]].append((rid[inc], n_ord + n + 1))
+    roads = _marked(roads, road, offset)
     return Network(tuple(roads), tuple(Junction(j, tuple(c)) for j, c in sorted(junctions.items())), offset,
-                   tuple(notes))
+                   tuple(notes), _crosswalks(roads, road, offset))
+
+
+def _edges(r: Road) -> tuple[np.ndarray, np.ndarray]:
+    """A road's left and right lane edges: its reference line moved half its width along the normal at each
+    point (the mean of its two segments' normals inside)."""
+    a = np.asarray(r.points, dtype=float)
+    d = np.diff(a, axis=0)
+    d /= np.hypot(d[:, 0], d[:, 1])[:, None]
+    tangent = np.concatenate([d[:1], d[:-1] + d[1:], d[-1:]])
+    tangent /= np.maximum(np.hypot(tangent[:, 0], tangent[:, 1]), 1e-12)[:, None]
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1) * (np.asarray(r.widths) / 2)[:, None]
+    return a + normal, a - normal
+
+
+def _marked(roads: list[Road], road: RoadMap, offset: tuple[float, float]) -> list[Road]:
+    """Each ordinary road with the recorded road lines along its edges as marks: the line of a known type
+    (ROAD_MARKS) within MARK_DISTANCE of the most of the edge's points sampled every MARK_STEP, if that is at
+    least MARK_SHARE of them; connecting roads are left unmarked (junctions rarely paint their lanes)."""
+    import shapely
+
+    lines = [f for f in road.features if f.kind == ROAD_LINE and f.source_type in ROAD_MARKS and len(f.line) >= 2]
+    if not lines:
+        return roads
+    tree = shapely.STRtree([shapely.LineString(np.asarray(f.line) - offset) for f in lines])
+    out = []
+    for r in roads:
+        if r.junction != -1 or len(r.points) < 2:
+            out.append(r)
+            continue
+        marks = []
+        for edge in _edges(r):
+            line = shapely.LineString(edge)
+            n = max(3, int(line.length / MARK_STEP) + 1)
+            samples = shapely.line_interpolate_point(line, np.linspace(0, line.length, n + 2)[1:-1])
+            _, near = tree.query(samples, predicate="dwithin", distance=MARK_DISTANCE)
+            counts = np.bincount(near, minlength=len(lines))
+            best = int(counts.argmax())
+            marks.append(ROAD_MARKS[lines[best].source_type] if counts[best] >= MARK_SHARE * n else NO_MARK)
+        out.append(Road(r.id, r.lanes, r.points, r.widths, r.junction, r.predecessor, r.successor,
+                        (marks[0], marks[1])))
+    return out
+
+
+def _crosswalks(roads: list[Road], road: RoadMap, offset: tuple[float, float]) -> tuple[Crosswalk, ...]:
+    """Each recorded crosswalk (a polygon of 3 points or more) on the ordinary road whose reference line is
+    nearest its centroid (Crosswalk)."""
+    import shapely
+
+    ordinary = [r for r in roads if r.junction == -1 and len(r.points) >= 2]
+    walks = [f for f in road.features if f.kind == CROSSWALK and len(f.polygon) >= 3]
+    if not ordinary or not walks:
+        return ()
+    refs = [shapely.LineString(r.points) for r in ordinary]
+    tree = shapely.STRtree(refs)
+    out = []
+    for f in walks:
+        ring = np.asarray(f.polygon, dtype=float) - offset
+        c = shapely.Polygon(ring).centroid
+        if c.is_empty:
+            continue
+        k = int(tree.nearest(c))
+        r, ref = ordinary[k], refs[k]
+        s = float(ref.project(c))
+        rs = np.asarray(r.s)
+        i = min(max(int(np.searchsorted(rs, s, side="right")) - 1, 0), len(rs) - 2)  # the segment holding s
+        a, b = np.asarray(r.points[i]), np.asarray(r.points[i + 1])
+        tangent = (b - a) / np.hypot(*(b - a))
+        normal = np.array([-tangent[1], tangent[0]])
+        base = a + (s - rs[i]) * tangent
+        t = float(np.dot(np.array([c.x, c.y]) - base, normal))
+        origin = base + t * normal
+        rel = ring - origin
+        outline = tuple((float(u), float(v)) for u, v in zip(rel @ tangent, rel @ normal))
+        out.append(Crosswalk(f.feature_id, r.id, s, t, outline))
+    return tuple(out)
 
 
 def _paths(ordinary: list[str], junction: set[str], succ: dict[str, list[str]]

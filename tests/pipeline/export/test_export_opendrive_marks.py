@@ -1,0 +1,108 @@
+"""`r2s export F.maps --to opendrive`: road marks from the recorded road lines and crosswalks as objects, read back
+from the written file by hand (its planView, lane marks and header offset) and held against the recorded map:
+the shipped Argoverse 2 map's crosswalks, the shipped nuScenes maps' road lines (ScenarioNet's types). ASAM's
+checker reports no issue on either."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+
+from frames.maps import read_maps
+from tests.support import run_r2s
+from tests.support.extract import EXCERPT
+
+from .test_export_openscenario import asam_issues
+
+AV2_MAPS = Path(__file__).resolve().parents[3] / "data" / "argoverse2-log-excerpt" / "frames.maps"
+NUSCENES_MAP = "scene-0796"  # 15 broken white, 6 solid white, 2 solid yellow road lines
+# what each recorded type must read as in the file: (type, colour, laneChange), written out here by hand
+EXPECTED = {"ROAD_LINE_BROKEN_SINGLE_WHITE": ("broken", "white", "both"),
+            "ROAD_LINE_SOLID_SINGLE_WHITE": ("solid", "white", "none"),
+            "ROAD_LINE_SOLID_SINGLE_YELLOW": ("solid", "yellow", "none")}
+
+
+def _export(maps: Path, out: Path, *more: str) -> ET.Element:
+    res = run_r2s("export", str(maps), *more, "--to", "opendrive", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert asam_issues(out) == []
+    return ET.parse(out).getroot()
+
+
+def _pose(road: ET.Element, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point and unit direction of a road's reference line at s, from its line geometries."""
+    geoms = road.findall("planView/geometry")
+    g = max((g for g in geoms if float(g.get("s")) <= s + 1e-9), key=lambda g: float(g.get("s")))
+    h = float(g.get("hdg"))
+    d = np.array([math.cos(h), math.sin(h)])
+    return np.array([float(g.get("x")), float(g.get("y"))]) + (s - float(g.get("s"))) * d, d
+
+
+@pytest.fixture(scope="module")
+def av2(tmp_path_factory) -> ET.Element:
+    return _export(AV2_MAPS, tmp_path_factory.mktemp("marks-av2") / "map.xodr")
+
+
+@pytest.fixture(scope="module")
+def nuscenes(tmp_path_factory) -> tuple[ET.Element, object]:
+    root = tmp_path_factory.mktemp("marks-nu")
+    assert run_r2s("extract", "scenarionet", str(EXCERPT / "scenarionet"), "--out", str(root / "f.parquet")).returncode == 0
+    road = next(m for m in read_maps(root / "f.maps") if m.map_id == NUSCENES_MAP)
+    return _export(root / "f.maps", root / "map.xodr", "--map", NUSCENES_MAP), road
+
+
+def test_every_recorded_crosswalk_is_an_object_with_its_outline_where_it_was_recorded(av2):
+    road = next(iter(read_maps(AV2_MAPS)))
+    recorded = {f.feature_id: f.polygon for f in road.features if f.kind == "crosswalk"}
+    o = av2.find("header/offset")
+    shift, hdg = np.array([float(o.get("x")), float(o.get("y"))]), float(o.get("hdg"))
+    assert hdg == 0.0
+    found = {}
+    for r in av2.findall("road"):
+        for obj in r.findall("objects/object"):
+            assert obj.get("type") == "crosswalk"
+            base, d = _pose(r, float(obj.get("s")))
+            n = np.array([-d[1], d[0]])
+            origin = base + float(obj.get("t")) * n
+            corners = [origin + float(c.get("u")) * d + float(c.get("v")) * n + shift
+                       for c in obj.findall("outlines/outline/cornerLocal")]
+            found[obj.get("name")] = corners
+    assert set(found) == set(recorded) and len(found) == 11
+    ids = [obj.get("id") for obj in av2.iter("object")]
+    assert len(set(ids)) == len(ids)
+    for k, corners in found.items():
+        assert np.abs(np.asarray(corners) - np.asarray(recorded[k])).max() < 1e-6, k
+
+
+def test_road_marks_are_the_recorded_road_lines_along_each_lane_edge(nuscenes):
+    root, road = nuscenes
+    lines = [f for f in road.features if f.kind == "road_line"]
+    lanes = {f.feature_id: f for f in road.lanes}
+    seen = set()
+    for r in root.findall("road"):
+        if r.get("junction") != "-1":
+            continue
+        left = r.find("lanes/laneSection/center/lane/roadMark")
+        right = r.find("lanes/laneSection/right/lane/roadMark")
+        lane = lanes[r.get("name")]
+        centre = shapely.LineString(lane.line)
+        half = np.mean([float(w.get("a")) for w in r.findall("lanes/laneSection/right/lane/width")]) / 2
+        for side, mark in ((1, left), (-1, right)):
+            written = (mark.get("type"), mark.get("color"), mark.get("laneChange"))
+            if written[0] == "none":
+                continue
+            seen.add(written)
+            # brute force: a recorded line of a type written so runs along that side of the recorded lane (its
+            # centre line moved by half the lane's written width)
+            edge = centre.offset_curve(side * half)
+            samples = shapely.line_interpolate_point(edge, np.linspace(0, edge.length, 12)[1:-1])
+            assert any(EXPECTED.get(f.source_type, (None,))[:2] == written[:2]
+                       and EXPECTED[f.source_type] == written
+                       and np.mean(shapely.distance(samples, shapely.LineString(f.line)) < 0.8) >= 0.5
+                       for f in lines), (r.get("name"), side, written)
+    assert {("broken", "white", "both"), ("solid", "white", "none")} <= seen
