@@ -5,7 +5,9 @@ The road: the scene's road (the map features within r2s scene's radius of ego) a
 (pipeline/export/opendrive.py, synth/road/opendrive.py; docs/formats.md "OpenDRIVE").
 
 A scenario (`scenario`): every entity at its world pose less the road's offset (a TeleportAction to a
-WorldPosition: x, y in the road's recentred frame, z = 0, h the yaw in radians), with its recorded speed along
+WorldPosition: x, y in the road's recentred frame, z = 0, h the yaw in radians; an entity in a lane, by its lane
+fact on the scene's road, to a LanePosition on that lane's road instead: s, the offset from the lane's centre,
+lane -1, h the same yaw, absolute), with its recorded speed along
 its heading (an AbsoluteSpeedAction, step dynamics), as a Vehicle (car, truck, bus, trailer, motorbike, bicycle),
 Pedestrian (pedestrian, animal) or MiscObject (barrier, obstacle) with its box; the scenario stops after
 --steps x 0.1 s.
@@ -21,6 +23,8 @@ from pipeline.errors import UserError
 from pipeline.export import slug
 from pipeline.export.opendrive import DATE, VENDOR, linked, opendrive, write_xml, xml_text
 from pipeline.export.scenarionet import HEIGHTS, STEP_S
+from synth.road.lane_facts import RoadIndex
+from synth.road.opendrive import Network, lane_position
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.version import __version__
@@ -40,18 +44,28 @@ CATEGORIES: dict[str, tuple[str, str]] = {
 
 
 def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, steps: int, note: str,
-             offset: tuple[float, float] = (0.0, 0.0)):
+             offset: tuple[float, float] = (0.0, 0.0), net: Network | None = None, road: RoadMap | None = None):
     """The OpenSCENARIO 1.2 scenario (scenariogeneration's Scenario) of one scene on the road in road_file, whose
-    coordinates are the world's less `offset`."""
+    coordinates are the world's less `offset`; with the road's network `net` and the scene's road (ego frame),
+    an entity in a lane (its lane fact on that road) is placed by a LanePosition on the road of that lane."""
     from scenariogeneration import xosc
 
     entities = xosc.Entities()
     init = xosc.Init()
+    lanes = _lanes(scene, road) if net is not None and road is not None else {}
     for e in scene.entities:
         w = in_world(world, e)
         box = xosc.BoundingBox(w.width, w.length, HEIGHTS[e.type], 0, 0, HEIGHTS[e.type] / 2.0)
         entities.add_scenario_object(e.id, _object(e.id, e.type, box))
-        init.add_init_action(e.id, xosc.TeleportAction(xosc.WorldPosition(w.x - offset[0], w.y - offset[1], 0, w.yaw)))
+        x, y = w.x - offset[0], w.y - offset[1]
+        on = lane_position(net, lanes[e.id], x, y) if lanes.get(e.id) is not None else None
+        if on is not None:  # the lane's road, s along it, the offset from the lane's centre; the yaw absolute
+            road_id, s, t = on
+            where = xosc.LanePosition(s, t, -1, road_id, xosc.Orientation(h=w.yaw,
+                                                                       reference=xosc.ReferenceContext.absolute))
+        else:
+            where = xosc.WorldPosition(x, y, 0, w.yaw)
+        init.add_init_action(e.id, xosc.TeleportAction(where))
         if CATEGORIES[e.type][0] != "misc":  # a MiscObject does not move (no speed action applies)
             init.add_init_action(e.id, xosc.AbsoluteSpeedAction(
                 w.speed or 0.0, xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0)))
@@ -61,6 +75,13 @@ def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, steps: i
     return xosc.Scenario(name, f"{VENDOR} {__version__}: {note}", xosc.ParameterDeclarations(), entities, board,
                          xosc.RoadNetwork(roadfile=road_file), xosc.Catalog(), osc_minor_version=2,
                          creation_date=DATE)
+
+
+def _lanes(scene: Scene, road: RoadMap) -> dict[str, str | None]:
+    """Each entity's lane fact on the scene's road (synth.road.lane_facts: its chosen lane, None in none)."""
+    es = scene.entities
+    facts = RoadIndex(road).facts([e.x for e in es], [e.y for e in es], [e.heading + 90.0 for e in es])
+    return {e.id: f.lane for e, f in zip(es, facts)}
 
 
 def _object(eid: str, etype: str, box) -> Any:
@@ -91,13 +112,15 @@ class _Writer:
         world = recorded.world or WorldPose.identity()
         net = linked(road_in_world(world, recorded.road), f"the scene {recorded.frame_id!r}")
         self.offset = net.offset
+        self.net = net
         write_xml(opendrive(net, slug(recorded.frame_id)), folder / self.road_file)
 
     def add(self, item, world: WorldPose, road: RoadMap | None) -> None:
         what = "the recorded frame" if item.variant is None else f"variant {item.variant}"
         note = f"{what} of {self.recorded_frame}" + (f", program {self.options.program_file}"
                                                        if self.options.program_file else "")
-        sc = scenario(item.scene, item.name, world, self.road_file, self.options.steps, xml_text(note), self.offset)
+        sc = scenario(item.scene, item.name, world, self.road_file, self.options.steps, xml_text(note), self.offset,
+                      self.net, road)
         write_xml(sc.get_element(), self.folder / f"{item.name}.xosc")
 
     def close(self) -> None:

@@ -521,3 +521,24 @@ def _pinned(line, ws, start, end):
             out_p.append(tuple(p.tolist()))
             out_w.append(x)
     return out_p, out_w
+
+
+def lane_position(net: Network, lane: str, x: float, y: float) -> tuple[int, float, float] | None:
+    """Where a point of the network's frame is on the road that follows recorded lane `lane` (of those, the one
+    whose reference line is nearest it): (road id, s, t), s its projection's distance along the reference line
+    and t its signed distance to the left there (lane -1's centre is the reference line, so t is the offset from
+    the lane's centre); None where no road follows that lane."""
+    import shapely
+
+    p = shapely.Point(x, y)
+    roads = [r for r in net.roads if lane in r.lanes and len(r.points) >= 2]
+    if not roads:
+        return None
+    r = min(roads, key=lambda r: shapely.LineString(r.points).distance(p))
+    s = float(shapely.LineString(r.points).project(p))
+    rs = np.asarray(r.s)
+    i = min(max(int(np.searchsorted(rs, s, side="right")) - 1, 0), len(rs) - 2)  # the segment holding s
+    a, b = np.asarray(r.points[i]), np.asarray(r.points[i + 1])
+    tangent = (b - a) / np.hypot(*(b - a))
+    t = float(np.cross(tangent, np.array([x, y]) - (a + (s - rs[i]) * tangent)))
+    return r.id, s, t

@@ -63,3 +63,13 @@ def kept_links(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tuple[st
         for s in f.successors:
             (kept if (f.feature_id, s) in follows else lost).append((f.feature_id, s))
     return kept, lost
+
+
+def reference_pose(road, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point and unit direction at s of the reference line of a road element of an .xodr (its line
+    geometries), read from the XML alone."""
+    geoms = road.findall("planView/geometry")
+    g = max((g for g in geoms if float(g.get("s")) <= s + 1e-9), key=lambda g: float(g.get("s")))
+    h = float(g.get("hdg"))
+    d = np.array([math.cos(h), math.sin(h)])
+    return np.array([float(g.get("x")), float(g.get("y"))]) + (s - float(g.get("s"))) * d, d

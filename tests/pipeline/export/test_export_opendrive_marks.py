@@ -5,7 +5,6 @@ checker reports no issue on either."""
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import shapely
 from frames.maps import read_maps
 from tests.support import run_r2s
 from tests.support.extract import EXCERPT
+from tests.support.opendrive import reference_pose
 
 from .test_export_openscenario import asam_issues
 
@@ -32,15 +32,6 @@ def _export(maps: Path, out: Path, *more: str) -> ET.Element:
     assert res.returncode == 0, res.stderr
     assert asam_issues(out) == []
     return ET.parse(out).getroot()
-
-
-def _pose(road: ET.Element, s: float) -> tuple[np.ndarray, np.ndarray]:
-    """The point and unit direction of a road's reference line at s, from its line geometries."""
-    geoms = road.findall("planView/geometry")
-    g = max((g for g in geoms if float(g.get("s")) <= s + 1e-9), key=lambda g: float(g.get("s")))
-    h = float(g.get("hdg"))
-    d = np.array([math.cos(h), math.sin(h)])
-    return np.array([float(g.get("x")), float(g.get("y"))]) + (s - float(g.get("s"))) * d, d
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +57,7 @@ def test_every_recorded_crosswalk_is_an_object_with_its_outline_where_it_was_rec
     for r in av2.findall("road"):
         for obj in r.findall("objects/object"):
             assert obj.get("type") == "crosswalk"
-            base, d = _pose(r, float(obj.get("s")))
+            base, d = reference_pose(r, float(obj.get("s")))
             n = np.array([-d[1], d[0]])
             origin = base + float(obj.get("t")) * n
             corners = [origin + float(c.get("u")) * d + float(c.get("v")) * n + shift
