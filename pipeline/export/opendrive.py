@@ -17,7 +17,7 @@ from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
 from pipeline.outputs import writing
 from storage.atomic import atomic_path
-from synth.road.opendrive import MAP_SUFFIX, Crosswalk, Network, Road, network
+from synth.road.opendrive import MAP_SUFFIX, Crosswalk, Network, Road, network, straight_runs
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose, road_in_world
@@ -25,7 +25,6 @@ from synth.world import WorldPose, road_in_world
 FRAME_TOLERANCE = 1e-9  # metres, radians: a file's header offset this near a scene's ego pose is its frame
 DATE = datetime.datetime(2000, 1, 1)  # every file says it was made then: the same inputs give the same bytes
 VENDOR = "r2sgen"  # the header's vendor: how an earlier export's file is told from a user's
-HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
 SAME = 2.5e-6  # metres (and m/m): width pieces this close are one (ASAM: 1e-6; halved for the offsets, still one)
 # Line geometries in one .xodr at most: each is ~190 bytes of XML and ~1.6 KB while scenariogeneration builds it
 # (10^6 took 1.6 GB and 54 s for a 186 MB file); real roads within 50 m of ego have up to ~1,100 (nuScenes-mini).
@@ -38,21 +37,6 @@ def xml_text(text: str) -> str:
     undecodable in UTF-8 gives them, U+FFFE, U+FFFF) as its Python escape (\\x01, \\udcff): a file name or a path
     in a note must not make the file one no XML parser reads."""
     return NOT_XML.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
-
-
-def straight_runs(points) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """A reference line's segments, runs of them in one direction (within HEADING_TOLERANCE) as one line (ASAM's
-    check flags two line geometries in a row with the same heading as redundant)."""
-    runs: list[tuple[tuple[float, float], tuple[float, float]]] = []
-    start, heading = None, None
-    for a, b in zip(points, points[1:]):
-        h = math.atan2(b[1] - a[1], b[0] - a[0])
-        if start is not None and abs(math.remainder(h - heading, math.tau)) < HEADING_TOLERANCE:
-            runs[-1] = (start, b)
-            continue
-        start, heading = a, h
-        runs.append((a, b))
-    return runs
 
 
 def _same_line(p: tuple[float, float, float], q: tuple[float, float, float]) -> bool:

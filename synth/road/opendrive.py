@@ -50,6 +50,7 @@ MAX_PATH_LANES = 64  # junction lanes in one path at most
 # the keys of a split lane's second half (no feature id holds a control character): a junction lane's, an
 # ordinary lane's
 TAIL, MIDDLE, BRIDGE = "\x00tail", "\x00middle", "\x00to\x00"
+HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
 LINK_GAP = 0.1  # metres: linked lane ends farther apart are bridged (nearer ones meet at their mean point)
 MARK_DISTANCE = 0.5  # metres: a recorded road line this near a point of a road's edge runs along it there
 MARK_SHARE = 0.5  # a road line near this share of an edge's points (sampled every MARK_STEP) marks the edge
@@ -428,18 +429,10 @@ def _crosswalks(roads: list[Road], road: RoadMap, offset: tuple[float, float]) -
         c = shapely.Polygon(ring).centroid
         if c.is_empty:
             continue
-        k = int(tree.nearest(c))
-        r, ref = ordinary[k], refs[k]
-        s = float(ref.project(c))
-        rs = np.asarray(r.s)
-        i = min(max(int(np.searchsorted(rs, s, side="right")) - 1, 0), len(rs) - 2)  # the segment holding s
-        a, b = np.asarray(r.points[i]), np.asarray(r.points[i + 1])
-        tangent = (b - a) / np.hypot(*(b - a))
+        r = ordinary[int(tree.nearest(c))]
+        s, t, base, tangent = _station(r, c.x, c.y, exact=False)  # type: ignore[misc]
         normal = np.array([-tangent[1], tangent[0]])
-        base = a + (s - rs[i]) * tangent
-        t = float(np.dot(np.array([c.x, c.y]) - base, normal))
-        origin = base + t * normal
-        rel = ring - origin
+        rel = ring - (base + t * normal)
         outline = tuple((float(u), float(v)) for u, v in zip(rel @ tangent, rel @ normal))
         out.append(Crosswalk(f.feature_id, r.id, s, t, outline))
     return tuple(out)
@@ -524,21 +517,55 @@ def _pinned(line, ws, start, end):
 
 
 def lane_position(net: Network, lane: str, x: float, y: float) -> tuple[int, float, float] | None:
-    """Where a point of the network's frame is on the road that follows recorded lane `lane` (of those, the one
-    whose reference line is nearest it): (road id, s, t), s its projection's distance along the reference line
-    and t its signed distance to the left there (lane -1's centre is the reference line, so t is the offset from
-    the lane's centre); None where no road follows that lane."""
-    import shapely
+    """Where a point of the network's frame is on a road that follows recorded lane `lane`: (road id, s, t), s
+    along the reference line as written and t the signed distance to its left (lane -1's centre is the reference
+    line, so t is the offset from the lane's centre), on the road whose written line has a perpendicular foot of
+    the point nearest it, so that (s, t) gives the point back exactly; None where no road follows the lane or
+    none has such a foot (a point beyond a bend's outer corner)."""
+    best = None
+    for r in net.roads:
+        if lane in r.lanes and len(r.points) >= 2:
+            at = _station(r, x, y, exact=True)
+            if at is not None and (best is None or abs(at[1]) < abs(best[2])):
+                best = (r.id, at[0], at[1])
+    return best
 
-    p = shapely.Point(x, y)
-    roads = [r for r in net.roads if lane in r.lanes and len(r.points) >= 2]
-    if not roads:
+
+def straight_runs(points) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """A reference line's segments, runs of them in one direction (within HEADING_TOLERANCE) as one line (ASAM's
+    check flags two line geometries in a row with the same heading as redundant): the line geometries written."""
+    runs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    start, heading = None, None
+    for a, b in zip(points, points[1:]):
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
+        if start is not None and abs(math.remainder(h - heading, math.tau)) < HEADING_TOLERANCE:
+            runs[-1] = (start, b)
+            continue
+        start, heading = a, h
+        runs.append((a, b))
+    return runs
+
+
+def _station(r: Road, x: float, y: float, exact: bool) -> tuple[float, float, np.ndarray, np.ndarray] | None:
+    """A point's (s, t) on a road's reference line as written (its straight runs, s summed over their lengths),
+    with the reference point and unit direction there: on the run with the point's perpendicular foot nearest
+    it; where no run has one (a point beyond a bend's outer corner or an end), None if `exact`, else its
+    nearest point's run."""
+    runs = straight_runs(r.points)
+    a = np.array([p for p, _ in runs], dtype=float)
+    b = np.array([q for _, q in runs], dtype=float)
+    length = np.hypot(*(b - a).T)
+    tangent = (b - a) / length[:, None]
+    rel = np.array([x, y]) - a
+    u = (rel * tangent).sum(axis=1)
+    t = tangent[:, 0] * rel[:, 1] - tangent[:, 1] * rel[:, 0]
+    inside = (u >= 0) & (u <= length)
+    if inside.any():
+        i = int(np.where(inside, np.abs(t), np.inf).argmin())
+    elif exact:
         return None
-    r = min(roads, key=lambda r: shapely.LineString(r.points).distance(p))
-    s = float(shapely.LineString(r.points).project(p))
-    rs = np.asarray(r.s)
-    i = min(max(int(np.searchsorted(rs, s, side="right")) - 1, 0), len(rs) - 2)  # the segment holding s
-    a, b = np.asarray(r.points[i]), np.asarray(r.points[i + 1])
-    tangent = (b - a) / np.hypot(*(b - a))
-    t = float(np.cross(tangent, np.array([x, y]) - (a + (s - rs[i]) * tangent)))
-    return r.id, s, t
+    else:
+        u = np.clip(u, 0, length)
+        i = int(np.hypot(*(rel - u[:, None] * tangent).T).argmin())
+    start = float(np.concatenate([[0.0], np.cumsum(length)])[i])
+    return start + float(u[i]), float(t[i]), a[i] + u[i] * tangent[i], tangent[i]

@@ -48,8 +48,8 @@ def test_an_entity_in_a_lane_is_at_a_lane_position_of_its_recorded_lane(frames, 
     in_lane = 0
     for e, fact in zip(es, facts):
         where = placed[e.id]
-        if fact.lane is None:
-            assert where.tag == "WorldPosition", e.id
+        if fact.lane is None or where.tag == "WorldPosition":  # the latter: beyond a bend's outer corner
+            assert fact.lane is not None or where.tag == "WorldPosition", e.id
             continue
         in_lane += 1
         assert where.tag == "LanePosition" and where.get("laneId") == "-1", e.id
@@ -58,6 +58,6 @@ def test_an_entity_in_a_lane_is_at_a_lane_position_of_its_recorded_lane(frames, 
         base, d = reference_pose(road, float(where.get("s")))
         at = base + float(where.get("offset")) * np.array([-d[1], d[0]]) + shift
         w = in_world(scene.world, e)
-        assert np.hypot(*(at - (w.x, w.y))) < 0.01, (e.id, at, (w.x, w.y))
+        assert np.hypot(*(at - (w.x, w.y))) < 1e-6, (e.id, at, (w.x, w.y))
         assert math.isclose(float(where.find("Orientation").get("h")), w.yaw, abs_tol=1e-9)
     assert in_lane >= 3

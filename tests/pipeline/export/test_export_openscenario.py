@@ -20,6 +20,7 @@ from extractors.base import global_to_ego
 from synth.scene import scene_from_json
 from synth.world import road_in_world
 from tests.support import assert_one_line_error, run_r2s
+from tests.support.opendrive import reference_pose
 
 from .conftest import FRAMES
 
@@ -87,7 +88,10 @@ def road_offset(xodr: Path) -> tuple[float, float]:
 
 
 def _read_back(xosc: Path) -> dict[str, dict]:
+    """Each entity's category, box, speed and place (x, y in the road's frame, yaw), a LanePosition's through
+    the road's reference line in the .xodr beside it."""
     root = ET.parse(xosc).getroot()
+    roads = {r.get("id"): r for r in ET.parse(next(xosc.parent.glob("*.xodr"))).getroot().findall("road")}
     out: dict[str, dict] = {}
     for obj in root.iter("ScenarioObject"):
         kind = obj[0]
@@ -98,7 +102,13 @@ def _read_back(xosc: Path) -> dict[str, dict]:
     for private in root.iter("Private"):
         e = out[private.get("entityRef")]
         pos = private.find(".//TeleportAction/Position/WorldPosition")
-        e.update(x=float(pos.get("x")), y=float(pos.get("y")), h=float(pos.get("h")))
+        if pos is not None:
+            e.update(x=float(pos.get("x")), y=float(pos.get("y")), h=float(pos.get("h")))
+        else:
+            pos = private.find(".//TeleportAction/Position/LanePosition")
+            base, d = reference_pose(roads[pos.get("roadId")], float(pos.get("s")))
+            x, y = base + float(pos.get("offset")) * np.array([-d[1], d[0]])
+            e.update(x=x, y=y, h=float(pos.find("Orientation").get("h")), lane=True)
         speed = private.find(".//AbsoluteTargetSpeed")
         e["speed"] = float(speed.get("value")) if speed is not None else None
     return out
@@ -124,6 +134,7 @@ def test_positions_read_back_from_the_xosc_give_back_every_scene(fid, recorded, 
             assert (b["length"], b["width"]) == pytest.approx(e.dimensions(), rel=1e-12)
             if b["category"] not in ("barrier", "obstacle"):
                 assert b["speed"] == pytest.approx(e.speed or 0.0, abs=1e-12)
+        assert any(b.get("lane") for b in back.values())  # some at a LanePosition, read back as exactly
 
 
 def test_the_road_runs_through_the_recorded_centre_lines(recorded, tmp_path):
