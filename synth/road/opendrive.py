@@ -543,7 +543,24 @@ def straight_runs(points) -> list[tuple[tuple[float, float], tuple[float, float]
             continue
         start, heading = a, h
         runs.append((a, b))
+    # ASAM compares the headings as written, each run's chord's, which drift from its first segment's: runs
+    # whose chords are within the tolerance are one, until none are (a Waymo map had one such pair)
+    merged = True
+    while merged:
+        merged, out = False, []
+        for run in runs:
+            if out and abs(math.remainder(_chord(out[-1]) - _chord(run), math.tau)) < HEADING_TOLERANCE:
+                out[-1] = (out[-1][0], run[1])
+                merged = True
+            else:
+                out.append(run)
+        runs = out
     return runs
+
+
+def _chord(run: tuple[tuple[float, float], tuple[float, float]]) -> float:
+    (x0, y0), (x1, y1) = run
+    return math.atan2(y1 - y0, x1 - x0)
 
 
 def _station(r: Road, x: float, y: float, exact: bool) -> tuple[float, float, np.ndarray, np.ndarray] | None:

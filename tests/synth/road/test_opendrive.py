@@ -80,3 +80,25 @@ def test_every_recorded_link_is_kept_and_linked_roads_meet(road):
     for f in road.lanes:
         for s in f.successors:
             assert (f.feature_id, s) in follows
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-3e-6, 3e-6), min_size=1, max_size=30), st.lists(st.floats(0.5, 30.0), min_size=31,
+                                                                         max_size=31))
+def test_straight_runs_leave_no_two_written_lines_in_one_heading(turns, lengths):
+    """A line turning by up to a few micro-radians a segment (nearly straight: where runs merge): the runs
+    written have no two in a row whose chords' headings ASAM's redundancy check (1e-6, unwrapped, as it
+    compares them) would call one, they join end to end, and every point lies on them within length x 1e-6."""
+    from synth.road.opendrive import straight_runs
+
+    pts, h = [(0.0, 0.0)], 0.3
+    for turn, length in zip(turns + [0.0], lengths):
+        h += turn
+        pts.append((pts[-1][0] + length * math.cos(h), pts[-1][1] + length * math.sin(h)))
+    runs = straight_runs(pts)
+    assert runs[0][0] == pts[0] and runs[-1][1] == pts[-1]
+    assert all(a[1] == b[0] for a, b in zip(runs, runs[1:]))
+    chords = [math.atan2(q[1] - p[1], q[0] - p[0]) for p, q in runs]
+    assert all(abs(a - b) >= 1e-6 for a, b in zip(chords, chords[1:]))
+    line = shapely.LineString([runs[0][0]] + [q for _, q in runs])
+    assert max(line.distance(shapely.Point(p)) for p in pts) <= 1e-6 * sum(lengths) + 1e-9
