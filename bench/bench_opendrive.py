@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import tempfile
 import time
@@ -142,8 +143,18 @@ def main() -> None:
             rows += [measure(work / "waymo.maps", m.map_id, work) for m in read_maps(work / "waymo.maps")]
         for r in rows:
             print(r)
+    load = os.getloadavg()
+    m = {**machine(), "load": [round(v, 1) for v in load]}
+    payload = {"machine": m, "rows": rows}
+    write_results("opendrive", payload, markdown(payload))
+
+
+def markdown(payload: dict) -> str:
+    """The results table, and the cars that did not drive on (their lane, how far they went, where they ended)."""
+    m, rows = payload["machine"], payload["rows"]
     lines = ["# OpenDRIVE from recorded maps (issue 37)", "",
-             f"`bench/bench_opendrive.py`; {machine()['cpu']}, {machine()['note']}.", "",
+             f"`bench/bench_opendrive.py`; {m['cpu']}, commit {m['commit']}, {m['date']}, load average "
+             f"{', '.join(map(str, m.get('load', [])))} at the end; {m['note']}.", "",
              "| map | features | points | export CPU s | wall s | peak MB | .xodr MB | ASAM issues | Scenic load s "
              "| intersections | max lane gap m | links kept | drove on |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -152,7 +163,9 @@ def main() -> None:
                      f"| {r['peak_rss_mb']:.0f} | {r['xodr_mb']:.1f} | {r['asam_issues']} | {r['scenic_load_s']:.0f} "
                      f"| {r['intersections']} | {r['max_gap_m']:.3f} | {r['links_kept']} / {r['links']} "
                      f"| {r['drove']} / {r['cars']} ({100 * r['drove'] / max(1, r['cars']):.0f}%) |")
-    write_results("opendrive", {"machine": machine(), "rows": rows}, "\n".join(lines) + "\n")
+    lines += ["", "Cars that did not drive on (start lane: distance moved in 6 s, the Scenic lane it ended on):", ""]
+    lines += [f"- {r['map'][:16]}: " + "; ".join(r["failed"]) for r in rows if r["failed"]]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
