@@ -382,6 +382,31 @@ def gc_paused() -> Iterator[None]:
             gc.enable()
 
 
+class LongLived:
+    """A scope whose long-lived objects are left out of cyclic garbage collection (gc.freeze) until it ends
+    (gc.unfreeze): `keep()` freezes every object alive at that moment. For one scenario or log: what was read of
+    it, its map, the map's index (~10^5 tuples, dicts and features, without a cycle among them), alive for all its
+    frames. Otherwise each young one is swept by the next collection of generation 0, again of generation 1 and
+    then of generation 2 while the frames are built, freeing nothing: on the 12 shared Waymo scenarios with their
+    maps, about 0.2 of 1.7 CPU s. Reference counting still frees them as usual, and whatever cycle they hold is
+    collected after the scope ends, as any old one. A scope entered while objects are frozen already (a caller's
+    own gc.freeze) does nothing, so that it never thaws what it did not freeze."""
+
+    def __enter__(self) -> LongLived:
+        self._mine = not gc.get_freeze_count()
+        return self
+
+    def keep(self) -> None:
+        """Freeze what is alive now; call it where collection is paused (gc_paused) or nothing was built since the
+        last collection, lest a sweep come first."""
+        if self._mine:
+            gc.freeze()
+
+    def __exit__(self, *exc: object) -> None:
+        if self._mine:
+            gc.unfreeze()
+
+
 def utf8_writable(text: str) -> bool:
     """Whether UTF-8 (Parquet's strings, a terminal) can write a string: a pickle or a JSON file may hold lone
     surrogates."""

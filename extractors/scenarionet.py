@@ -28,6 +28,7 @@ from extractors.base import (
     ExtractOptions,
     ExtractTally,
     FrameBuilder,
+    LongLived,
     Look,
     MapSink,
     RecordedObject,
@@ -173,17 +174,19 @@ def extract(input_path: str, options: ExtractOptions, tally: ExtractTally | None
                        f"r2s extract: skipping {f}: scenario {scene!r} was already read from {files[first[scene]]}")
             continue
         first[scene] = i
-        if maps is not None:
-            with gc_paused():
-                road = scenario_road(f, sd, scene, options.strict_maps, tally)
-        else:
-            road = None
-        if road is not None:
-            maps(road.road)
         n = 0
-        for rows in scenario_frames(f, sd, options, tally, road):
-            n += 1
-            yield rows
+        with LongLived() as scope:  # the scenario and its map live as long as its frames: no sweep need visit them
+            scope.keep()
+            road = None
+            if maps is not None:
+                with gc_paused():
+                    road = scenario_road(f, sd, scene, options.strict_maps, tally)
+                    scope.keep()
+            if road is not None:
+                maps(road.road)
+            for rows in scenario_frames(f, sd, options, tally, road):
+                n += 1
+                yield rows
         if n == 0:
             tally.skip("no step with a valid ego")
 
