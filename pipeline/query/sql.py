@@ -20,9 +20,12 @@ All these rounding bounds hold for coordinates up to WILD_XY metres and headings
 beyond them is *wild*: every clause it takes part in is a candidate and never sure, so Python decides it.
 
 Speed: every angle is a dot product with the per-row sin / cos of the heading (columns s and c of the rows view),
-so the pairwise conditions are a few multiplications. Join order and memory are DuckDB's: clauses that refer only to
-ego or to nothing filter each name's rows before any join (ego joined in per frame), clauses between names filter
-the join on the frame, and DuckDB spills to its temporary directory under its memory limit.
+so the pairwise conditions are a few multiplications. Clauses that refer only to ego or to nothing filter each
+name's rows before any join (ego joined in per frame). A name related to an earlier one is joined to one of them,
+its anchor, through an equality key that every candidate pair shares (a grid cell of the reach of a distance, or a
+lane of a lane relation: see "Pruning the joins" below), so the join meets the pairs near each other and not every
+pair of the frame; the other clauses between names filter the join. Join order and memory are DuckDB's, and it
+spills to its temporary directory under its memory limit.
 """
 
 from __future__ import annotations
@@ -237,6 +240,99 @@ def clause_condition(clause, e: str, r: str | None, config: SynthConfig) -> Cond
     return Condition(f"({cond.candidate}) OR {wild}", f"({cond.sure}) AND NOT ({wild})")
 
 
+# ------------------------------------------------------------------------------------------- pruning the joins
+# A name related to earlier names is paired with one of them, its *anchor*, in a relation of its own (pairs_cte,
+# materialized): the pairs of rows of a frame for which the statement's clauses on the anchor are candidates. The
+# bindings then join each name's pairs on the anchor's row (r2s_ref = its ord), so each join meets the candidate
+# pairs and not every pair of the frame again: before this (issue 39), DuckDB joined the third car of
+# queue-of-three on the frame and evaluated the whole exact decision (CASE and re-check) on every pair of rows of
+# the frame with every pair of the first two, ~20 of its 26 s at 10^5 frames.
+#
+# Within the pairs relation, a cheap necessary condition comes first: when a clause bounds the centre distance
+# (ahead of r by Range(a, b), on X @ Y relative to r, within Range(a, b) of r), |dx| and |dy| are at most
+# box(reach). Proof: reach() is the candidate condition's own upper bound of the computed distance (the
+# distance's b, or the hypotenuse of the local coordinates' largest magnitudes, each widened by LENGTH_EPS and
+# SLACK as _within widens them). For two entities that are not wild (|x|, |y| <= WILD_XY, finite), the computed
+# differences, squares, sum and sqrt each round by half an ulp, so the true distance is at most the computed one
+# times (1 + 1e-15) plus 1e-150 (an underflowed square); the local coordinates are a rotation by the rounded cos
+# and sin, of norm within 1e-15 of 1, computed within 1e-8 m at these magnitudes. So the true |dx|, |dy| are below
+# reach (1 + 1e-12) + 1e-8, and their computed values (one rounding) below box(reach) = reach (1 + BOX_MARGIN) +
+# BOX_FLOOR. A wild entity is a candidate of every clause (clause_condition), so the box is `... OR wild`. The
+# box costs two subtractions a pair where the candidate condition costs square roots and angles: DuckDB evaluates
+# it first and the rest on the ~1 in 6 pairs of cars within it (measured on the Argoverse 2 log). A grid key
+# instead (the 3 x 3 cells of side box(reach) around the anchor, a hash join on frame and cell) met a quarter of
+# the frame's pairs but cost more than the frame's join with the box (3.6 vs 1.9 s at 10^5 frames: nine copies
+# of every anchor row), so the join stays on the frame.
+# The anchor is the earlier name of the clause of least reach, else the first earlier name the statement relates
+# to; a lane relation (exact SQL, pipeline.query.lanes) filters its pairs as any other clause on the anchor does.
+BOX_MARGIN = 1e-6
+BOX_FLOOR = 1e-3  # metres
+
+
+def _widened_hi(hi: float) -> float:
+    """The upper bound _within puts in a candidate condition for a length Range's hi."""
+    bound = hi + LENGTH_EPS
+    return bound + _slack_len(bound)
+
+
+def _widened_abs(lo: float, hi: float) -> float:
+    """The largest magnitude a candidate condition of _within(lo - LENGTH_EPS, hi + LENGTH_EPS) lets through."""
+    low = lo - LENGTH_EPS
+    return max(abs(low - _slack_len(low)), abs(_widened_hi(hi)))
+
+
+def reach(clause) -> float | None:
+    """An upper bound of the computed centre distance of a candidate pair (entity, reference) of the clause, both
+    not wild, or None (no bound, or one beyond the distance of any two entities that are not wild)."""
+    if isinstance(clause, (DirectionPos, WithinDistance)):
+        bound = _widened_hi(clause.distance.hi)
+    elif isinstance(clause, LocalXYPos):
+        bound = math.hypot(_widened_abs(clause.lateral.lo, clause.lateral.hi),
+                           _widened_abs(clause.forward.lo, clause.forward.hi))
+    else:
+        return None
+    return bound if bound <= 4 * WILD_XY else None  # (inf and NaN are not)
+
+
+def box(bound: float) -> float:
+    """The half side of the box around the anchor that holds every candidate of a clause of reach `bound`."""
+    return bound * (1.0 + BOX_MARGIN) + BOX_FLOOR
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """The earlier name `ref` a statement is paired with; `reach`: the least reach of its clauses on it, if any."""
+
+    ref: str
+    reach: float | None = None
+
+
+def anchor(st: Statement) -> Anchor | None:
+    """The statement's anchor (see above), or None when it relates to no earlier name."""
+    binary = [c for c in clauses(st) if c.ref not in (None, EGO_ID)]
+    if not binary:
+        return None
+    reaches = [(r, k, c.ref) for k, c in enumerate(binary) if (r := reach(c)) is not None]
+    if not reaches:
+        return Anchor(binary[0].ref)
+    bound, _, ref = min(reaches)
+    return Anchor(ref, bound)
+
+
+def pairs_cte(name: str, rows: str, ref_rows: str, st: Statement, ref_type: str, anc: Anchor,
+              config: SynthConfig) -> str:
+    """The CTE `name`: the rows of `rows` (a name's, with its columns) that are candidates for the statement's
+    clauses on its anchor, each with r2s_ref, the ord of the anchor's row in `ref_rows` it pairs with (a row once
+    per such anchor row). Materialized: inlined, DuckDB would merge it into the bindings' joins and reorder them."""
+    on = [_same_frame("e", "r")]
+    if anc.reach is not None:
+        half = lit(box(anc.reach))
+        on.append(f"((abs(e.x - r.x) <= {half} AND abs(e.y - r.y) <= {half}) OR e.wild OR r.wild)")
+    on += ["e.ord <> r.ord"] if _overlap(st.type, ref_type) else []
+    on.append(f"({Condition.all([clause_condition(c, 'e', 'r', config) for c in clauses(st) if c.ref == anc.ref]).candidate})")
+    return f"{name} AS MATERIALIZED (SELECT e.*, r.ord AS r2s_ref FROM {ref_rows} r JOIN {rows} e ON {' AND '.join(on)})"
+
+
 # ----------------------------------------------------------------------------------------- the whole query
 
 def _alias(k: int) -> str:
@@ -326,14 +422,21 @@ def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
         sure_parts.append(f"{a}.sure")
         if k == 0:
             continue
-        on = [_same_frame(a, first)]
+        anc = anchor(st)
+        source = a
+        if anc is None:
+            on = [_same_frame(a, first)]
+        else:  # its rows paired with its anchor's (its frame is the anchor's: an ord is one row of the input)
+            source = f"{a}_pairs {a}"
+            ctes.append(pairs_cte(f"{a}_pairs", a, alias[anc.ref], st, _type_of(pattern, anc.ref), anc, config))
+            on = [f"{a}.r2s_ref = {alias[anc.ref]}.ord"]
         # Injective: a different input row from every earlier name whose types can coincide.
         on += [f"{a}.ord <> {alias[other.id]}.ord" for other in pattern.statements[:k] if _overlap(st.type, other.type)]
         bcond = Condition.all(_binary(st, alias, config))
         on.append(f"({bcond.candidate})")
         sure_parts.append(f"({bcond.sure})")
         candidate_parts.append(f"({bcond.candidate})")
-        joins.append(f"JOIN {a} ON {' AND '.join(on)}")
+        joins.append(f"JOIN {source} ON {' AND '.join(on)}")
     if pattern.ego is not None:
         # The ego line: conditions on g, the frame's ego row, in the final filter (the ego CTE keeps every frame:
         # frame_pos numbers a scene's frames for events).
@@ -364,31 +467,34 @@ def _binary(st: Statement, alias: dict[str, str], config: SynthConfig) -> list[C
 
 def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: str = "p") -> list[str]:
     """CTEs ending in `label`: one row per frame (fk, frame_id, scene, rows: its non-ego rows, p) where p bounds
-    from above the candidate bindings the pattern's join can meet in the frame: the product over the names of how
-    many rows each may bind (its type and its clauses on ego), and with `fanout` a tighter product in which a name
-    constrained by an earlier name counts at most the rows that may stand in that relation to one row of the earlier
-    name (a pairwise join, the query's own first step). A binding picks each name among those rows, so the product
-    is an upper bound. Names and helper CTEs are prefixed by `label`, so several patterns' estimates share a query."""
+    from above what the pattern's join (bindings_query) builds in the frame: its candidate bindings, at most the
+    product over the names of how many rows each may bind (its type and its clauses on ego), plus the rows of each
+    name's pairs with its anchor (pairs_cte), at most the product of the two names' rows. With `fanout`, tighter:
+    in the product a name constrained by an earlier name counts at most the rows that may stand in that relation
+    to one row of the earlier name (its anchor where it has one: the pairs the query joins, counted), and the
+    pairs are counted. A binding picks each name among those rows, so the product is an upper bound. Names and
+    helper CTEs are prefixed by `label`, so several patterns' estimates share a query."""
     names = pattern.names
     alias = {name: f"{label}_{_alias(k)}" for k, name in enumerate(names)} | {EGO_ID: "g"}
     ctes = _name_ctes(pattern, config, alias)
-    factors = []
+    factors, pairs = [], []
     for k, st in enumerate(pattern.statements):
         a = alias[st.id]
-        binary = [c for c in clauses(st) if c.ref not in (None, EGO_ID)] if fanout and k else []
         n_k = f"{label}_n{k}"
-        if binary:
-            ref = alias[binary[0].ref]  # one earlier name's relation bounds how many rows pair with each of its rows
-            cond = Condition.all([clause_condition(c, a, ref, config) for c in binary if alias[c.ref] == ref])
-            ctes.append(f"{n_k} AS (SELECT fk, frame_id, max(n) AS n FROM (SELECT {ref}.fk, {ref}.frame_id, "
-                        f"count(*) AS n FROM {ref} JOIN {a} ON {_same_frame(a, ref)} AND ({cond.candidate}) "
-                        f"GROUP BY {ref}.fk, {ref}.frame_id, {ref}.ord) GROUP BY fk, frame_id)")
+        anc = anchor(st) if k else None
+        if anc is not None:
+            count = f"{label}_n{names.index(anc.ref)}.n"
+            pairs.append(f"coalesce({n_k}.pairs, 0)::DOUBLE" if fanout else f"coalesce({count} * {n_k}.n, 0)::DOUBLE")
+        if fanout and anc is not None:
+            ctes.append(pairs_cte(f"{a}_pairs", a, alias[anc.ref], st, _type_of(pattern, anc.ref), anc, config))
+            ctes.append(f"{n_k} AS (SELECT fk, frame_id, max(n) AS n, sum(n) AS pairs FROM (SELECT fk, frame_id, "
+                        f"count(*) AS n FROM {a}_pairs GROUP BY fk, frame_id, r2s_ref) GROUP BY fk, frame_id)")
         else:
             ctes.append(f"{n_k} AS (SELECT fk, frame_id, count(*) AS n FROM {a} GROUP BY fk, frame_id)")
         factors.append(f"coalesce({n_k}.n, 0)::DOUBLE")
     joins = " ".join(f"LEFT JOIN {label}_n{k} ON {_same_frame(f'{label}_n{k}', 'g')}" for k in range(len(names)))
-    ctes.append(f"{label} AS (SELECT g.fk, g.frame_id, g.scene, g.rows, {' * '.join(factors)} AS p "
-                f"FROM r2s_frames g {joins})")
+    ctes.append(f"{label} AS (SELECT g.fk, g.frame_id, g.scene, g.rows, {' + '.join([' * '.join(factors), *pairs])} "
+                f"AS p FROM r2s_frames g {joins})")
     return ctes
 
 
@@ -416,6 +522,10 @@ def estimate_select(products: str, extra: str, per_frame: bool) -> str:
 def _same_frame(a: str, b: str) -> str:
     # fk = hash(frame_id): joining on an integer is faster than on the id; the id comparison settles collisions.
     return f"{a}.fk = {b}.fk AND {a}.frame_id = {b}.frame_id"
+
+
+def _type_of(pattern: Pattern, name: str) -> str:
+    return next(st.type for st in pattern.statements if st.id == name)
 
 
 def _overlap(t1: str, t2: str) -> bool:
