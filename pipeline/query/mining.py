@@ -249,17 +249,18 @@ def estimate_bound(pattern: Pattern | TemporalPattern, largest_frame: int, rows:
     n names meets at most R^n candidates in a frame and N R^(n - 1) over all (N: the rows); a temporal pattern's
     candidate bindings in a scene are at most the bindings there of a step that names every variable (None when no
     step does). Within the bounds, the estimate is too, and need not run: it costs a join of the frames (the steps'
-    own, again), and a pattern of one name a step is never refused."""
+    own, again), and a pattern of one name a step is never refused. The estimate adds each name's pairs with its
+    anchor (sql.pairs_cte): at most R^2 in a frame, N R over all, for each of the n - 1 names after the first."""
     r = max(largest_frame - 1, 0)
     steps = [s.pattern for s in pattern.steps] if isinstance(pattern, TemporalPattern) else [pattern]
     sizes = [len(p.names) for p in steps]
-    total = sum(rows * r ** (n - 1) for n in sizes)
+    total = sum(rows * r ** (n - 1) + (n - 1) * rows * r for n in sizes)
     if isinstance(pattern, TemporalPattern):
         whole = [n for n in sizes if n == len(pattern.names)]
         if not whole:
             return None
         total += rows * r ** (min(whole) - 1)
-    return r ** max(sizes), total
+    return max(r ** n + (n - 1) * r * r for n in sizes), total
 
 
 def _surely_within(bound: tuple[int, int] | None) -> bool:
