@@ -43,13 +43,15 @@ from pipeline.query.notes import absent_types_note
 from pipeline.query.sql import (
     EXACT_UDF,
     MACROS,
+    ORD_FILE,
     ROW_COLUMNS,
     ROWS,
     WILD_HEADING,
     WILD_XY,
-    bindings_query,
     estimate_query,
+    frame_chunks,
     matches_select,
+    materialize,
 )
 from pipeline.query.stop import leftover
 from pipeline.query.temporal import estimate_query as temporal_estimate_query
@@ -73,6 +75,7 @@ MAX_PATTERN_NAMES = MAX_NAMES  # synth.patterns.one_frame refuses more as it rea
 MAX_FRAME_BINDINGS = 10**6
 MAX_BINDINGS = 10**9
 SPILL_LIMIT_MB = 8192
+BINDINGS_TABLE = "r2s_m"
 
 
 @dataclass(frozen=True)
@@ -120,7 +123,8 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
         f"entity_id, track_id, type, "
         f"x, y, heading, {'speed' if has_speed else 'NULL::DOUBLE AS speed'}, "
         f"{'map_heading' if has_world else 'NULL::DOUBLE AS map_heading'}, is_ego, "
-        f"file_index::BIGINT * 1099511627776 + file_row_number AS ord, {ROW_COLUMNS}, "
+        f"file_index::BIGINT * {ORD_FILE} + file_row_number AS ord, file_index AS r2s_file, "
+        f"file_row_number AS r2s_row, {ROW_COLUMNS}, "
         f"{lane_columns}"
         f"NOT (abs(x) <= {WILD_XY} AND abs(y) <= {WILD_XY} AND abs(heading) <= {WILD_HEADING}) AS wild "
         f"FROM {source} src{lane_join}")
@@ -368,13 +372,15 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
                 _check_size(con, lambda fanout: estimate(pattern, config, fanout))
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
+                chunks = frame_chunks(con, pattern.uses_lanes)
                 if temporal:
                     def register(step_pattern):
                         # each step's query runs alone, re-checked by its own statements but the lane clauses
                         check.pattern = without_lanes(step_pattern)
-                    bindings = prepare(con, pattern, config, register)
+                    bindings = prepare(con, pattern, config, register, chunks)
                 else:
-                    bindings = bindings_query(pattern, config)
+                    materialize(con, pattern, config, chunks, BINDINGS_TABLE, "SELECT * FROM m")
+                    bindings = f"WITH m AS (SELECT * FROM {BINDINGS_TABLE})"
                 reader = _Named(con.sql(bindings + "\n" + select).to_arrow_reader(BATCH_ROWS), pattern.names)
                 if events:
                     n_events, matched, bindings = _write_rows(reader, tmp), 0, 0

@@ -360,11 +360,17 @@ def matches_select(all_bindings: bool) -> str:
 
 # ego's row per frame, with frame_pos: consecutive frames of a scene have consecutive positions (what events are
 # runs of).
-def ego_cte(with_lanes: bool = False) -> str:
-    """The CTE `ego`; with_lanes: with the lane facts and relation lists of its row (pipeline.query.lanes)."""
-    return (f"ego AS (SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
+def ego_select(with_lanes: bool = False) -> str:
+    """The rows of the CTE `ego`; with_lanes: with the lane facts and relation lists of its row
+    (pipeline.query.lanes)."""
+    return (f"SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
             f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild"
-            f"{_lane_columns('') if with_lanes else ''} FROM {ROWS} WHERE is_ego)")
+            f"{_lane_columns('') if with_lanes else ''} FROM {ROWS} WHERE is_ego")
+
+
+def ego_cte(with_lanes: bool = False) -> str:
+    """The CTE `ego` (ego_select)."""
+    return f"ego AS ({ego_select(with_lanes)})"
 
 
 def _lane_columns(prefix: str) -> str:
@@ -374,9 +380,65 @@ def _lane_columns(prefix: str) -> str:
 EGO_CTE = ego_cte()
 
 
-def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> list[str]:
+# ------------------------------------------------------------------------------------------ frames in chunks
+# The bindings are built CHUNK_FRAMES frames at a time, each chunk's appended to a table (materialize): a join's
+# tables and pairs hold one chunk's rows, so the memory of a query is bounded by the chunk, not by the frames
+# (queue-of-three held 11 GB at 10^6 frames in one query, and more than twice the CPU spilling under 3 GB). A
+# binding is of one frame and a frame is in one chunk, so the chunks' bindings together are the whole query's, and
+# DISTINCT or GROUP BY over a frame's rows per chunk is global.
+CHUNK_FRAMES = 100_000
+EGO_TABLE = "r2s_ego"
+ORD_FILE = 1099511627776  # ord = file_index * ORD_FILE + file_row_number (the rows view of pipeline.query.mining)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """The frames whose ego rows' ords are lo..hi. Their rows lie strictly between `after` and `before`, the ego
+    ords of the frames just before and after them (-1 and None at the ends): a frame's rows are one contiguous
+    block with exactly one ego row (frames.dataset checks both), so another frame's ego row is outside it. The rows
+    between are read by file and row number, which DuckDB's Parquet reader skips to without reading the others; the
+    rows of the two frames at the ends that fall between are dropped by the join with the chunk's ego rows."""
+
+    lo: int
+    hi: int
+    after: int
+    before: int | None
+
+    def rows(self, f: str) -> list[str]:
+        """The conditions on the rows (alias f) of the chunk's frames."""
+        where = [f"{f}.ord > {self.after}"]
+        first = self.after // ORD_FILE if self.after >= 0 else 0
+        where.append(f"{f}.r2s_file >= {first}")
+        if self.before is not None:
+            where += [f"{f}.ord < {self.before}", f"{f}.r2s_file <= {self.before // ORD_FILE}"]
+            if self.before // ORD_FILE == first:
+                where += [f"{f}.r2s_row > {self.after % ORD_FILE if self.after >= 0 else -1}",
+                          f"{f}.r2s_row < {self.before % ORD_FILE}"]
+        return where
+
+
+def frame_chunks(con, with_lanes: bool, size: int | None = None) -> list[Chunk]:
+    """Make EGO_TABLE (ego_select's rows, with_lanes their lane columns, in input order) in `con`, and the chunks of
+    its frames."""
+    con.execute(f"CREATE OR REPLACE TEMP TABLE {EGO_TABLE} AS {ego_select(with_lanes)} ORDER BY frame_ord")
+    ords = con.execute(f"SELECT frame_ord FROM {EGO_TABLE} ORDER BY frame_ord").fetchnumpy()["frame_ord"].tolist()
+    size = size or CHUNK_FRAMES
+    return [Chunk(ords[i], ords[min(i + size, len(ords)) - 1], ords[i - 1] if i else -1,
+                  ords[i + size] if i + size < len(ords) else None) for i in range(0, len(ords), size)]
+
+
+def materialize(con, pattern: Pattern, config: SynthConfig, chunks: list[Chunk], table: str, select: str) -> None:
+    """CREATE TEMP TABLE `table` from `select` (a SELECT over the bindings relation m), one chunk after another."""
+    for k, chunk in enumerate(chunks or [None]):
+        query = bindings_query(pattern, config, chunk) + "\n" + select
+        con.execute(f"CREATE TEMP TABLE {table} AS {query}" if k == 0 else f"INSERT INTO {table} {query}")
+
+
+def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str],
+               chunk: Chunk | None = None) -> list[str]:
     """Per pattern name (its CTE named alias[name]) the rows it may bind: its type, and its clauses on ego or on
-    nothing as the candidate filter (`sure` says whether they surely hold). They read the CTE `ego` (EGO_CTE)."""
+    nothing as the candidate filter (`sure` says whether they surely hold). They read the CTE `ego` (EGO_CTE).
+    With a chunk, the rows of its frames (and of the two at its ends, which the join with ego drops)."""
     cols = ("f.fk, f.frame_id, f.scene, f.ord, f.entity_id, f.track_id, f.type, f.x, f.y, f.heading, f.speed, f.c, "
             "f.s, f.wild")
     if pattern.uses_lanes:  # the lane facts and relation lists of each row (pipeline.query.lanes)
@@ -386,7 +448,7 @@ def _name_ctes(pattern: Pattern, config: SynthConfig, alias: dict[str, str]) -> 
         # Clauses on ego or on nothing filter the name's rows (ego joined per frame); the others filter the join.
         unary = [clause_condition(c, "f", None if c.ref is None else "g", config)
                  for c in clauses(st) if c.ref in (None, EGO_ID)]
-        where = ["NOT f.is_ego"]
+        where = ["NOT f.is_ego"] + (chunk.rows("f") if chunk is not None else [])
         types = matched_types(st.type)
         if types is not None:
             where.append(f"f.type IN ({', '.join(repr(t) for t in sorted(types))})")
@@ -405,16 +467,18 @@ def positional(values: list[str]) -> str:
     return "struct_pack(" + ", ".join(f'"{k}" := {v}' for k, v in enumerate(values)) + ")"
 
 
-def bindings_query(pattern: Pattern, config: SynthConfig) -> str:
+def bindings_query(pattern: Pattern, config: SynthConfig, chunk: Chunk | None = None) -> str:
     """`WITH ..., m AS (...)`: CTEs whose last, m, has one row per binding of the pattern in a frame: frame_id,
     frame_ord (the frame's order in the input), frame_pos (its position in its scene by frame index, from 1),
     scene, timestamp_us, key (the bound rows' ordinals), binding (name -> entity id), tracks (name -> track id),
     the two structs keyed by the names' positions (positional). It calls r2s_exact(numbers, types) on the
     candidates that are not sure: numbers are ego's x, y, heading, speed, then the same per name; types one per
-    name."""
+    name. With a chunk, over its frames alone (EGO_TABLE made by frame_chunks)."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ctes = [ego_cte(pattern.uses_lanes), *_name_ctes(pattern, config, alias)]
+    ego = (ego_cte(pattern.uses_lanes) if chunk is None else
+           f"ego AS (SELECT * FROM {EGO_TABLE} WHERE frame_ord BETWEEN {chunk.lo} AND {chunk.hi})")
+    ctes = [ego, *_name_ctes(pattern, config, alias, chunk)]
     first = alias[names[0]]
     joins, sure_parts, candidate_parts = [], [], []
     for k, st in enumerate(pattern.statements):

@@ -25,10 +25,11 @@ from dataclasses import dataclass
 from pipeline.query.sql import (
     ESTIMATE_FRAMES,
     ROWS,
-    bindings_query,
+    Chunk,
     ego_cte,
     estimate_ctes,
     estimate_select,
+    materialize,
     positional,
 )
 from synth.config import SynthConfig
@@ -147,14 +148,15 @@ def behaviour_sql(used: list[str], config: SynthConfig) -> str:
     return f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT frame_id, is_ego, track_id, {columns} FROM ({inner})"
 
 
-def step_sql(k: int, pattern: Pattern, with_frame: bool, variables: tuple[str, ...], config: SynthConfig) -> str:
-    """The frames (scene, position, timestamp) and track tuples at which step k's statements hold (its tracks
-    struct is keyed by the step's positions, its columns by the positions of the whole pattern's `variables`):
-    r2s_step{k}, or, when the step has behaviours to filter by, r2s_held{k} with each frame's id."""
+def step_select(k: int, pattern: Pattern, with_frame: bool, variables: tuple[str, ...]) -> tuple[str, str]:
+    """The table and the SELECT over the bindings relation m of step k (sql.materialize): the frames (scene,
+    position, timestamp) and track tuples at which its statements hold (its tracks struct is keyed by the step's
+    positions, its columns by the positions of the whole pattern's `variables`), r2s_step{k}, or, when the step
+    has behaviours to filter by, r2s_held{k} with each frame's id. DISTINCT per chunk of frames is DISTINCT over
+    all: a row is of one frame."""
     cols = ", ".join(f'm.tracks."{j}" AS {_var(variables.index(n))}' for j, n in enumerate(pattern.names))
     table, frame = (f"r2s_held{k}", "m.frame_id, ") if with_frame else (f"r2s_step{k}", "")
-    return (f"CREATE TEMP TABLE {table} AS {bindings_query(pattern, config)}\n"
-            f"SELECT DISTINCT m.scene, {frame}m.frame_pos, m.timestamp_us, {cols} FROM m")
+    return table, f"SELECT DISTINCT m.scene, {frame}m.frame_pos, m.timestamp_us, {cols} FROM m"
 
 
 def behaving_sql(k: int, step: Step, variables: tuple[str, ...]) -> str:
@@ -220,17 +222,19 @@ def ends_sql(k: int, pattern: TemporalPattern) -> str:
     )
 
 
-def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Callable[[Pattern], None]) -> str:
-    """Run the statements that build the pattern's tables in `con` (whose ROWS view exists); returns the
-    `WITH m AS (...)` that the matches and events selects read. exact_check(pattern) registers the exact re-check
-    UDF of a step before its query runs."""
+def prepare(con, pattern: TemporalPattern, config: SynthConfig, exact_check: Callable[[Pattern], None],
+            chunks: list[Chunk]) -> str:
+    """Run the statements that build the pattern's tables in `con` (whose ROWS view and EGO_TABLE, cut into
+    `chunks`, exist: sql.frame_chunks); returns the `WITH m AS (...)` that the matches and events selects read.
+    exact_check(pattern) registers the exact re-check UDF of a step before its query runs."""
     con.execute(f"CREATE TEMP TABLE {POSITIONS} AS SELECT scene, frame_id, ord AS frame_ord, row_number() OVER "
                 f"(PARTITION BY scene ORDER BY frame_index, ord) AS frame_pos, timestamp_us FROM {ROWS} WHERE is_ego")
     con.execute(f"CREATE TEMP TABLE {IDS} AS SELECT scene, track_id, min(entity_id) AS entity_id FROM {ROWS} "
                 "WHERE NOT is_ego GROUP BY scene, track_id")
     for k, step in enumerate(pattern.steps):
         exact_check(step.pattern)
-        con.execute(step_sql(k, step.pattern, bool(step.behaviours), pattern.names, config))
+        materialize(con, step.pattern, config, chunks,
+                    *step_select(k, step.pattern, bool(step.behaviours), pattern.names))
     # Behaviours only of the tracks the steps that ask for them bind (few, next to every track of the frames).
     used = list(dict.fromkeys(b for s in pattern.steps for _, b in s.behaviours))
     if used:

@@ -7,15 +7,24 @@ from __future__ import annotations
 import math
 import random
 
+import pyarrow.parquet as pq
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from frames.rows import iter_scenes, read_frames
 from pipeline.query import sql
+from pipeline.query.mining import query_frames
 from synth.config import SynthConfig
 from synth.patterns.one_frame import parse_pattern
+from synth.patterns.temporal import parse_query_pattern
 from synth.scene import Entity, Scene
-from tests.pipeline.query.test_query import _write, brute, engine
+from tests.pipeline.query.test_query import KEYFRAMES, _write, brute, engine
+from tests.support import ROOT
+
+PAIR = ROOT / "data" / "patterns" / "pedestrian-beside-vehicle.dsl"
+CUT_IN = ROOT / "data" / "patterns" / "cut-in-from-right.dsl"
+LOG = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
 
 CLAUSES = ["ahead of {r} by Range({a}, {b})", "left of {r} by Range({a}, {b})", "within Range({a}, {b}) of {r}",
            "on Range({c}, {d}) @ Range({a}, {b}) relative to {r}"]
@@ -89,3 +98,34 @@ def test_random_scenes_and_ranges_match_with_and_without_the_box(seed, forms, bo
         mp.setattr(sql, "reach", lambda clause: None)  # no box: every pair of the frame is a candidate
         unpruned, _ = engine(path, text, tmp)
     assert got == unpruned == brute(scenes, text)
+
+
+def _split(source, folder, cuts):
+    """The frames file as a dataset of files cut before the frames at `cuts` (rows and columns as they are)."""
+    table = pq.read_table(source)
+    ids = table.column("frame_id").to_pylist()
+    starts = [i for i in range(len(ids)) if i == 0 or ids[i] != ids[i - 1]]
+    bounds = [0] + [starts[c] for c in cuts] + [len(ids)]
+    folder.mkdir()
+    for k in range(len(bounds) - 1):
+        pq.write_table(table.slice(bounds[k], bounds[k + 1] - bounds[k]), folder / f"part-{k}.parquet")
+    return folder
+
+
+@pytest.mark.parametrize("size", [1, 7, 100])
+def test_frames_in_chunks_match_as_in_one(size, tmp_path, monkeypatch):
+    """Frames as datasets of three files, queried CHUNK_FRAMES frames at a time (chunks across the files): the
+    brute force's matches of a two-name pattern on the shipped keyframes, and a temporal pattern's events on the
+    Argoverse 2 log as in one chunk."""
+    keyframes = _split(KEYFRAMES, tmp_path / "k", [50, 51])
+    log = _split(LOG, tmp_path / "log", [60, 61])
+    text = PAIR.read_text()
+    temporal = parse_query_pattern(CUT_IN.read_text())
+    whole, _ = engine(keyframes, text, tmp_path)
+    query_frames(log, temporal, tmp_path / "one.parquet", events=True, log=lambda s: None)
+    monkeypatch.setattr(sql, "CHUNK_FRAMES", size)
+    got, _ = engine(keyframes, text, tmp_path)
+    assert got == whole == brute(list(iter_scenes(read_frames(KEYFRAMES))), text) and got
+    query_frames(log, temporal, tmp_path / "chunked.parquet", events=True, log=lambda s: None)
+    events = pq.read_table(tmp_path / "chunked.parquet")
+    assert events.equals(pq.read_table(tmp_path / "one.parquet")) and events.num_rows
