@@ -230,12 +230,14 @@ class _Progress:
         bar.close()
 
 
-def _check_size(con, estimate: Callable[[bool], str]) -> None:
+def _check_size(con, estimate: Callable[[bool], list[str]]) -> None:
     """Refuse (exit 2, one line) a pattern whose join may meet more candidate bindings than the bounds: the
-    per-type product first (one scan), and only when it is over, the tighter product with pairwise fan-outs."""
+    per-type product first (one scan), and only when it is over, the tighter product with pairwise fan-outs. An
+    estimate is one query or one per chunk of frames (the largest of their products, the sum of their totals)."""
     for fanout in (False, True):
-        worst, frame, rows, total = con.execute(estimate(fanout)).fetchall()[0]
-        worst, total = worst or 0.0, total or 0.0
+        parts = [con.execute(sql).fetchall()[0] for sql in estimate(fanout)]
+        worst, frame, rows, _ = max(parts, key=lambda p: p[0] or 0.0)
+        worst, total = worst or 0.0, sum(p[3] or 0.0 for p in parts)
         if worst <= MAX_FRAME_BINDINGS and total <= MAX_BINDINGS:
             return
     if worst > MAX_FRAME_BINDINGS:
@@ -354,7 +356,6 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
     exact checks). quick: the pattern is surely within the bounds (estimate_bound), no estimate runs."""
     # lane clauses are exact SQL (pipeline.query.lanes): the re-check decides the others
     check = _ExactCheck(without_lanes(pattern.steps[0].pattern if temporal else pattern), config)
-    estimate = temporal_estimate_query if temporal else estimate_query
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.spill-", dir=out.parent) as spill, \
             leftover(spill, "tree"):
         world = temporal and pattern.uses_world_heading
@@ -368,11 +369,14 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
             if temporal and pattern.needs_timestamps:
                 _require_timestamps(con, frames, "the pattern (its durations or behaviours)")
             _note_absent_types(con, [s.pattern for s in pattern.steps] if temporal else [pattern], frames, log)
+            chunks = frame_chunks(con, pattern.uses_lanes)
             if not quick:
-                _check_size(con, lambda fanout: estimate(pattern, config, fanout))
+                if temporal:  # its candidates are bounded per scene, and a scene may span chunks
+                    _check_size(con, lambda fanout: [temporal_estimate_query(pattern, config, fanout)])
+                else:
+                    _check_size(con, lambda fanout: [estimate_query(pattern, config, fanout, chunk=c) for c in chunks])
             con.create_function(EXACT_UDF, check, ["DOUBLE[]", "VARCHAR[]"], "BOOLEAN", type="arrow")
             with _Progress(con, log), atomic_path(out) as tmp, leftover(tmp, "file"):
-                chunks = frame_chunks(con, pattern.uses_lanes)
                 if temporal:
                     def register(step_pattern):
                         # each step's query runs alone, re-checked by its own statements but the lane clauses

@@ -320,17 +320,18 @@ def anchor(st: Statement) -> Anchor | None:
 
 
 def pairs_cte(name: str, rows: str, ref_rows: str, st: Statement, ref_type: str, anc: Anchor,
-              config: SynthConfig) -> str:
+              config: SynthConfig, materialized: bool = True) -> str:
     """The CTE `name`: the rows of `rows` (a name's, with its columns) that are candidates for the statement's
     clauses on its anchor, each with r2s_ref, the ord of the anchor's row in `ref_rows` it pairs with (a row once
-    per such anchor row). Materialized: inlined, DuckDB would merge it into the bindings' joins and reorder them."""
+    per such anchor row). Materialized (for the bindings' joins: inlined, DuckDB would merge it into them and
+    reorder them), or not (counted as it streams, by the estimate)."""
     on = [_same_frame("e", "r")]
     if anc.reach is not None:
         half = lit(box(anc.reach))
         on.append(f"((abs(e.x - r.x) <= {half} AND abs(e.y - r.y) <= {half}) OR e.wild OR r.wild)")
     on += ["e.ord <> r.ord"] if _overlap(st.type, ref_type) else []
     on.append(f"({Condition.all([clause_condition(c, 'e', 'r', config) for c in clauses(st) if c.ref == anc.ref]).candidate})")
-    return f"{name} AS MATERIALIZED (SELECT e.*, r.ord AS r2s_ref FROM {ref_rows} r JOIN {rows} e ON {' AND '.join(on)})"
+    return f"{name} AS {'MATERIALIZED ' if materialized else ''}(SELECT e.*, r.ord AS r2s_ref FROM {ref_rows} r JOIN {rows} e ON {' AND '.join(on)})"
 
 
 # ----------------------------------------------------------------------------------------- the whole query
@@ -529,7 +530,8 @@ def _binary(st: Statement, alias: dict[str, str], config: SynthConfig) -> list[C
     return [clause_condition(c, alias[st.id], alias[c.ref], config) for c in clauses(st) if c.ref not in (None, EGO_ID)]
 
 
-def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: str = "p") -> list[str]:
+def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: str = "p",
+                  chunk: Chunk | None = None) -> list[str]:
     """CTEs ending in `label`: one row per frame (fk, frame_id, scene, rows: its non-ego rows, p) where p bounds
     from above what the pattern's join (bindings_query) builds in the frame: its candidate bindings, at most the
     product over the names of how many rows each may bind (its type and its clauses on ego), plus the rows of each
@@ -540,7 +542,7 @@ def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: st
     helper CTEs are prefixed by `label`, so several patterns' estimates share a query."""
     names = pattern.names
     alias = {name: f"{label}_{_alias(k)}" for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ctes = _name_ctes(pattern, config, alias)
+    ctes = _name_ctes(pattern, config, alias, chunk)
     factors, pairs = [], []
     for k, st in enumerate(pattern.statements):
         a = alias[st.id]
@@ -550,7 +552,8 @@ def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: st
             count = f"{label}_n{names.index(anc.ref)}.n"
             pairs.append(f"coalesce({n_k}.pairs, 0)::DOUBLE" if fanout else f"coalesce({count} * {n_k}.n, 0)::DOUBLE")
         if fanout and anc is not None:
-            ctes.append(pairs_cte(f"{a}_pairs", a, alias[anc.ref], st, _type_of(pattern, anc.ref), anc, config))
+            ctes.append(pairs_cte(f"{a}_pairs", a, alias[anc.ref], st, _type_of(pattern, anc.ref), anc, config,
+                                  materialized=False))
             ctes.append(f"{n_k} AS (SELECT fk, frame_id, max(n) AS n, sum(n) AS pairs FROM (SELECT fk, frame_id, "
                         f"count(*) AS n FROM {a}_pairs GROUP BY fk, frame_id, r2s_ref) GROUP BY fk, frame_id)")
         else:
@@ -567,10 +570,18 @@ ESTIMATE_FRAMES = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS sce
                    f"FROM {ROWS} GROUP BY fk, frame_id)")
 
 
-def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_frame: bool = False) -> str:
+def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_frame: bool = False,
+                   chunk: Chunk | None = None) -> str:
     """One aggregate over estimate_ctes: (largest product, its frame id, that frame's non-ego rows, sum of the
-    products), or with per_frame one row per frame (frame id, product)."""
-    ctes = [ego_cte(pattern.uses_lanes), ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
+    products), or with per_frame one row per frame (frame id, product). With a chunk, over its frames (the query's
+    own chunks: frame_chunks): the largest of the chunks' and the sum of their sums are the whole estimate."""
+    if chunk is None:
+        ctes = [ego_cte(pattern.uses_lanes), ESTIMATE_FRAMES, *estimate_ctes(pattern, config, fanout)]
+    else:  # the frames whose ego row is the chunk's (the two at its ends, read in part, have none between)
+        frames = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS scene, count(*) - 1 AS rows FROM {ROWS} f "
+                  f"WHERE {' AND '.join(chunk.rows('f'))} GROUP BY fk, frame_id HAVING bool_or(is_ego))")
+        ctes = [f"ego AS (SELECT * FROM {EGO_TABLE} WHERE frame_ord BETWEEN {chunk.lo} AND {chunk.hi})", frames,
+                *estimate_ctes(pattern, config, fanout, chunk=chunk)]
     return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "0", per_frame)
 
 
