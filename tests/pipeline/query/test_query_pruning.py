@@ -12,8 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from frames.dataset import FramesDataset
 from frames.rows import iter_scenes, read_frames
-from pipeline.query import sql
+from pipeline.query import mining, sql
 from pipeline.query.mining import query_frames
 from synth.config import SynthConfig
 from synth.patterns.one_frame import parse_pattern
@@ -129,3 +130,17 @@ def test_frames_in_chunks_match_as_in_one(size, tmp_path, monkeypatch):
     query_frames(log, temporal, tmp_path / "chunked.parquet", events=True, log=lambda s: None)
     events = pq.read_table(tmp_path / "chunked.parquet")
     assert events.equals(pq.read_table(tmp_path / "one.parquet")) and events.num_rows
+
+
+def test_the_estimate_in_chunks_is_the_estimate_of_the_whole(tmp_path):
+    """Per frame, the chunks' estimates (both kinds) are the one query's: each frame is in exactly one chunk."""
+    folder = _split(KEYFRAMES, tmp_path / "k", [50, 51])
+    con = mining._open([p.path for p in FramesDataset.open(folder).parts], False, 1, None, str(tmp_path))
+    pattern = parse_pattern(PAIR.read_text())
+    chunks = sql.frame_chunks(con, False, size=7)
+    for fanout in (False, True):
+        whole = sorted(con.execute(sql.estimate_query(pattern, SynthConfig(), fanout, per_frame=True)).fetchall())
+        parts = sorted(r for c in chunks for r in con.execute(
+            sql.estimate_query(pattern, SynthConfig(), fanout, per_frame=True, chunk=c)).fetchall())
+        assert parts == whole and len(whole) == 242
+    con.close()
