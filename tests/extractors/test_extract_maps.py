@@ -103,22 +103,33 @@ def test_argoverse2_lane_facts_agree_with_av2_s_own_map_api(tmp_path, capsys):
     poses = read_feather(log / "city_SE3_egovehicle.feather").set_index("timestamp_ns")
     boxes = read_feather(log / "annotations.feather")
     stamps = sorted(boxes.timestamp_ns.unique())
-    checked = near_edge = 0
+    # each box's centre by (stamp, track) and each stamp's yaw, looked up once (a filter of the whole table per row
+    # made this test quadratic in the log's boxes)
+    centre = {(t, u): np.array([x, y]) for t, u, x, y in
+              zip(boxes.timestamp_ns, boxes.track_uuid, boxes.tx_m, boxes.ty_m)}
+    yaws: dict = {}
+    points = []
     for r in frames.itertuples():
         stamp = stamps[r.frame_index]
         pose = poses.loc[stamp]
-        rot = quat_to_mat(pose[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float))
-        yaw = np.arctan2(rot[1, 0], rot[0, 0])
-        if r.is_ego:
-            local = np.zeros(2)
-        else:
-            box = boxes[(boxes.timestamp_ns == stamp) & (boxes.track_uuid == r.track_id)].iloc[0]
-            local = np.array([box.tx_m, box.ty_m])
+        if stamp not in yaws:
+            rot = quat_to_mat(pose[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float))
+            yaws[stamp] = np.arctan2(rot[1, 0], rot[0, 0])
+        yaw = yaws[stamp]
+        local = np.zeros(2) if r.is_ego else centre[(stamp, r.track_id)]
         c, s = np.cos(yaw), np.sin(yaw)
-        p = shapely.Point(pose.tx_m + c * local[0] - s * local[1], pose.ty_m + s * local[0] + c * local[1])
-        want_lanes = sorted(i for i, poly in lanes.items() if poly.covers(p))
+        points.append(shapely.Point(pose.tx_m + c * local[0] - s * local[1], pose.ty_m + s * local[0] + c * local[1]))
+    points = np.array(points, dtype=object)
+    # shapely's covers, one call per map polygon over every point (the same predicate, vectorised)
+    covered = {i: shapely.covers(poly, points) for i, poly in lanes.items()}
+    on_crossing = np.any([shapely.covers(c, points) for c in crossings], axis=0)
+    on_area = np.any([shapely.covers(a, points) for a in areas], axis=0)
+    checked = near_edge = 0
+    for k, r in enumerate(frames.itertuples()):
+        p = points[k]
+        want_lanes = sorted(i for i in lanes if covered[i][k])
         want = (want_lanes, any(static.lane_is_in_intersection(int(i)) for i in want_lanes),
-                any(c.covers(p) for c in crossings), not want_lanes and not any(a.covers(p) for a in areas))
+                bool(on_crossing[k]), not want_lanes and not on_area[k])
         got = (sorted(r.lanes), r.in_intersection, r.on_crosswalk, r.off_road)
         checked += 1
         if got != want:
