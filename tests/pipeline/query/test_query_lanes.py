@@ -4,6 +4,7 @@ on the Argoverse 2 test log (../shared/data), for the shipped lane patterns and 
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import pandas as pd
@@ -41,15 +42,21 @@ MORE = [
 ]
 
 
-def brute(frames, pattern) -> list:
-    """Every binding of every frame, by the definition, each frame's road its whole map."""
+@functools.cache
+def _scenes(frames) -> tuple:
+    """Each frame as a scene whose road is its whole map, built once per frames file (every pattern reads the same
+    scenes: building them per pattern was most of these tests' time)."""
     maps = {m.map_id: m for m in read_maps(maps_dir(frames))}
     out = []
     for fid, rows in pd.read_parquet(frames).groupby("frame_id", sort=False):
         ego = rows[rows.is_ego].iloc[0]
-        scene = frame_to_scene(rows, maps.get(ego.map_id) if isinstance(ego.map_id, str) else None)
-        out += [(fid, tuple(sorted(b.items()))) for b in matches(pattern, scene)]
-    return sorted(out)
+        out.append((fid, frame_to_scene(rows, maps.get(ego.map_id) if isinstance(ego.map_id, str) else None)))
+    return tuple(out)
+
+
+def brute(frames, pattern) -> list:
+    """Every binding of every frame, by the definition, each frame's road its whole map."""
+    return sorted((fid, tuple(sorted(b.items()))) for fid, scene in _scenes(str(frames)) for b in matches(pattern, scene))
 
 
 def engine(frames, pattern) -> list:
