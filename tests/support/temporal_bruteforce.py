@@ -115,19 +115,29 @@ def _frame(rows: pd.DataFrame, graphs: dict[str, LaneGraph]) -> dict:
             "tracks": {k: e for k, e in by_key.items() if k != EGO}, "world": world, "lane": lane}
 
 
-def brute_temporal(frames: pd.DataFrame, pattern: TemporalPattern, config: SynthConfig | None = None,
-                   roads: list[RoadMap] = ()) -> dict:
-    """{frame_id: {tracks tuple (in pattern.names order), ...}} of the frames where the pattern matches; `roads`:
-    the maps the frames name (for lane clauses and changing lanes)."""
-    config = config or SynthConfig()
+def prepare(frames: pd.DataFrame, roads: list[RoadMap] = ()) -> tuple[dict, list[tuple[list, list[dict]]]]:
+    """The maps' lane graphs and each scene's frames in time order as the loop reads them (ids, frames): what every
+    pattern over the same frames shares, so a test of many patterns may build it once."""
     graphs = {road.map_id: LaneGraph(road) for road in roads}
     order = {fid: k for k, fid in enumerate(dict.fromkeys(frames.frame_id))}
-    names = pattern.names
-    out: dict[str, set] = {}
+    scenes = []
     for _, rows in frames.groupby("scene", sort=False):
         by_frame = {fid: f for fid, f in rows.groupby("frame_id", sort=False)}
         fids = sorted(by_frame, key=lambda f: (int(by_frame[f].frame_index.iloc[0]), order[f]))
-        scene_frames = [_frame(by_frame[f], graphs) for f in fids]
+        scenes.append((fids, [_frame(by_frame[f], graphs) for f in fids]))
+    return graphs, scenes
+
+
+def brute_temporal(frames: pd.DataFrame | None, pattern: TemporalPattern, config: SynthConfig | None = None,
+                   roads: list[RoadMap] = (), prepared=None) -> dict:
+    """{frame_id: {tracks tuple (in pattern.names order), ...}} of the frames where the pattern matches; `roads`:
+    the maps the frames name (for lane clauses and changing lanes); `prepared`: `prepare(frames, roads)` made once
+    (then `frames` and `roads` are not read)."""
+    config = config or SynthConfig()
+    graphs, scenes = prepared if prepared is not None else prepare(frames, roads)
+    names = pattern.names
+    out: dict[str, set] = {}
+    for fids, scene_frames in scenes:
         ts = [f["t"] for f in scene_frames]
         tracks = sorted({t for f in scene_frames for t in f["tracks"]})
         for chosen in itertools.permutations(tracks, len(names)):

@@ -7,6 +7,7 @@ no lane, the 3 s window met exactly and passed)."""
 
 from __future__ import annotations
 
+import functools
 import random
 import tempfile
 from pathlib import Path
@@ -23,7 +24,7 @@ from synth.dsl import DslError
 from synth.patterns.temporal import is_temporal, parse_temporal
 from tests.support import ROOT, SHARED, assert_one_line_error, run_r2s
 from tests.support.lanes import random_road
-from tests.support.temporal_bruteforce import brute_temporal
+from tests.support.temporal_bruteforce import brute_temporal, prepare
 from tests.support.temporal_engine import engine_temporal
 
 ANY = "on Range(-999, 999) @ Range(-999, 999), facing Range(0, 360) deg"
@@ -51,10 +52,16 @@ FINDS = {"cut-in-by-lane-change.dsl": ("av2-log",),
          "ego-left-turn-with-oncoming-traffic.dsl": ("nuscenes",)}  # ego turns left in scene-0061 only
 
 
-def engine_and_brute(frames: Path, text: str, tmp: Path) -> tuple[dict, dict]:
+@functools.cache
+def _prepared(frames: Path):
+    """The brute force's reading of a frames file and its maps, made once for all the patterns over it."""
     roads = list(read_maps(maps_dir(frames))) if maps_dir(frames).exists() else []
+    return prepare(read_frames(frames), roads)
+
+
+def engine_and_brute(frames: Path, text: str, tmp: Path) -> tuple[dict, dict]:
     here = Path(tempfile.mkdtemp(dir=tmp))
-    return engine_temporal(frames, text, here), brute_temporal(read_frames(frames), parse_temporal(text), roads=roads)
+    return engine_temporal(frames, text, here), brute_temporal(None, parse_temporal(text), prepared=_prepared(Path(frames)))
 
 
 @pytest.fixture(scope="module")
