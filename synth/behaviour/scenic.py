@@ -23,14 +23,16 @@ from synth.world import WorldPose
 # degrees CCW), the speed goes linearly from one end to the other and the heading turns at a steady rate, both
 # steered step by step toward where they should be (cars: speed set along the heading and a steering angle
 # whose Newtonian yaw rate closes the heading error in one step; pedestrians: walking speed and direction).
-PRELUDE = '''\
+STEER = '''\
 import math
 
-def r2s__steer(car, yaw_rate):
-    """The steering whose Newtonian yaw rate (-speed * sin(steer * pi / 2) / length) is yaw_rate (rad/s)."""
-    speed = max(car.speed, 0.1)
+def r2s__steer(car, speed, yaw_rate):
+    """The steering whose Newtonian yaw rate (-speed * sin(steer * pi / 2) / length) is yaw_rate (rad/s) at the
+    speed set in the same step (the simulator turns the car at its new speed)."""
+    speed = max(speed, 0.1)
     return 2 / math.pi * math.asin(max(-1, min(1, -yaw_rate * car.length / speed)))
-
+'''
+PRELUDE = STEER + '''
 behavior R2sSegments(segments, walks):
     heading = self.heading
     for duration, v0, v1, turn in segments:
@@ -44,13 +46,13 @@ behavior R2sSegments(segments, walks):
                 take SetWalkingDirectionAction(heading), SetWalkingSpeedAction(speed)
             else:
                 error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, error / simulation().timestep))
+                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / simulation().timestep))
     while True:
         take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
 '''
 
 
-def _num(v: float) -> str:
+def num(v: float) -> str:
     return repr(round(v, 6))
 
 
@@ -81,14 +83,14 @@ def speed_bound(behaviour: Behaviour, track: Track, v_stop: float) -> float:
     return top
 
 
-def _placed(e: Entity, world: WorldPose) -> tuple[str, str]:
+def placed(e: Entity, world: WorldPose) -> tuple[str, str]:
     """The Scenic class and the specifiers of an entity at its recorded pose in the world."""
     x, y = world.point(e.x, e.y)
     heading = world.heading + e.heading - 90.0  # Scenic's 0 is +y; the world's yaw is from +x
     length, width = e.dimensions()
     cls = "Pedestrian" if e.type == "Pedestrian" else "Car" if e.type in VEHICLE_CLASSES else "Object"
-    return cls, (f"new {cls} at ({_num(x)}, {_num(y)}), facing {_num(heading)} deg, with length {_num(length)}, "
-                 f"with width {_num(width)}, with regionContainedIn None, with allowCollisions True, "
+    return cls, (f"new {cls} at ({num(x)}, {num(y)}), facing {num(heading)} deg, with length {num(length)}, "
+                 f"with width {num(width)}, with regionContainedIn None, with allowCollisions True, "
                  "with requireVisible False")
 
 
@@ -113,14 +115,14 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
             continue
         behaviour = segmented.behaviour
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, placed = _placed(e, world)
+        cls, placed = placed(e, world)
         if not behaviour.parked and cls != "Object":
-            segments = ", ".join(f"({', '.join(_num(v) for v in p)})" for p in segment_parameters(segmented, track))
+            segments = ", ".join(f"({', '.join(num(v) for v in p)})" for p in segment_parameters(segmented, track))
             walks = "True" if cls == "Pedestrian" else "False"
-            placed += f", with speed {_num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
+            placed += f", with speed {num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
         lines.append(f"{track.id} = {placed}")
         if cls != "Object":
             top = speed_bound(behaviour, track, v_stop)
             lines.append(f"require always {track.id}.speed <= {fmt_number(top + 0.01)}  # {behaviour.id}: its paces")
-    lines.append(f"terminate after {_num(clip.duration)} seconds")
+    lines.append(f"terminate after {num(clip.duration)} seconds")
     return "\n".join(lines) + "\n"
