@@ -33,6 +33,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "sample": ("pipeline.cli.sample", "variants of a recorded scene, sampled from its program, as scene JSON"),
     "eval-frontend": ("pipeline.cli.eval_frontend", "detection metrics of predicted frames against ground truth"),
     "export": ("pipeline.cli.export", "a frame and its variants as ScenarioNet scenarios or OpenSCENARIO + OpenDRIVE"),
+    "simulate": ("pipeline.cli.simulate", "simulated variants of a clip's behaviour program, as frames, each re-checked"),
 }
 
 # verb -> an example, one command a line, run from the repository's root on the data shipped there (after
@@ -64,6 +65,13 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                "r2s synth scene.json --format scenic --out scene.scenic",
                "r2s sample scene.scenic --n 5 --seed 0 --out variants",
                "r2s export scene.json variants --to scenarionet --out scenarios"),
+    "simulate": tuple(f"r2s scene data/argoverse2-log-excerpt/frames.parquet adcf7d18-0510-35b0-a2fa-b4cea13a6d76/{k} "
+                      f"--out f{k}.json" for k in range(100, 106))
+                + ("r2s synth f100.json f101.json f102.json f103.json f104.json f105.json --behaviours --motion --lanes "
+                   "--format json --out clip.json",
+                   "r2s simulate clip.json f100.json f101.json f102.json f103.json f104.json f105.json --motion --lanes "
+                   "--n 2 --seed 0 --out simulated",
+                   "r2s query simulated data/patterns/queue-of-three.dsl --out matches.parquet"),
 }
 
 EXIT_CODES = (f"{ExitCode.OK} done; {ExitCode.BAD_INPUT} bad input or usage (one line on stderr, nothing written); "
@@ -74,6 +82,8 @@ MORE_EXIT_CODES: dict[str, str] = {
     "sample": f"{ExitCode.SAMPLING_FAILED} sampling failed: no variant satisfies the program and the collision rule "
               "within the budget (one line naming the colliding entities; nothing written)",
     "render": f"{ExitCode.SAMPLING_FAILED} with --samples: no variant found (as r2s sample)",
+    "simulate": f"{ExitCode.SAMPLING_FAILED} no variant written: each rejected by Scenic, past --time-limit or refused "
+                "by the checker (nothing written)",
     "run": f"{ExitCode.INTERRUPTED} / {ExitCode.TERMINATED} stopped by Ctrl-C / SIGTERM (finished frames kept: the "
            "same command resumes)",
 }
@@ -111,7 +121,7 @@ def _top_help() -> str:
     rows = "\n".join(f"  {v.ljust(width)}  {h}" for v, (_, h) in VERBS.items())
     return (f"usage: r2s VERB [options]\n\nverbs:\n{rows}\n\n`r2s VERB --help` for a verb's options, defaults and an "
             f"example.\nexit codes: {EXIT_CODES}; {ExitCode.CHECK_FAILED} r2s check: the program does not contain the "
-            f"scene; {ExitCode.SAMPLING_FAILED} r2s sample, r2s render --samples: no variant found\n"
+            f"scene; {ExitCode.SAMPLING_FAILED} r2s sample, r2s render --samples, r2s simulate: no variant found\n"
             "the specification: docs/spec.md\n")
 
 

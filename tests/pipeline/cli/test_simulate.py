@@ -1,0 +1,158 @@
+"""`r2s simulate`: simulated variants of a clip program as frames, as a user runs it on a real clip (the shipped
+Argoverse 2 log, 6 frames with its map), every written variant passing the checker again when read back by other
+verbs as real processes; the variant draws against an independent brute force."""
+
+from __future__ import annotations
+
+import json
+
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.scenes import scene as frame_scene
+from synth.behaviour.program import ClipProgram, parse_clip_program
+from synth.behaviour.variants import SpeedPlan, feasible
+from tests.support import ROOT, assert_one_line_error, run_r2s
+
+AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
+LOG = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
+FLAGS = ("--motion", "--lanes")
+
+pytest.importorskip("scenic")
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    """Six frames of the log as scene JSON, their clip program (JSON), and one simulation of two variants."""
+    out = tmp_path_factory.mktemp("clip")
+    frames = []
+    for k in range(100, 106):
+        path = out / f"f{k}.json"
+        path.write_text(frame_scene(str(AV2), f"{LOG}/{k}").to_json())
+        frames.append(str(path))
+    program = out / "clip.json"
+    proc = run_r2s("synth", *frames, "--behaviours", *FLAGS, "--format", "json", "--out", str(program))
+    assert proc.returncode == 0, proc.stderr
+    sims = out / "sims"
+    proc = run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "2", "--seed", "7", "--out", str(sims))
+    return frames, program, sims, proc
+
+
+def test_written_variants_are_frames_the_checker_accepts(clip, tmp_path):
+    frames, program, sims, proc = clip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.count("r2s simulate: variant ") == 2  # progress, one line per variant
+    summary = json.loads((sims / "summary.json").read_text())
+    assert summary["asked"] == 2
+    assert (summary["written"] + summary["rejected_by_scenic"] + summary["timed_out"]
+            + summary["rejected_by_checker"]) == 2
+    written = [v["scene"] for v in summary["variants"] if v["outcome"] == "written"]
+    table = pq.read_table(sims / "part-000000.parquet")
+    assert sorted(set(table.column("scene").to_pylist())) == sorted(written) and written
+    # Each written variant, read back by r2s scene as any user would, passes r2s check with the clip program less
+    # the behaviours of entities the simulation could not place (first seen later).
+    doc = json.loads(program.read_text())
+    full = parse_clip_program(doc["program"])
+    kept = ClipProgram(full.program, tuple(b for b in full.behaviours if b.id in summary["simulated"]))
+    (tmp_path / "kept.dsl").write_text(str(kept))
+    (tmp_path / "c.toml").write_text("motion = true\nlanes = true\n")
+    recorded = [json.loads(open(f).read()) for f in frames]
+    for name in written:
+        paths = []
+        for k in range(len(frames)):
+            path = tmp_path / f"{name}-{k}.json"
+            assert run_r2s("scene", str(sims), f"{name}/{k}", "--out", str(path)).returncode == 0
+            paths.append(str(path))
+        ok = run_r2s("check", *paths, str(tmp_path / "kept.dsl"), "--config", str(tmp_path / "c.toml"))
+        assert ok.returncode == 0, ok.stdout + ok.stderr
+        docs = [json.loads(open(p).read()) for p in paths]
+        assert [d["world"]["timestamp_us"] for d in docs] == [r["world"]["timestamp_us"] for r in recorded]
+        ego_speeds = [d["entities"][0]["speed"] for d in docs]
+        assert ego_speeds[0] == pytest.approx(recorded[0]["entities"][0]["speed"], abs=1e-6)
+        assert ego_speeds[-1] != pytest.approx(recorded[-1]["entities"][0]["speed"], abs=1e-6)  # a variant moves
+    # Other verbs read the output as frames.
+    query = run_r2s("query", str(sims), str(ROOT / "data" / "patterns" / "queue-of-three.dsl"),
+                    "--out", str(tmp_path / "m.parquet"))
+    assert query.returncode == 0 and f"{6 * len(written)} frames scanned" in query.stdout, query.stdout
+    batch = run_r2s("run", str(sims), "--motion", "--out", str(tmp_path / "programs"), "--jobs", "1")
+    assert batch.returncode == 0, batch.stderr
+
+
+def test_the_same_seed_writes_the_same_bytes(clip, tmp_path):
+    frames, program, sims, _ = clip
+    again = tmp_path / "again"
+    proc = run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "2", "--seed", "7", "--out", str(again))
+    assert proc.returncode == 0, proc.stderr
+    for name in ("part-000000.parquet", "summary.json", "_maps/part-000000.parquet"):
+        assert (again / name).read_bytes() == (sims / name).read_bytes(), name
+    # Variant k does not depend on K, and another seed draws other speeds.
+    one = tmp_path / "one"
+    assert run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "1", "--seed", "7", "--out",
+                   str(one)).returncode == 0
+    first = json.loads((sims / "summary.json").read_text())["variants"][0]
+    assert json.loads((one / "summary.json").read_text())["variants"][0] == first
+    other = tmp_path / "other"
+    assert run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "1", "--seed", "8", "--out",
+                   str(other)).returncode == 0
+    speeds = [pq.read_table(d / "part-000000.parquet").column("speed").to_pylist() for d in (one, other)]
+    assert speeds[0] != speeds[1]
+
+
+def test_no_variant_within_the_time_limit_writes_nothing_and_exits_4(clip, tmp_path):
+    frames, program, _, _ = clip
+    out = tmp_path / "none"
+    proc = run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "1", "--time-limit", "0.001", "--out", str(out))
+    assert proc.returncode == 4 and not proc.stdout and "Traceback" not in proc.stderr, proc.stderr
+    progress, error = proc.stderr.strip().splitlines()  # one progress line, then the one line of the failure
+    assert "timed out" in progress and error.startswith("r2s simulate: no variant written: 1 asked")
+    assert not out.exists()
+
+
+def test_bad_input_is_one_line(clip, tmp_path):
+    frames, program, _, _ = clip
+    out = str(tmp_path / "out")
+    assert_one_line_error(run_r2s("simulate", str(tmp_path / "nope.json"), *frames, "--out", out), 2, "does not exist")
+    assert_one_line_error(run_r2s("simulate", frames[0], *frames, "--out", out), 2, "not a behaviour program")
+    assert_one_line_error(run_r2s("simulate", str(program), *frames, "--n", "0", "--out", out), 2, "--n")
+    assert_one_line_error(run_r2s("simulate", str(program), *frames[:-1], *FLAGS, "--out", out), 2, "not of the")
+    text = tmp_path / "clip.dsl"
+    text.write_text(json.loads(program.read_text())["program"])
+    assert_one_line_error(run_r2s("simulate", str(text), *frames, "--out", out), 2, "not JSON")
+    assert not (tmp_path / "out").exists()
+
+
+@st.composite
+def plans(draw):
+    """A SpeedPlan as speed_plan writes them (boxes around the recorded speeds, rises and falls of at least DV
+    between neighbours that the recorded speeds obey) and a draw q in the boxes."""
+    m = draw(st.integers(1, 5))
+    r = [draw(st.floats(0, 20)) for _ in range(m + 1)]
+    lo = [max(0.0, x - draw(st.floats(0, 3))) for x in r]
+    hi = [x + draw(st.floats(0, 3)) for x in r]
+    lo[0] = hi[0] = r[0]
+    rows = []
+    for j in range(m):
+        if r[j + 1] - r[j] >= 1.0 and draw(st.booleans()):
+            rows.append((j, 1.0, j + 1, -1.0, -1.0))
+        elif r[j] - r[j + 1] >= 1.0 and draw(st.booleans()):
+            rows.append((j + 1, 1.0, j, -1.0, -1.0))
+    q = [draw(st.floats(a, b)) for a, b in zip(lo, hi)]
+    return SpeedPlan(tuple(r), tuple(lo), tuple(hi), tuple(rows)), q, draw(st.floats(0, 1))
+
+
+@settings(max_examples=300, deadline=None)
+@given(plans())
+def test_every_draw_obeys_its_plan_and_goes_as_far_as_it_may(case):
+    plan, q, f = case
+    u = feasible(plan.recorded, plan.lo, plan.hi, plan.rows, q, f)
+    assert plan.holds(u, 1e-9)
+    far = feasible(plan.recorded, plan.lo, plan.hi, plan.rows, q, 1.0)
+    assert plan.holds(far, 1e-9)
+    # Brute force: the furthest point of the segment from r toward q that obeys the plan, on a fine grid.
+    r = plan.recorded
+    grid = [k / 1000 for k in range(1001)]
+    best = max(t for t in grid if plan.holds([a + t * (b - a) for a, b in zip(r, q)], 1e-9))
+    reached = max((abs(a - x) / abs(b - x) for a, b, x in zip(far, q, r) if abs(b - x) > 1e-6), default=1.0)
+    assert reached >= best - 1e-6
