@@ -1,5 +1,5 @@
 """`r2s simulate PROGRAM.json A.json B.json ... --n K --seed S --out DIR`: K simulated variants of a clip program
-as frames, each re-checked by r2sgen's checker (pipeline.simulate; `from pipeline import simulate`).
+as frames, each re-checked by r2sgen's checker (pipeline.simulation; `from pipeline import simulate`).
 
 PROGRAM is what `r2s synth A.json B.json ... --behaviours --format json` writes; A.json B.json ... are the clip's
 frames it was synthesized from (their road: the simulation's, as OpenDRIVE; their times: the frames'). DIR is a
@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import load_config
-    from pipeline.simulate import progress_line, simulate
+    from pipeline.simulation import progress_line, simulate
 
     check_apart(args.out, [("program", args.program), *(("scene", s) for s in args.scene), ("config", args.config)],
                 directory=True)

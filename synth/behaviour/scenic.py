@@ -115,12 +115,12 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
             continue
         behaviour = segmented.behaviour
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, placed = placed(e, world)
+        cls, where = placed(e, world)
         if not behaviour.parked and cls != "Object":
             segments = ", ".join(f"({', '.join(num(v) for v in p)})" for p in segment_parameters(segmented, track))
             walks = "True" if cls == "Pedestrian" else "False"
-            placed += f", with speed {num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
-        lines.append(f"{track.id} = {placed}")
+            where += f", with speed {num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
+        lines.append(f"{track.id} = {where}")
         if cls != "Object":
             top = speed_bound(behaviour, track, v_stop)
             lines.append(f"require always {track.id}.speed <= {fmt_number(top + 0.01)}  # {behaviour.id}: its paces")

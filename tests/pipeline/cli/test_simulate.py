@@ -156,3 +156,13 @@ def test_every_draw_obeys_its_plan_and_goes_as_far_as_it_may(case):
     best = max(t for t in grid if plan.holds([a + t * (b - a) for a, b in zip(r, q)], 1e-9))
     reached = max((abs(a - x) / abs(b - x) for a, b, x in zip(far, q, r) if abs(b - x) > 1e-6), default=1.0)
     assert reached >= best - 1e-6
+
+
+def test_the_python_api_writes_what_the_verb_writes(clip, tmp_path):
+    from pipeline import simulate
+
+    frames, program, sims, _ = clip
+    result = simulate(program, frames, tmp_path / "api", n=2, seed=7, config={"motion": True, "lanes": True})
+    assert result.to_json_dict() == json.loads((sims / "summary.json").read_text())
+    assert (tmp_path / "api" / "part-000000.parquet").read_bytes() == (sims / "part-000000.parquet").read_bytes()
+    assert set(result.seconds) >= {"road", "compile", "simulate", "check", "write"}
