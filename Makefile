@@ -36,6 +36,10 @@ $(STAMP): requirements.lock requirements-nodeps.lock pyproject.toml
 # and motion programs for the extracted excerpt (its frames carry speeds).
 DEMO_FRAMES := data/nuscenes-mini-keyframes/frames.parquet
 DEMO_FRAME  := scene-0103/0
+# A second of the shipped Argoverse 2 log (map, speeds): its behaviour program, simulated (r2s simulate).
+DEMO_LOG    := data/argoverse2-log-excerpt/frames.parquet
+DEMO_LOG_ID := adcf7d18-0510-35b0-a2fa-b4cea13a6d76
+DEMO_CLIP   := 100 101 102 103 104 105 106 107 108 109 110
 
 demo: setup
 	@mkdir -p $(DEMO)
@@ -55,12 +59,17 @@ demo: setup
 	$(R2S) sample $(DEMO)/moving-scene.scenic --n 5 --seed 0 --out $(DEMO)/moving-samples
 	$(R2S) export $(DEMO)/moving-scene.json $(DEMO)/moving-samples --to scenarionet --program $(DEMO)/moving-scene.scenic --steps 50 --out $(DEMO)/scenarionet
 	$(R2S) export $(DEMO)/moving-scene.json $(DEMO)/moving-samples --to openscenario --program $(DEMO)/moving-scene.scenic --steps 50 --out $(DEMO)/openscenario
+	@mkdir -p $(DEMO)/clip
+	for k in $(DEMO_CLIP); do $(R2S) scene $(DEMO_LOG) $(DEMO_LOG_ID)/$$k --out $(DEMO)/clip/f$$k.json || exit 2; done
+	$(R2S) synth $(foreach k,$(DEMO_CLIP),$(DEMO)/clip/f$(k).json) --behaviours --motion --lanes --format json --out $(DEMO)/clip.json
+	$(R2S) simulate $(DEMO)/clip.json $(foreach k,$(DEMO_CLIP),$(DEMO)/clip/f$(k).json) --motion --lanes --n 2 --seed 0 --time-limit 60 --out $(DEMO)/simulated
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
 	@echo "           frames with three cars in a queue: $(DEMO)/matches.parquet (and a section of the report)"
 	@echo "           motion (who is parked, who drives with whom): $(DEMO)/motion-programs.parquet, moving-scene.dsl"
 	@echo "           that frame and 5 variants for simulators: $(DEMO)/scenarionet (MetaDrive), $(DEMO)/openscenario (esmini)"
+	@echo "           a second of the AV2 log, its behaviours ($(DEMO)/clip.json) and 2 simulated variants: $(DEMO)/simulated"
 	@echo "next: . $(VENV)/bin/activate   (in each new shell: puts r2s and the venv's python on PATH for the README's examples)"
 
 # Two pytest-xdist workers, each given whole test files (--dist loadfile: a module's fixtures are built once):
