@@ -14,11 +14,20 @@ between its simulated and recorded position at each of its recorded samples (the
 sample's time): mean and max over the clip. Targets (issue 38, over 8 s clips): median of the actors' mean
 distance <= 1.0 m; 90th percentile of their max <= 3.0 m.
 
+Variants (`r2s simulate`, pipeline.simulation.simulate, as the verb runs it): per clip with a road, K = VARIANTS
+variants with seed 0 from the clip program's JSON and its scene files; the share of simulations Scenic accepts
+(a scene drawn, no `require always` broken, within TIME_LIMIT_S) and, of those, the share r2sgen's checker accepts
+(target: 100%). Event retention (on the shipped Argoverse 2 log's clips): every event of a shipped temporal
+pattern (RETENTION_PATTERNS) that `r2s query --events` finds in the recording within the clip, its bound entities
+simulated; of the written variants, the share in which `r2s query --events` on the simulated frames finds an event
+of the same pattern with the same binding (target: >= 90%).
+
     .venv/bin/python bench/bench_behaviours.py
 """
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 import statistics
@@ -34,7 +43,10 @@ sys.path.insert(0, str(HERE))
 from common import machine, write_results  # noqa: E402
 
 from pipeline.cli import main as r2s  # noqa: E402
+from pipeline.errors import UserError  # noqa: E402
+from pipeline.query.mining import query  # noqa: E402
 from pipeline.scenes import scene as frame_scene  # noqa: E402
+from pipeline.simulation import NoVariantWritten, simulate  # noqa: E402
 from synth import SynthConfig  # noqa: E402
 from synth.behaviour.check import check_clip  # noqa: E402
 from synth.behaviour.scenic import clip_scenic  # noqa: E402
@@ -45,6 +57,10 @@ CONFIG = SynthConfig(motion=True, lanes=True)
 CLIP_S = 8.0
 SHARED = Path("/work/shared/data")
 STEP_S = 0.1
+VARIANTS = 5
+TIME_LIMIT_S = 120.0
+RETENTION_PATTERNS = ("lanes/cut-in-by-lane-change.dsl", "lanes/vehicle-turning-left-in-intersection.dsl",
+                      "vehicle-following-ego.dsl", "vehicle-braking-ahead.dsl")
 
 
 def extracted(source: str, path: Path, out: Path) -> Path:
@@ -107,6 +123,57 @@ def replay(result, scenes, work: Path) -> dict:
     return {"accepted": True, "sim_s_per_wall_s": steps * STEP_S / wall, "actors": actors}
 
 
+def variants(result, scenes, frames: Path, work: Path) -> dict:
+    """K simulated variants of the clip (r2s simulate) and, on the Argoverse 2 log, their event retention."""
+    clip_dir = work / "variants"
+    shutil.rmtree(clip_dir, ignore_errors=True)
+    clip_dir.mkdir()
+    paths = []
+    for k, s in enumerate(scenes):
+        paths.append(clip_dir / f"f{k:04d}.json")
+        paths[-1].write_text(s.to_json())
+    program = clip_dir / "clip.json"
+    program.write_text(json.dumps(result.to_json_dict()))
+    out = clip_dir / "simulated"
+    try:
+        done = simulate(program, paths, out, n=VARIANTS, seed=0, time_limit=TIME_LIMIT_S, config=CONFIG)
+    except UserError as exc:
+        return {"variants": None, "why_not": str(exc)}
+    except NoVariantWritten as exc:
+        done, out = exc.result, None
+    counts = done.to_json_dict()
+    accepted = VARIANTS - counts["rejected_by_scenic"] - counts["timed_out"]
+    row = {"variants": {"asked": VARIANTS, "scenic_accepts": accepted, "checker_accepts": counts["written"],
+                        "written": counts["written"], "seconds": dict(done.seconds),
+                        "reasons": [v["reason"] for v in counts["variants"] if v["outcome"] != "written"][:3]}}
+    if frames.name == "frames.parquet" and frames.parent.name == "argoverse2-log-excerpt" and out is not None:
+        row["retention"] = retention(frames, scenes, done, out)
+    return row
+
+
+def retention(frames: Path, scenes, done, out: Path) -> list[dict]:
+    """Each recorded event of RETENTION_PATTERNS within the clip, its entities simulated: in how many written
+    variants the same pattern finds the same binding."""
+    ids = {s.frame_id for s in scenes}
+    written = [v["scene"] for v in done.to_json_dict()["variants"] if v["outcome"] == "written"]
+    rows = []
+    for name in RETENTION_PATTERNS:
+        text = (ROOT / "data" / "patterns" / name).read_text()
+        recorded = query(str(frames), text, events=True)
+        simulated = query(str(out), text, events=True)
+        for _, event in recorded.iterrows():
+            binding = dict(event["binding"])
+            if event["first_frame"] not in ids or event["last_frame"] not in ids:
+                continue
+            if not set(binding.values()) <= set(done.simulated):
+                rows.append({"pattern": name, "binding": binding, "simulated": False})
+                continue
+            found = {e["scene"] for _, e in simulated.iterrows() if dict(e["binding"]) == binding}
+            rows.append({"pattern": name, "binding": binding, "simulated": True, "variants": len(written),
+                         "retained": len(found & set(written))})
+    return rows
+
+
 def measure(name: str, frames: Path, ids: list[str], work: Path) -> dict:
     scenes = [frame_scene(str(frames), fid) for fid in ids]
     clip = read_clip(scenes)
@@ -120,6 +187,7 @@ def measure(name: str, frames: Path, ids: list[str], work: Path) -> dict:
            "behaviours_wall_s": result.behaviours_s,
            "checker_accepts": ok, "parked": segments.count(0), "max_segments": max(segments)}
     row.update(replay(result, scenes, work))
+    row.update(variants(result, scenes, frames, work))
     print(f"{name}: {row['tracks']} tracks, {row['frames']} frames, synthesis {cpu:.2f} CPU s, "
           f"checker {'ok' if ok else 'REFUSES'}", flush=True)
     return row
@@ -170,6 +238,41 @@ def percentile(values: list[float], q: float) -> float:
     return values[lo] + (values[hi] - values[lo]) * (k - lo)
 
 
+def variant_lines(rows: list[dict]) -> list[str]:
+    """The Variants section: per clip, simulations Scenic accepts and variants the checker accepts; retention."""
+    done = [r for r in rows if r.get("variants")]
+    lines = ["## Variants (r2s simulate)", "",
+             f"{VARIANTS} variants per clip, seed 0, --time-limit {TIME_LIMIT_S:g} s; the checker reads each variant back "
+             "from the frames written. Clips without a road are not simulated.", "",
+             "| clip | Scenic accepts | checker accepts (of those) | first reason not written | seconds (compile, simulate, check) |",
+             "|---|---|---|---|---|"]
+    for r in done:
+        v = r["variants"]
+        sec = v["seconds"]
+        lines.append(f"| {r['clip']} | {v['scenic_accepts']} of {v['asked']} | {v['checker_accepts']} of "
+                     f"{v['scenic_accepts']} | {(v['reasons'] or [''])[0][:160]} | {sec.get('compile', 0):.1f}, "
+                     f"{sec.get('simulate', 0):.1f}, {sec.get('check', 0):.1f} |")
+    asked = sum(r["variants"]["asked"] for r in done)
+    scenic_ok = sum(r["variants"]["scenic_accepts"] for r in done)
+    checker_ok = sum(r["variants"]["checker_accepts"] for r in done)
+    lines += ["", f"Over {len(done)} clips: Scenic accepts {scenic_ok} of {asked} simulations "
+              f"({100 * scenic_ok / max(asked, 1):.0f}%); the checker accepts {checker_ok} of those "
+              f"({100 * checker_ok / max(scenic_ok, 1):.0f}%, target 100%).", ""]
+    events = [e for r in done for e in r.get("retention", [])]
+    if events:
+        lines += ["Event retention (the shipped AV2 log; same pattern, same binding, in a written variant):", "",
+                  "| clip | pattern | binding | retained |", "|---|---|---|---|"]
+        for r in done:
+            for e in r.get("retention", []):
+                kept = f"{e['retained']} of {e['variants']}" if e["simulated"] else "not simulated (first seen later)"
+                lines.append(f"| {r['clip']} | {e['pattern']} | {e['binding']} | {kept} |")
+        sim = [e for e in events if e["simulated"]]
+        kept, of = sum(e["retained"] for e in sim), sum(e["variants"] for e in sim)
+        lines += ["", f"Retained in {kept} of {of} (event, written variant) pairs "
+                  f"({100 * kept / max(of, 1):.0f}%, target >= 90%).", ""]
+    return lines
+
+
 def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -202,6 +305,7 @@ def main() -> None:
               f"{summary['p90_max_m'] or 0:.2f} m (target <= 3.0). The checker accepts every recording: "
               f"{summary['checker_accepts_all']}. Scenic accepts {summary['scenic_accepts']} of {summary['clips']} "
               "simulations.", ""]
+    lines += variant_lines(rows)
     if crowded is not None:
         lines += [f"Cost: {crowded['clip']}, {crowded['tracks']} tracks over {crowded['frames']} frames "
                   f"({crowded['seconds']} s): synthesis {crowded['synth_cpu_s']:.2f} CPU s (target: under 5 s for "

@@ -116,6 +116,14 @@ class SimulateResult:
                 "variants": [v.to_json_dict() for v in self.variants], "version": __version__}
 
 
+class NoVariantWritten(SamplingError):
+    """Every variant rejected (exit 4, nothing written); `result` says how."""
+
+    def __init__(self, result: SimulateResult) -> None:
+        super().__init__(f"no variant written: {result.line()}")
+        self.result = result
+
+
 class _TimedOut(Exception):
     pass
 
@@ -174,7 +182,7 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
     """K = n simulated variants of the clip program in the JSON file `program` on the clip's scene JSON files
     `scenes` (those it was synthesized from), written to the folder `out` (module docstring). `report(variant, n)`
     is called after each simulation. Bad input raises a UserError (one line, nothing written); no variant
-    written, a SamplingError."""
+    written, NoVariantWritten (a SamplingError) with the result."""
     config = as_config(config)
     if not 1 <= n <= MAX_VARIANTS:
         raise UserError(f"--n must be from 1 to {MAX_VARIANTS:,}, got {n}")
@@ -222,7 +230,7 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
                                     tuple(t.id for t in clip.tracks if not t.from_start), len(clip.scenes),
                                     dict(timer.seconds))
             if not result.written:
-                raise SamplingError(f"no variant written: {result.line()}")
+                raise NoVariantWritten(result)
             with timer.stage("write"):
                 with frames_writer(stage / FRAMES_FILE) as w:
                     for frame in rows:

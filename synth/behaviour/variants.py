@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from synth.behaviour.kinds import Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
+from synth.behaviour.kinds import Heading as HeadingPath
 from synth.behaviour.program import Behaviour
 from synth.behaviour.scenic import STEER, num, placed, speed_bound
 from synth.behaviour.track import Clip, Track
@@ -113,20 +114,42 @@ def r2s__states(objects):
         out.append((o.position.x, o.position.y, o.heading if heading is None else heading, o.velocity.norm()))
     return out
 
-behavior R2sVariant(ends, turns, recorded, lo, hi, rows, q, f, walks):
+def r2s__along(path, s):
+    """The point at arc length s along a polyline ((x, y), ...), past its end straight on along its last piece."""
+    for i in range(len(path) - 1):
+        x0, y0 = path[i]
+        x1, y1 = path[i + 1]  # (not `by`: a Scenic keyword)
+        piece = math.hypot(x1 - x0, y1 - y0)
+        if s <= piece or i == len(path) - 2:
+            share = s / piece if piece > 0 else 0
+            return x0 + (x1 - x0) * share, y0 + (y1 - y0) * share
+        s -= piece
+    return path[-1]
+
+behavior R2sVariant(ends, turns, recorded, lo, hi, rows, q, f, walks, path):
     speeds = feasible(recorded, lo, hi, rows, q, f)
     heading = self.heading
+    travelled = 0
+    dt = simulation().timestep
     for j in range(len(turns)):
         start, a, b = heading, ends[j], ends[j + 1]
         for k in range(a, b):
             share = (k + 1 - a) / (b - a)
             speed = speeds[j] + (speeds[j + 1] - speeds[j]) * share
             heading = start + turns[j] * share
+            if path is not None:
+                # along the recorded path: where this step ends (the car moves on its present heading), aim at the
+                # path's point one more step on
+                travelled += speed * dt
+                ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
+                tx, ty = r2s__along(path, travelled + speed * dt)
+                if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
+                    heading = math.atan2(-(tx - ahead.x), ty - ahead.y)
             if walks:
                 take SetWalkingDirectionAction(heading), SetWalkingSpeedAction(speed)
             else:
                 error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / simulation().timestep))
+                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / dt))
     while True:
         take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
 '''
@@ -145,6 +168,17 @@ class Simulated:
     @property
     def steps(self) -> int:
         return self.frame_steps[-1]
+
+
+def path_of(behaviour: Behaviour, track: Track, clip: Clip) -> str:
+    """The recorded path a moving vehicle follows by arc length (its world positions at its samples, Scenic text), so
+    that a variant at other speeds keeps the recording's lanes; `None` (heading by time, the recorded turns) where
+    some segment is a `heading` Range, which only the recorded arc of headings keeps, and for a walker."""
+    if track.type == "Pedestrian" or any(isinstance(s.path, HeadingPath) for s in behaviour.segments):
+        return "None"
+    rows = [scene.ego if track.id == "ego" else scene.by_id().get(track.id) for scene in clip.scenes]
+    points = [scene.world.point(e.x, e.y) for scene, e in zip(clip.scenes, rows) if e is not None]
+    return "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]"
 
 
 def simulation_step(times: Sequence[float], most: float = 0.1) -> float:
@@ -181,7 +215,7 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             args = [repr(ends), "[" + ", ".join(num(t) for t in turns(bounds, track)) + "]",
                     *("[" + ", ".join(num(v) for v in vs) + "]" for vs in (plan.recorded, plan.lo, plan.hi)),
                     "[" + ", ".join(f"({i}, {num(a)}, {j}, {num(b)}, {num(c)})" for i, a, j, b, c in plan.rows) + "]",
-                    f"[{draws}]", "Range(0, 1)", "True" if cls == "Pedestrian" else "False"]
+                    f"[{draws}]", "Range(0, 1)", "True" if cls == "Pedestrian" else "False", path_of(behaviour, track, clip)]
             where += f", with speed {num(plan.recorded[0])}, with behavior R2sVariant({', '.join(args)})"
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
