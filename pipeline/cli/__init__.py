@@ -70,8 +70,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                 + ("r2s synth f100.json f101.json f102.json f103.json f104.json f105.json --behaviours --motion --lanes "
                    "--format json --out clip.json",
                    "r2s simulate clip.json f100.json f101.json f102.json f103.json f104.json f105.json --motion --lanes "
-                   "--n 2 --seed 0 --out simulated",
-                   "r2s query simulated data/patterns/queue-of-three.dsl --out matches.parquet"),
+                   "--n 2 --seed 0 --out simulated"),
 }
 
 EXIT_CODES = (f"{ExitCode.OK} done; {ExitCode.BAD_INPUT} bad input or usage (one line on stderr, nothing written); "

@@ -28,16 +28,17 @@ def test_help_shows_defaults_an_example_and_the_exit_codes(verb):
         if action.default is not None and action.default is not False:
             assert "default" in parser._get_formatter()._get_help_string(action), (verb, action.option_strings)
     assert ("3 the program does not contain the scene" in text) == (verb == "check")
-    assert ("4 " in text.split("exit codes:")[1]) == (verb in ("sample", "render"))
+    assert ("4 " in text.split("exit codes:")[1]) == (verb in ("sample", "render", "simulate"))
 
 
 def test_the_sampling_exit_code_is_the_one_sampling_raises():
     from pipeline.cli import MORE_EXIT_CODES
+    from pipeline.simulation import NoVariantWritten
     from pipeline.variants.sample import SamplingFailed
     from synth.errors import ExitCode
 
-    assert SamplingFailed.exit_code == ExitCode.SAMPLING_FAILED
-    assert all(MORE_EXIT_CODES[v].startswith(f"{ExitCode.SAMPLING_FAILED} ") for v in ("sample", "render"))
+    assert SamplingFailed.exit_code == NoVariantWritten.exit_code == ExitCode.SAMPLING_FAILED
+    assert all(MORE_EXIT_CODES[v].startswith(f"{ExitCode.SAMPLING_FAILED} ") for v in ("sample", "render", "simulate"))
 
 
 def test_top_level_help_lists_the_exit_codes():
@@ -68,7 +69,8 @@ def test_every_help_example_runs(tmp_path):
             assert proc.returncode == 0, f"r2s {verb} --help example: {line}\n{proc.stderr[-2000:]}"
     # What the examples say they make is there.
     for made in ("scene.json", "result.json", "scene.dsl", "frames", "programs", "matches.parquet",
-                 "report/report.html", "scene.png", "variants/sample_004.json", "eval/metrics.json"):
+                 "report/report.html", "scene.png", "variants/sample_004.json", "eval/metrics.json",
+                 "simulated/summary.json"):
         assert (tmp_path / made).exists(), made
     assert json.loads((tmp_path / "result.json").read_text())["status"] == "optimal"
 
