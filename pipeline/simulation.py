@@ -22,6 +22,7 @@ import random
 import signal
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -188,6 +189,9 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
         raise UserError(f"--n must be from 1 to {MAX_VARIANTS:,}, got {n}")
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
         raise UserError(f"--time-limit must be a positive number of seconds, got {time_limit}")
+    if time_limit is not None and threading.current_thread() is not threading.main_thread():
+        raise UserError("a time limit per simulation is an alarm signal, which only the main thread receives: call "
+                        "simulate with time_limit from the main thread, or without it")
     if not 0 <= seed < 2**32:
         raise UserError(f"--seed must be from 0 to 2^32 - 1, got {seed}")
     if len(scenes) < 2:
