@@ -90,6 +90,8 @@ LAZY: dict[tuple[str, str], str] = {
     ('pipeline.cli.sample', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.sample', 'pipeline.variants.sample'): VERB,
     ('pipeline.cli.scene', 'pipeline.scenes'): VERB,
+    ('pipeline.cli.simulate', 'pipeline.cli.inputs'): VERB,
+    ('pipeline.cli.simulate', 'pipeline.simulation'): VERB,
     ('pipeline.cli.synth', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.synth', 'synth.behaviour.synthesize'): VERB,
     ('pipeline.cli.synth', 'synth.window.program'): VERB,
