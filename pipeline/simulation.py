@@ -45,7 +45,7 @@ from synth.behaviour.track import Clip, read_clip
 from synth.behaviour.variants import Simulated, variant_scenic
 from synth.config import SynthConfig, as_config
 from synth.driver import StageTimer
-from synth.errors import SamplingError
+from synth.errors import InternalError, SamplingError
 from synth.geometry import normalize
 from synth.road.lane_facts import RoadIndex
 from synth.scene import Scene
@@ -125,8 +125,8 @@ class NoVariantWritten(SamplingError):
         self.result = result
 
 
-class _TimedOut(Exception):
-    pass
+class _TimedOut(InternalError):
+    """The alarm of --time-limit inside one simulation, caught around it (an internal error only if it escaped)."""
 
 
 def variant_seed(seed: int, k: int) -> int:
