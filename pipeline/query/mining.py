@@ -76,6 +76,16 @@ MAX_FRAME_BINDINGS = 10**6
 MAX_BINDINGS = 10**9
 SPILL_LIMIT_MB = 8192
 BINDINGS_TABLE = "r2s_m"
+# Without --memory-limit DuckDB's own default (80% of RAM) let its buffer pool grow past what a chunk of frames needs
+# (pipeline.query.sql.CHUNK_FRAMES): queue-of-three at 10^6 frames peaked at 4,736 MB RSS; under 3072 MB, 3,303 MB for
+# 6-10% more CPU (bench/results/query.md). A machine with less RAM keeps DuckDB's 80%.
+DEFAULT_MEMORY_LIMIT_MB = 3072
+
+
+def default_memory_limit_mb() -> int:
+    """The memory limit of a query without --memory-limit: DEFAULT_MEMORY_LIMIT_MB, or 80% of RAM if that is less."""
+    ram_mb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2**20
+    return min(DEFAULT_MEMORY_LIMIT_MB, ram_mb * 8 // 10)
 
 
 @dataclass(frozen=True)
@@ -104,7 +114,7 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
     pipeline.query.lanes; map_heading, the heading in the world, where has_world)."""
     con = duckdb.connect(config={"threads": threads or os.cpu_count() or 1, "temp_directory": spill_dir,
                                  "max_temp_directory_size": f"{SPILL_LIMIT_MB}MiB",
-                                 **({"memory_limit": f"{memory_limit_mb}MB"} if memory_limit_mb else {})})
+                                 "memory_limit": f"{memory_limit_mb or default_memory_limit_mb()}MB"})
     # Progress is tracked for _Progress, never printed by DuckDB itself (it would write to stdout).
     con.execute("SET enable_progress_bar = true")
     con.execute("SET enable_progress_bar_print = false")
@@ -393,7 +403,8 @@ def _run(dataset, frames, pattern, temporal: bool, config: SynthConfig, select: 
         except duckdb.IOException as exc:  # the rows were checked, so this is a file that changed or broke since
             raise FramesError(f"{frames}: not a readable frames dataset ({str(exc).splitlines()[0][:160]})") from None
         except duckdb.OutOfMemoryException as exc:
-            limit = f"--memory-limit {memory_limit_mb} MB" if memory_limit_mb else "the memory limit"
+            limit = (f"--memory-limit {memory_limit_mb} MB" if memory_limit_mb
+                     else f"the default memory limit of {default_memory_limit_mb()} MB")
             raise UserError(f"the query ran out of memory under {limit} with at most {SPILL_LIMIT_MB} MB spilled to "
                             f"disk: raise the limit ({str(exc).splitlines()[0][:120]})") from None
         except duckdb.Error as exc:

@@ -92,6 +92,20 @@ def test_the_spill_is_capped(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_query_without_memory_limit_runs_under_the_default(tmp_path, monkeypatch):
+    """Without --memory-limit the session is bounded by the default (DuckDB's own, 80% of RAM, let queue-of-three
+    at 10^6 frames reach 4.7 GB): a default too small to run in is named in the refusal."""
+    from pipeline.errors import UserError
+
+    assert mining.default_memory_limit_mb() <= mining.DEFAULT_MEMORY_LIMIT_MB
+    monkeypatch.setattr(mining, "DEFAULT_MEMORY_LIMIT_MB", 1)
+    out = tmp_path / "m.parquet"
+    with pytest.raises(UserError, match="the default memory limit of 1 MB"):
+        mining.query_frames(KEYFRAMES, parse_pattern(_unrelated(2)), out, all_bindings=True, threads=1,
+                            log=lambda s: None)
+    assert list(tmp_path.iterdir()) == []
+
+
 def _running_query(tmp_path: Path, sig: signal.Signals):
     """Start a query that runs for seconds (every pair of two unrelated names, all bindings: 6e5 rows), wait
     until it has made its temporary output, then send `sig`."""
