@@ -228,17 +228,17 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
             (stage / MAPS_DIR).mkdir()
             with timer.stage("write"), maps_writer(stage / MAPS_DIR / FRAMES_FILE) as maps:
                 maps.add(world_road)
-            variants, rows = _variants(scenario, sim, clip, kept, world_road, maps_dir(stage), n, seed, time_limit,
-                                       config, timer, report)
+            # each written variant's rows go to the file as it passes (K up to MAX_VARIANTS clips must not sit in
+            # memory); with none written the staged folder is dropped whole
+            with frames_writer(stage / FRAMES_FILE) as w:
+                variants = _variants(scenario, sim, clip, kept, world_road, maps_dir(stage), n, seed, time_limit,
+                                     config, timer, report, w.write_frame)
             result = SimulateResult(n, seed, tuple(variants), sim.placed,
                                     tuple(t.id for t in clip.tracks if not t.from_start), len(clip.scenes),
                                     dict(timer.seconds))
             if not result.written:
                 raise NoVariantWritten(result)
             with timer.stage("write"):
-                with frames_writer(stage / FRAMES_FILE) as w:
-                    for frame in rows:
-                        w.write_frame(frame)
                 (stage / SUMMARY_FILE).write_text(json.dumps(result.to_json_dict(), indent=1) + "\n",
                                                   encoding="utf-8")
     return result
@@ -251,14 +251,16 @@ def _compile(text: str):
 
 
 def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_road, maps: Path, n: int, seed: int,
-              time_limit: float | None, config: SynthConfig, timer: StageTimer, report) -> tuple[list, list]:
-    """Simulate, write as rows and check each variant in turn: (every Variant, the rows of the frames written)."""
+              time_limit: float | None, config: SynthConfig, timer: StageTimer, report,
+              write: Callable[[list[dict]], None]) -> list[Variant]:
+    """Simulate, write as rows and check each variant in turn, each frame of a variant the checker accepts passed to
+    `write`; every Variant."""
     from scenic.core.distributions import RejectionException
 
     base = clip.scenes[0].world.scene or clip.scenes[0].frame_id.rsplit("/", 1)[0]
     index, roads = RoadIndex(world_road), FrameRoads(maps)
     simulator = scenario.getSimulator()
-    variants, written = [], []
+    variants = []
     for k in range(n):
         name, s = f"{base}-sim{k:03d}", variant_seed(seed, k)
         random.seed(s)
@@ -279,7 +281,9 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
                 verdict = check_clip(kept, scenes, config)
             if verdict.ok:
                 outcome = "written"
-                written.extend(frames)
+                with timer.stage("write"):
+                    for frame in frames:
+                        write(frame)
             else:
                 first = verdict.violations[0]
                 outcome = "rejected by the checker"
@@ -290,7 +294,7 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
         variants.append(variant)
         if report is not None:
             report(variant, n)
-    return variants, written
+    return variants
 
 
 class _deadline:
