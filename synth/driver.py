@@ -17,13 +17,12 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from synth.config import SynthConfig
-from synth.dsl import Program, fmt_number
+from synth.dsl import Program
 from synth.errors import InternalError
 from synth.oracle import RelationOracle, make_oracle
-from synth.parts import MOTION
 from synth.parts.lane import require_lanes
 from synth.result import SynthResult, SynthStats
-from synth.robust import is_robust
+from synth.robust import robust_note
 from synth.scene import Scene, SceneError
 from synth.scenic.emit import render_scenic
 from synth.search import Budget, CostModel, search
@@ -177,11 +176,8 @@ class Frame:
 
     def scenic(self, program: Program, status: str, config: SynthConfig) -> str:
         scene = self.scene
-        header = f"frame {scene.frame_id}: cost {program.cost} ({status}), r2sgen {__version__}"
-        if is_robust(scene, config):
-            speed = f", {fmt_number(config.speed_uncertainty)} m/s" if MOTION.is_robust(scene, config) else ""
-            header += (f"; robust to {fmt_number(config.pos_uncertainty)} m, "
-                       f"{fmt_number(config.heading_uncertainty)} deg{speed} (entities' own sigmas override)")
+        header = (f"frame {scene.frame_id}: cost {program.cost} ({status}), r2sgen {__version__}"
+                  + robust_note(self.scenes, config))
         return render_scenic(program, scene, config, header=header)
 
     def result(self, **fields: Any) -> SynthResult:

@@ -11,13 +11,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from synth.config import SynthConfig
-from synth.parts import Part, parts_for
+from synth.dsl import fmt_number
+from synth.parts import MOTION, Part, parts_for
 from synth.perturbation import MIN_CONE, Bounds, bounds_of, covering, narrowed
 from synth.scene import Scene
 from synth.tables import NONE, UNDECIDED, RelationTable, scene_arrays
 
 __all__ = ["MIN_CONE", "Bounds", "bounds_of", "covering", "is_robust", "narrowed", "robust_closed_form_table",
-           "robust_parts", "settle_conservatively"]
+           "robust_note", "robust_parts", "settle_conservatively"]
 
 
 def robust_parts(scene: Scene, config: SynthConfig, parts: Sequence[Part] | None = None) -> frozenset[str]:
@@ -28,6 +29,16 @@ def robust_parts(scene: Scene, config: SynthConfig, parts: Sequence[Part] | None
 def is_robust(scene: Scene, config: SynthConfig) -> bool:
     """Does any entity carry uncertainty that concerns a part? If not, synthesis is the plain one, byte for byte."""
     return bool(robust_parts(scene, config))
+
+
+def robust_note(scenes: Sequence[Scene], config: SynthConfig) -> str:
+    """What a Scenic header adds when some frame's synthesis was robust (docs/dsl.md, "Robust synthesis"): one
+    note for a frame and for a window alike, since a window's clauses are its frames' robust ones merged."""
+    if not any(is_robust(s, config) for s in scenes):
+        return ""
+    speed = f", {fmt_number(config.speed_uncertainty)} m/s" if any(MOTION.is_robust(s, config) for s in scenes) else ""
+    return (f"; robust to {fmt_number(config.pos_uncertainty)} m, "
+            f"{fmt_number(config.heading_uncertainty)} deg{speed} (entities' own sigmas override)")
 
 
 def robust_closed_form_table(scene: Scene, config: SynthConfig, parts: Sequence[Part] | None = None) -> RelationTable:

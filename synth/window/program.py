@@ -33,6 +33,7 @@ from synth.oracle import RelationOracle, make_oracle
 from synth.parts import parts_for
 from synth.result import SynthResult
 from synth.road.roadmap import RoadMap
+from synth.robust import robust_note
 from synth.scene import Entity, Scene, SceneError, as_scene
 from synth.scenic.emit import render_scenic
 from synth.semantics import check
@@ -265,7 +266,7 @@ class Window:
     def scenic(self, program: Program, status: str, config: SynthConfig) -> str:
         first, last = self.scenes[0], self.scenes[-1]
         header = (f"frames {first.frame_id} to {last.frame_id} ({len(self.scenes)} frames): cost {program.cost} "
-                  f"({status}), r2sgen {__version__}")
+                  f"({status}), r2sgen {__version__}" + robust_note(self.scenes, config))
         # On the window's road, so that a lane clause of an entity first seen later names a region of the text.
         shown = self.shown
         return render_scenic(program, shown if self.road is shown.road else replace(shown, road=self.road), config,

@@ -239,3 +239,14 @@ def test_tiling_refuses_non_positive_durations():
     for args in ((0,), (1, 0), (1, None, -1)):
         with pytest.raises(ValueError):
             tile([0, 1], *args)
+
+
+def test_window_scenic_header_says_robust():
+    """A window's clauses are its frames' robust ones merged, so its Scenic header says what they are robust to,
+    as a frame's does; without uncertainty neither says it."""
+    frames = random_clip(random.Random(3), 3, 3, speeds=True)
+    robust = SynthConfig(pos_uncertainty=0.5, heading_uncertainty=2.0, motion=True, speed_uncertainty=0.25)
+    header = synthesize_window(frames, robust).scenic.splitlines()[0]
+    assert "robust to 0.5 m, 2 deg, 0.25 m/s" in header
+    assert header.split("; robust")[1] in synthesize(frames[0], robust).scenic.splitlines()[0]
+    assert "robust to" not in synthesize_window(frames).scenic
