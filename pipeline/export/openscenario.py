@@ -22,7 +22,9 @@ from typing import Any
 from pipeline.errors import UserError
 from pipeline.export import slug
 from pipeline.export.opendrive import DATE, VENDOR, linked, opendrive, write_xml, xml_text
-from pipeline.export.scenarionet import HEIGHTS, STEP_S
+from pipeline.export.motion import STRAIGHT, Motion
+from pipeline.export.scenarionet import HEIGHTS
+from pipeline.export.trajectory_story import story
 from synth.road.lane_facts import RoadIndex
 from synth.road.opendrive import Network, lane_position
 from synth.road.roadmap import RoadMap
@@ -43,20 +45,25 @@ CATEGORIES: dict[str, tuple[str, str]] = {
 }
 
 
-def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, steps: int, note: str,
+def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, motion: Motion, note: str,
              offset: tuple[float, float] = (0.0, 0.0), net: Network | None = None, road: RoadMap | None = None):
     """The OpenSCENARIO 1.2 scenario (scenariogeneration's Scenario) of one scene on the road in road_file, whose
     coordinates are the world's less `offset`; with the road's network `net` and the scene's road (ego frame),
-    an entity in a lane (its lane fact on that road) is placed by a LanePosition on the road of that lane."""
+    an entity in a lane (its lane fact on that road) is placed by a LanePosition on the road of that lane. The
+    scene's entities start where it has them; `motion` (its first step the scene's) says what they do: on at their
+    speed (STRAIGHT: an initial speed, no story), else a path and a speed profile each
+    (pipeline/export/trajectory_story.py), an entity of the motion absent from the scene (a clip's, first seen
+    later) standing at its first pose until then."""
     from scenariogeneration import xosc
 
     entities = xosc.Entities()
     init = xosc.Init()
     lanes = _lanes(scene, road) if net is not None and road is not None else {}
+    placed = set()
     for e in scene.entities:
         w = in_world(world, e)
-        box = xosc.BoundingBox(w.width, w.length, HEIGHTS[e.type], 0, 0, HEIGHTS[e.type] / 2.0)
-        entities.add_scenario_object(e.id, _object(e.id, e.type, box))
+        placed.add(e.id)
+        entities.add_scenario_object(e.id, _object(e.id, e.type, _box(e.type, w.length, w.width)))
         x, y = w.x - offset[0], w.y - offset[1]
         on = lane_position(net, lanes[e.id], x, y) if lanes.get(e.id) is not None else None
         if on is not None:  # the lane's road, s along it, the offset from the lane's centre; the yaw absolute
@@ -69,12 +76,33 @@ def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, steps: i
         if CATEGORIES[e.type][0] != "misc":  # a MiscObject does not move (no speed action applies)
             init.add_init_action(e.id, xosc.AbsoluteSpeedAction(
                 w.speed or 0.0, xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0)))
+    movable = {e.id for e in scene.entities if CATEGORIES[e.type][0] != "misc"}
+    for t in motion.trajectories if motion.how != STRAIGHT else ():
+        if t.id in placed:
+            continue
+        k = t.first  # first seen after the scene's frame: standing at its first pose until its time
+        entities.add_scenario_object(t.id, _object(t.id, t.type, _box(t.type, t.length, t.width)))
+        init.add_init_action(t.id, xosc.TeleportAction(xosc.WorldPosition(
+            float(t.x[k]) - offset[0], float(t.y[k]) - offset[1], 0, float(t.yaw[k]))))
+        if CATEGORIES[t.type][0] != "misc":
+            movable.add(t.id)
+            init.add_init_action(t.id, xosc.AbsoluteSpeedAction(
+                0.0, xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0)))
     stop = xosc.ValueTrigger("stop", 0, xosc.ConditionEdge.rising,
-                             xosc.SimulationTimeCondition(steps * STEP_S, xosc.Rule.greaterThan), "stop")
+                             xosc.SimulationTimeCondition(motion.end, xosc.Rule.greaterThan), "stop")
     board = xosc.StoryBoard(init, stop)
+    moving = story(motion, movable, offset) if motion.how != STRAIGHT else None
+    if moving is not None:
+        board.add_story(moving)
     return xosc.Scenario(name, f"{VENDOR} {__version__}: {note}", xosc.ParameterDeclarations(), entities, board,
                          xosc.RoadNetwork(roadfile=road_file), xosc.Catalog(), osc_minor_version=2,
                          creation_date=DATE)
+
+
+def _box(etype: str, length: float, width: float):
+    from scenariogeneration import xosc
+
+    return xosc.BoundingBox(width, length, HEIGHTS[etype], 0, 0, HEIGHTS[etype] / 2.0)
 
 
 def _lanes(scene: Scene, road: RoadMap) -> dict[str, str | None]:
@@ -116,10 +144,11 @@ class _Writer:
         write_xml(opendrive(net, slug(recorded.frame_id)), folder / self.road_file)
 
     def add(self, item, world: WorldPose, road: RoadMap | None) -> None:
-        what = "the recorded frame" if item.variant is None else f"variant {item.variant}"
+        what = ("the recorded frame" if item.variant is None else f"variant {item.variant}") if item.clip is None \
+            else f"the clip of {item.clip.scene} ({len(item.clip.scenes)} frames) from"
         note = f"{what} of {self.recorded_frame}" + (f", program {self.options.program_file}"
                                                        if self.options.program_file else "")
-        sc = scenario(item.scene, item.name, world, self.road_file, self.options.steps, xml_text(note), self.offset,
+        sc = scenario(item.scene, item.name, world, self.road_file, item.motion, xml_text(note), self.offset,
                       self.net, road)
         write_xml(sc.get_element(), self.folder / f"{item.name}.xosc")
 

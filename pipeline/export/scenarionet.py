@@ -21,14 +21,14 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from pipeline.export.motion import RECORDED, STEP_S, Motion, Trajectory, straight
 from synth.road.roadmap import CROSSWALK, DRIVABLE_AREA, LANE, ROAD_LINE, RoadMap
 from synth.scene import ENTITY_TYPES, Scene
 from synth.version import __version__
-from synth.world import WorldPose, in_world, road_in_world
+from synth.world import WorldPose, road_in_world
 
 DATASET = "r2sgen"
 SUMMARY, MAPPING = "dataset_summary.pkl", "dataset_mapping.pkl"
-STEP_S = 0.1  # ScenarioNet's 10 Hz
 # Scenic class -> (MetaDrive track type, the dataset's own type kept in the track's metadata.type). The MetaDrive
 # type is what MetaDrive replays (only its agent and traffic-object types are allowed); the own type is a name
 # `r2s extract scenarionet` reads back as the same class (extractors.scenarionet.TAXONOMY: nuScenes' names).
@@ -78,56 +78,72 @@ def scenario(scene: Scene, name: str, world: WorldPose, road: RoadMap | None, pr
              steps: int = 1) -> dict[str, Any]:
     """The scenario of one scene: every entity at its world pose (ego = the sdc track, id `ego`), moving at its
     speed along its heading for `steps` steps of 0.1 s (1: the instant itself), on the road put back in the world."""
-    tracks = {e.id: _track(scene, e, world, steps) for e in scene.entities}
+    return scenario_of(straight(scene, world, steps), name, world, road, provenance)
+
+
+def scenario_of(motion: Motion, name: str, world: WorldPose, road: RoadMap | None, provenance: Provenance,
+                more: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The scenario of a Motion (pipeline/export/motion.py: one frame moved on, or a clip's recorded steps): every
+    step of every track (`valid` false where it is not there), the Motion's times as `ts`, on the road put back in
+    the world; `more` adds to the metadata's r2sgen entry (a clip's frames)."""
+    tracks = {t.id: _track(t) for t in motion.trajectories}
     features = map_features(road_in_world(world, road)) if road is not None else {}
+    steps = motion.steps
     meta = {
-        "ts": np.arange(steps, dtype=float) * STEP_S,
+        "ts": motion.times,
         "metadrive_processed": False,
         "coordinate": "right-handed",
         "dataset": DATASET,
         "scenario_id": name,
         "id": name,
         "sdc_id": "ego",
-        "sample_rate": STEP_S,
+        # a clip's own rate (its mean step; ts holds every step's time), else 10 Hz
+        "sample_rate": STEP_S if motion.how != RECORDED or steps < 2 else float(motion.times[-1] / (steps - 1)),
         "map": world.map_id,
-        "r2sgen": {**provenance.to_dict(), "world": world.to_dict(), "map_features": len(features)},
+        "r2sgen": {**provenance.to_dict(), "world": world.to_dict(), "map_features": len(features), **(more or {})},
         "object_summary": {tid: _object_summary(tid, t) for tid, t in tracks.items()},
     }
     return {"id": name, "version": f"{DATASET} {__version__}", "length": steps, "metadata": meta,
             "tracks": tracks, "dynamic_map_states": {}, "map_features": features}
 
 
-def _track(scene: Scene, e, world: WorldPose, steps: int) -> dict[str, Any]:
-    w = in_world(world, e)
-    speed = w.speed or 0.0  # no speed: standing (MetaDrive needs a velocity)
-    vx, vy = speed * math.cos(w.yaw), speed * math.sin(w.yaw)
-    t = np.arange(steps, dtype=float) * STEP_S
+def _track(t: Trajectory) -> dict[str, Any]:
+    steps = len(t.valid)
     position = np.zeros((steps, 3))
-    position[:, 0], position[:, 1] = w.x + vx * t, w.y + vy * t
-    position[0, :2] = (w.x, w.y)  # the instant itself exactly, not x + 0.0 * vx
-    metadrive_type, own_type = TRACK_TYPES[e.type]
+    position[:, 0], position[:, 1] = t.x, t.y
+    # each step's velocity by the scalar cos / sin (numpy's may differ in the last bit from the instant's own)
+    velocity = np.array([(s * math.cos(y), s * math.sin(y)) for s, y in zip(t.speed.tolist(), t.yaw.tolist())],
+                        dtype=float).reshape(steps, 2)
+    velocity[~t.valid] = 0.0  # MetaDrive's valid_check: an absent step's values are zeros
+    metadrive_type, own_type = TRACK_TYPES[t.type]
+    box = np.where(t.valid, 1.0, 0.0)[:, None]
     return {
         "type": metadrive_type,
         "state": {
             "position": position,
-            "heading": np.full(steps, w.yaw),
-            "velocity": np.tile([vx, vy], (steps, 1)),
-            "valid": np.ones(steps, dtype=bool),
-            "length": np.full((steps, 1), w.length),
-            "width": np.full((steps, 1), w.width),
-            "height": np.full((steps, 1), HEIGHTS[e.type]),
+            "heading": t.yaw.copy(),
+            "velocity": velocity,
+            "valid": t.valid.copy(),
+            "length": box * t.length,
+            "width": box * t.width,
+            "height": box * HEIGHTS[t.type],
         },
-        "metadata": {"track_length": steps, "type": own_type, "object_id": e.id, "original_id": e.id,
+        "metadata": {"track_length": steps, "type": own_type, "object_id": t.id, "original_id": t.id,
                      "dataset": DATASET},
     }
 
 
 def _object_summary(tid: str, track: dict) -> dict[str, Any]:
-    steps = len(track["state"]["valid"])
-    xy = track["state"]["position"][:, :2]
+    """ScenarioNet's get_object_summary: the distance moved over the valid steps, how many are valid, and the run
+    of valid steps from the first."""
+    valid = track["state"]["valid"]
+    steps = len(valid)
+    xy = track["state"]["position"][valid, :2]
+    first = int(np.argmax(valid)) if valid.any() else steps
+    run = int(np.argmin(valid[first:])) if not valid[first:].all() else steps - first
     return {"type": track["type"], "object_id": tid, "track_length": steps,
-            "moving_distance": float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if steps > 1 else 0.0,
-            "valid_length": steps, "continuous_valid_length": steps}
+            "moving_distance": float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0,
+            "valid_length": int(valid.sum()), "continuous_valid_length": run}
 
 
 def map_features(road: RoadMap) -> dict[str, dict[str, Any]]:
@@ -237,7 +253,8 @@ class _Writer:
         o = self.options
         provenance = Provenance(item.scene.frame_id if item.variant is None else self.recorded_frame, item.variant,
                                 o.program_text, o.program_file)
-        self.db.add(scenario(item.scene, item.name, world, road, provenance, o.steps))
+        more = {"clip": item.clip.to_dict()} if item.clip is not None else None
+        self.db.add(scenario_of(item.motion, item.name, world, road, provenance, more))
 
     def close(self) -> None:
         self.db.close()

@@ -17,6 +17,9 @@ from pathlib import Path
 from typing import Protocol
 
 from pipeline.cli.inputs import read_scene
+from pipeline.export.behaviour_motion import Behaviours, by_behaviours, check_program_of
+from pipeline.export.clip import Clip
+from pipeline.export.motion import Motion, straight
 from pipeline.errors import UserError
 from pipeline.export import TARGETS, slug
 from pipeline.outputs import staged_directory
@@ -29,11 +32,14 @@ MAX_VARIANTS = 10**7
 
 @dataclass(frozen=True)
 class Item:
-    """One scenario to write: its scene, its name (unique in the output) and where it came from."""
+    """One scenario to write: its scene (a clip's first frame), its name (unique in the output), where it came
+    from, and what its entities do over its steps (pipeline/export/motion.py)."""
 
     scene: Scene
     name: str
     variant: str | None  # the variant's file name; None for the recorded frame
+    motion: Motion
+    clip: Clip | None = None  # a recorded clip's frames (r2s export --clip, FRAMES --scene S)
 
 
 class Writer(Protocol):
@@ -61,6 +67,13 @@ class ExportOptions:
     program_text: str | None = None  # --program's text and file name, which every scenario names
     program_file: str | None = None
     steps: int = 1  # steps of STEP_S per scenario
+    behaviours: Behaviours | None = None  # --program P.json, a clip program: --steps moves entities by it
+
+    def motion(self, scene: Scene, world: WorldPose) -> Motion:
+        """What a frame's entities do over --steps: their behaviours with a clip program, else on at their speed."""
+        if self.behaviours is None:
+            return straight(scene, world, self.steps)
+        return by_behaviours(scene, world, self.behaviours, self.steps)
 
 
 def variant_files(paths: list[str]) -> list[Path]:
@@ -86,12 +99,18 @@ def variant_files(paths: list[str]) -> list[Path]:
     return out
 
 
-def items(recorded: Scene, files: list[Path], max_entities: int | None = None) -> Iterator[Item]:
-    """The recorded scene, then each variant as it is read (one in memory at a time)."""
+def items(recorded: Scene, files: list[Path], options: ExportOptions, max_entities: int | None = None
+          ) -> Iterator[Item]:
+    """The recorded scene, then each variant as it is read (one in memory at a time), each with its motion."""
     base = slug(recorded.frame_id)
-    yield Item(recorded, base, None)
+    yield Item(recorded, base, None, options.motion(recorded, _world(recorded, recorded)))
     for f in files:
-        yield Item(read_scene(str(f), max_entities), f"{base}-{slug(f.stem)}", f.name)
+        scene = read_scene(str(f), max_entities)
+        yield Item(scene, f"{base}-{slug(f.stem)}", f.name, options.motion(scene, _world(scene, recorded)))
+
+
+def _world(scene: Scene, recorded: Scene) -> WorldPose:
+    return scene.world or recorded.world or WorldPose.identity()
 
 
 EXPORTED = "scenarios of r2s export"
@@ -114,6 +133,18 @@ def target(name: str) -> Target:
 def export(recorded: Scene, files: list[Path], to: str, out: Path, options: ExportOptions) -> tuple[int, list[str]]:
     """Write the recorded scene and the variants into `out` (replaced whole); returns the number of scenarios
     and the notes to tell the user (no world pose, no road)."""
+    if options.behaviours is not None:
+        check_program_of(options.behaviours, recorded, options.program_file or "--program")
+    return _write(recorded, items(recorded, files, options), to, out, options)
+
+
+def export_clip(clip: Clip, to: str, out: Path, options: ExportOptions) -> tuple[int, list[str]]:
+    """Write a recorded clip (pipeline/export/clip.py) into `out` as one scenario of its whole trajectories."""
+    return _write(clip.first, iter([Item(clip.first, clip.name, None, clip.motion, clip)]), to, out, options)
+
+
+def _write(recorded: Scene, scenarios: Iterator[Item], to: str, out: Path, options: ExportOptions
+           ) -> tuple[int, list[str]]:
     chosen = target(to)
     notes = []
     if recorded.road is None:
@@ -126,9 +157,9 @@ def export(recorded: Scene, files: list[Path], to: str, out: Path, options: Expo
     n = 0
     with staged_directory(out, exported, EXPORTED) as stage:
         writer = chosen.open(stage, recorded, options)
-        for item in items(recorded, files):
+        for item in scenarios:
             scene = item.scene
-            writer.add(item, scene.world or recorded.world or WorldPose.identity(), scene.road or recorded.road)
+            writer.add(item, _world(scene, recorded), scene.road or recorded.road)
             n += 1
         writer.close()
     return n, notes
