@@ -48,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pipeline.cli.inputs import read_scene, read_text_file
     from pipeline.export.behaviour_motion import read_behaviours
-    from pipeline.export.clip import read_clip_frames, read_clip_files
+    from pipeline.export.clip import read_clip_files, read_clip_frames
     from pipeline.export.stage import EXPORTED, ExportOptions, export, export_clip, exported, variant_files
 
     if args.to == ROAD_ONLY:

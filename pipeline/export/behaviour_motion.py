@@ -26,8 +26,17 @@ import numpy as np
 from pipeline.errors import UserError
 from pipeline.export.motion import BEHAVIOURS, Motion, Trajectory, steps_of
 from pipeline.simulation import read_program_json
-from synth.behaviour.kinds import ChangingLanes, Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped, Turning
-from synth.behaviour.kinds import FollowingLane, Pace
+from synth.behaviour.kinds import (
+    ChangingLanes,
+    Cruising,
+    FollowingLane,
+    Pace,
+    SlowingDown,
+    SlowingToAStop,
+    SpeedingUp,
+    Stopped,
+    Turning,
+)
 from synth.behaviour.program import Behaviour, ClipProgram
 from synth.geometry import heading_vector
 from synth.road.roadmap import LANE, RoadMap

@@ -21,8 +21,8 @@ from typing import Any
 
 from pipeline.errors import UserError
 from pipeline.export import slug
-from pipeline.export.opendrive import DATE, VENDOR, linked, opendrive, write_xml, xml_text
 from pipeline.export.motion import STRAIGHT, Motion
+from pipeline.export.opendrive import DATE, VENDOR, linked, opendrive, write_xml, xml_text
 from pipeline.export.scenarionet import HEIGHTS
 from pipeline.export.trajectory_story import story
 from synth.road.lane_facts import RoadIndex

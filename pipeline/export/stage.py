@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Protocol
 
 from pipeline.cli.inputs import read_scene
+from pipeline.errors import UserError
+from pipeline.export import TARGETS, slug
 from pipeline.export.behaviour_motion import Behaviours, by_behaviours, check_program_of
 from pipeline.export.clip import Clip
 from pipeline.export.motion import Motion, straight
-from pipeline.errors import UserError
-from pipeline.export import TARGETS, slug
 from pipeline.outputs import staged_directory
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene

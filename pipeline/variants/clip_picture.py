@@ -21,8 +21,16 @@ from pipeline.errors import UserError
 from pipeline.export.clip import SCENE_COLUMNS, Clip, read_clip_files, read_clip_frames
 from pipeline.export.motion import Trajectory
 from pipeline.outputs import check_apart, writing
-from pipeline.variants.render import (EGO_EDGE, EGO_FILL, ENTITY_PALETTE, FORMATS, ROAD_STYLES, Footprint,
-                                      road_shapes, save)
+from pipeline.variants.render import (
+    EGO_EDGE,
+    EGO_FILL,
+    ENTITY_PALETTE,
+    FORMATS,
+    ROAD_STYLES,
+    Footprint,
+    road_shapes,
+    save,
+)
 from synth.world import WorldPose
 
 RECORDED_GID, SIMULATED_GID = "r2s-recorded", "r2s-simulated"  # each drawn path's gid: `{kind}-{clip}-{entity}`
