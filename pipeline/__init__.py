@@ -1,13 +1,14 @@
 """The pipeline: the `r2s` verbs and the batch stage. Every verb has a Python API (docs/api.md), imported on first
 use so that `r2s synth` never pays for pandas or pyarrow: `pipeline.extract` (r2s extract), `pipeline.scene`
 (r2s scene), `pipeline.run_frames` (r2s run, the batch stage), `pipeline.sample` (r2s sample), `pipeline.render`
-(r2s render), `pipeline.simulate` (r2s simulate, in pipeline.simulation), and in the rooms of the same name (so not
+(r2s render; `pipeline.render_clip` of a clip), `pipeline.simulate` (r2s simulate, in pipeline.simulation), and in the rooms of the same name (so not
 here) `pipeline.query.query` and `pipeline.report.report`."""
 
 import importlib
 
 _API = {"extract": "pipeline.batch.extract", "scene": "pipeline.scenes", "run_frames": "pipeline.batch.stage",
         "sample": "pipeline.variants.sample", "render": "pipeline.variants.picture",
+        "render_clip": "pipeline.variants.clip_picture",
         "simulate": "pipeline.simulation"}
 
 
