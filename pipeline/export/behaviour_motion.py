@@ -18,7 +18,7 @@ Values only: no I/O."""
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +43,7 @@ from synth.road.roadmap import LANE, RoadMap
 from synth.scene import Entity, Scene
 from synth.world import WorldPose, in_world
 
+TIME_EPS = 1e-9  # seconds: a step's time this near a segment boundary is at it (0.1 k is not exact in floats)
 MAX_LANES = 1000  # lanes a route may chain (a route of 10,000 steps at 40 m/s is 4 km: a few hundred lanes)
 
 
@@ -109,7 +110,7 @@ def _speeds(pace_segments: list[tuple[Pace, float]], v0: float, t: np.ndarray) -
     bounds = np.cumsum([d for _, d in pace_segments]) if pace_segments else np.array([])
     out = np.empty(len(t))
     for k, tk in enumerate(t):
-        i = bisect_right(list(bounds), tk)
+        i = bisect_left(list(bounds), tk - TIME_EPS)  # a boundary's time ends its segment (the checker's too)
         if i >= len(pace_segments):
             out[k] = ends[-1] if ends else v0
         else:
@@ -222,7 +223,7 @@ def _move(e: Entity, behaviour: Behaviour | None, road: RoadMap | None, t: np.nd
         and len(road[e.lane].line) >= 2 else None
     current = -1
     for k in range(1, n):
-        i = min(bisect_right(bounds, t[k - 1]), len(segments) - 1)
+        i = min(bisect_right(bounds, t[k - 1] + TIME_EPS), len(segments) - 1)  # the segment the step starts in
         if i != current and segments:  # a segment starts: its path decides the route
             current = i
             path = segments[i][0].path
