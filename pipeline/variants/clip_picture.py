@@ -28,7 +28,7 @@ from pipeline.variants.render import (
     FORMATS,
     ROAD_STYLES,
     Footprint,
-    road_shapes,
+    draw_road,
     save,
 )
 from synth.world import WorldPose
@@ -143,15 +143,7 @@ def draw_clip(clip: Clip, simulated: Sequence[Clip] = (), where: str | None = No
                  layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    road = road_shapes(clip.first)
-    for r in road:
-        st = ROAD_STYLES[r.style]
-        if r.polygon:
-            ax.add_patch(Polygon(r.polygon, closed=True, facecolor=st.face, edgecolor=st.edge, linewidth=0.5,
-                                 zorder=st.zorder))
-        if r.line:
-            ax.plot(*zip(*r.line), color=st.edge if st.face == "none" else "#b7c6da", linewidth=0.8,
-                    linestyle="-" if st.face == "none" else ":", zorder=st.zorder + 0.05)
+    road = draw_road(ax, clip.first)
     alpha = max(0.25, min(0.7, 3.0 / max(1, len(others))))
     for name, ps in others:
         for p in ps:

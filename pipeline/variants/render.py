@@ -251,15 +251,7 @@ def draw(view: View):
     font = 7.0 if n <= 25 else 6.0 if n <= 70 else 5.0
     colours = entity_colours(boxes) if view.samples else {}
 
-    road = road_shapes(view.scene)
-    for r in road:
-        st = ROAD_STYLES[r.style]
-        if r.polygon:
-            ax.add_patch(Polygon(r.polygon, closed=True, facecolor=st.face, edgecolor=st.edge, linewidth=0.5,
-                                 zorder=st.zorder))
-        if r.line:
-            ax.plot(*zip(*r.line), color=st.edge if st.face == "none" else "#b7c6da", linewidth=0.8,
-                    linestyle="-" if st.face == "none" else ":", zorder=st.zorder + 0.05)
+    road = draw_road(ax, view.scene)
     # Dense enough that where variants pile up reads as likely, sparse enough that single ones still show.
     alpha = max(0.06, min(0.3, 2.0 / max(1, len(view.samples))))
     for b in sample_boxes:
@@ -329,6 +321,23 @@ def draw(view: View):
     fig.legend(handles=handles, loc="outside right upper", fontsize=7, frameon=False, labelspacing=0.9)
     _label(fig, ax, boxes, view, colours, font)
     return fig
+
+
+def draw_road(ax, scene: Scene) -> tuple[RoadShape, ...]:
+    """The scene's road drawn on the axes (areas filled, lanes outlined with their centre lines dotted, road lines
+    dark), under everything else; returns its shapes (the legend names their styles)."""
+    from matplotlib.patches import Polygon
+
+    road = road_shapes(scene)
+    for r in road:
+        st = ROAD_STYLES[r.style]
+        if r.polygon:
+            ax.add_patch(Polygon(r.polygon, closed=True, facecolor=st.face, edgecolor=st.edge, linewidth=0.5,
+                                 zorder=st.zorder))
+        if r.line:
+            ax.plot(*zip(*r.line), color=st.edge if st.face == "none" else "#b7c6da", linewidth=0.8,
+                    linestyle="-" if st.face == "none" else ":", zorder=st.zorder + 0.05)
+    return road
 
 
 def _label(fig, ax, boxes: dict[str, Footprint], view: View, colours: dict[str, str], font: float) -> None:
