@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from tests.support import ROOT, assert_one_line_error, run_r2s
@@ -207,3 +208,27 @@ def _not_a_program(clip, tmp_path):
     bad = tmp_path / "p.json"
     bad.write_text('{"program": "x"}')
     return [str(clip[0]), "--steps", "5", "--program", str(bad)]
+
+
+def test_a_simulated_variant_exports_as_its_frames(clip, metadrive_format_check, tmp_path):
+    """r2s simulate's output is a frames dataset: FRAMES --scene SCENE-sim000 is the simulated clip, every step of
+    every simulated track at the world place the simulation wrote (its frames' map_x, map_y, map_heading)."""
+    sim = tmp_path / "sim"
+    _ok(run_r2s("simulate", str(clip[0].with_name("clip.json")), *map(str, clip), "--motion", "--lanes", "--n", "1",
+                "--seed", "0", "--time-limit", "60", "--out", str(sim)))
+    name = f"{LOG_ID}-sim000"
+    _ok(run_r2s("export", str(sim), "--scene", name, "--to", "scenarionet", "--out", str(tmp_path / "db")))
+    _ok(run_r2s("export", str(sim), "--scene", name, "--to", "openscenario", "--out", str(tmp_path / "osc")))
+    sd = _scenario(tmp_path / "db")
+    metadrive_format_check(sd, check_self_type=True, valid_check=True)
+    rows = pq.read_table(sim / "part-000000.parquet").to_pylist()
+    assert {r["entity_id"] for r in rows} == set(sd["tracks"]) and sd["length"] == len(clip)
+    for r in rows:
+        state = sd["tracks"][r["entity_id"]]["state"]
+        k = r["frame_index"]
+        assert state["valid"][k]
+        assert math.hypot(state["position"][k][0] - r["map_x"], state["position"][k][1] - r["map_y"]) < 1e-6
+        assert _gap(state["heading"][k], math.radians(r["map_heading"])) < 1e-9
+    assert sum(state["valid"].sum() for state in (t["state"] for t in sd["tracks"].values())) == len(rows)
+    for f in (tmp_path / "osc").iterdir():
+        assert asam_issues(f) == [], f.name
