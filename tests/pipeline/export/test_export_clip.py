@@ -95,6 +95,15 @@ def test_a_clip_to_scenarionet_is_every_step_of_every_track(clip, metadrive_form
             assert _gap(state["heading"][k], yaw) < 1e-9
             assert state["velocity"][k] == pytest.approx([speed * math.cos(yaw), speed * math.sin(yaw)], abs=1e-9)
     assert absent > 0  # the clip has entities that appear or leave: their steps are not valid
+    # and r2s extract scenarionet reads it back: a frame per step at the clip's times, each track where it was
+    back = tmp_path / "back.parquet"
+    _ok(run_r2s("extract", "scenarionet", str(tmp_path / "db"), "--radius", "1000", "--out", str(back)))
+    rows = pq.read_table(back).to_pylist()
+    assert sorted({r["timestamp_us"] for r in rows}) == [round(t * 1e6) for t in times]
+    assert len(rows) == sum(len(by_frame) for by_frame in tracks.values())
+    for r in rows:
+        x, y, yaw, _ = tracks[r["track_id"]][r["frame_index"]]
+        assert math.hypot(r["map_x"] - x, r["map_y"] - y) < 1e-6 and _gap(math.radians(r["map_heading"]), yaw) < 1e-9
 
 
 def _trajectories(xosc: Path) -> dict[str, dict]:
