@@ -53,7 +53,7 @@ def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, motion: 
     scene's entities start where it has them; `motion` (its first step the scene's) says what they do: on at their
     speed (STRAIGHT: an initial speed, no story), else a path and a speed profile each
     (pipeline/export/trajectory_story.py), an entity of the motion absent from the scene (a clip's, first seen
-    later) standing at its first pose until then."""
+    later) removed in Init and added at its first pose at its time."""
     from scenariogeneration import xosc
 
     entities = xosc.Entities()
@@ -80,14 +80,11 @@ def scenario(scene: Scene, name: str, world: WorldPose, road_file: str, motion: 
     for t in motion.trajectories if motion.how != STRAIGHT else ():
         if t.id in placed:
             continue
-        k = t.first  # first seen after the scene's frame: standing at its first pose until its time
+        # first seen after the scene's frame: not in the scenario until its story adds it at its first pose
         entities.add_scenario_object(t.id, _object(t.id, t.type, _box(t.type, t.length, t.width)))
-        init.add_init_action(t.id, xosc.TeleportAction(xosc.WorldPosition(
-            float(t.x[k]) - offset[0], float(t.y[k]) - offset[1], 0, float(t.yaw[k]))))
+        init.add_global_action(xosc.DeleteEntityAction(t.id))
         if CATEGORIES[t.type][0] != "misc":
             movable.add(t.id)
-            init.add_init_action(t.id, xosc.AbsoluteSpeedAction(
-                0.0, xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0)))
     stop = xosc.ValueTrigger("stop", 0, xosc.ConditionEdge.rising,
                              xosc.SimulationTimeCondition(motion.end, xosc.Rule.greaterThan), "stop")
     board = xosc.StoryBoard(init, stop)

@@ -110,11 +110,21 @@ def _trajectories(xosc: Path) -> dict[str, dict]:
     """Each entity's start (Init: WorldPosition or LanePosition's foot is not read: only its path), its path's
     vertices (time, x, y, h) and its speed pieces (start time, duration, target), read from the XML."""
     root = ET.parse(xosc).getroot()
-    out: dict[str, dict] = {o.get("name"): {"path": [], "speeds": []} for o in root.iter("ScenarioObject")}
+    out: dict[str, dict] = {o.get("name"): {"path": [], "speeds": [], "arrives": None, "leaves": None,
+                                            "in_init": False} for o in root.iter("ScenarioObject")}
+    for private in root.find("Storyboard/Init/Actions").iter("Private"):
+        out[private.get("entityRef")]["in_init"] = private.find(".//TeleportAction") is not None
+    for gone in root.find("Storyboard/Init/Actions").iter("EntityAction"):
+        assert gone.find("DeleteEntityAction") is not None and not out[gone.get("entityRef")]["in_init"]
     for group in root.iter("ManeuverGroup"):
         eid = group.find("Actors/EntityRef").get("entityRef")
         for event in group.iter("Event"):
             start = float(event.find(".//SimulationTimeCondition").get("value"))
+            added = event.find(".//AddEntityAction/Position/WorldPosition")
+            if added is not None:
+                out[eid]["arrives"] = (start, *(float(added.get(a)) for a in "xyh"))
+            if event.find(".//DeleteEntityAction") is not None:
+                out[eid]["leaves"] = start
             poly = event.find(".//FollowTrajectoryAction//Polyline")
             if poly is not None:
                 out[eid]["path"] = [(float(v.get("time")), *(float(v.find("Position/WorldPosition").get(a))
@@ -132,17 +142,27 @@ def test_a_clip_to_openscenario_passes_asam_and_its_paths_and_speeds_read_back(c
     (xosc,) = (tmp_path / "osc").glob("*.xosc")
     (xodr,) = (tmp_path / "osc").glob("*.xodr")
     assert asam_issues(xosc) == [] and asam_issues(xodr) == []
-    assert xosc.read_text().count("<TeleportAction>") == len(_trajectories(xosc))  # one placement each, at the start
     ox, oy = road_offset(xodr)
     times, tracks = recorded_tracks(clip)
     back = _trajectories(xosc)
+    assert set(back) == set(tracks)
     moving = 0
     for tid, by_frame in tracks.items():
         b = back[tid]
+        ks = sorted(by_frame)
+        # there from its first frame to its last: placed at the start or added at its first pose just before its
+        # time, removed just after its last
+        assert b["in_init"] == (ks[0] == 0) and (b["arrives"] is None) == (ks[0] == 0)
+        if b["arrives"] is not None:
+            t, x, y, h = b["arrives"]
+            rx, ry, ryaw, _ = by_frame[ks[0]]
+            assert times[ks[0]] - 0.002 < t < times[ks[0]] and math.hypot(x + ox - rx, y + oy - ry) < 1e-6
+        assert (b["leaves"] is None) == (ks[-1] == len(clip) - 1)
+        if b["leaves"] is not None:
+            assert times[ks[-1]] < b["leaves"] < times[ks[-1]] + 0.002
         if not b["path"]:
             continue
         moving += 1
-        ks = sorted(by_frame)
         assert [t for t, *_ in b["path"]] == pytest.approx([times[k] for k in ks], abs=1e-9)
         for (_, x, y, h), k in zip(b["path"], ks):
             rx, ry, ryaw, _ = by_frame[k]
@@ -156,6 +176,7 @@ def test_a_clip_to_openscenario_passes_asam_and_its_paths_and_speeds_read_back(c
         assert [(round(s, 6), round(d, 6), v) for s, d, v in got] == \
             [(round(max(0.0, s - 1e-9), 6), round(d, 6), pytest.approx(v, abs=1e-9)) for s, d, v in pieces]
     assert moving > 10
+    assert any(b["arrives"] for b in back.values()) and any(b["leaves"] is not None for b in back.values())
 
 
 @pytest.fixture(scope="module")
