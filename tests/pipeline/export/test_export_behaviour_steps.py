@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import pickle
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ import pytest
 from synth.road.lane_facts import RoadIndex
 from synth.road.roadmap import LANE, MapFeature, RoadMap
 from tests.support import run_r2s
+
+from .test_export_openscenario import asam_issues, road_offset
 
 RADIUS, HALF = 30.0, 1.75  # the bend's centre-line radius, half the lane's width
 CENTRE = (5.0 - RADIUS, 0.0)  # the bend turns left from (5, 0), heading +y, round this point
@@ -105,3 +108,19 @@ def test_a_car_following_its_lane_round_a_bend_stays_in_it(bend, tmp_path):
     res = run_r2s("export", str(scene), "--to", "scenarionet", "--steps", str(steps), "--out", str(tmp_path / "straight"))
     assert res.returncode == 0, res.stderr
     assert not all(_in_lane(_poses(tmp_path / "straight")))  # without the program: straight on, off the bend
+
+
+def test_the_moved_frame_to_openscenario_passes_asam_and_follows_the_bend(bend, tmp_path):
+    scene, program = bend
+    res = run_r2s("export", str(scene), "--to", "openscenario", "--steps", "80", "--program", str(program),
+                  "--out", str(tmp_path / "osc"))
+    assert res.returncode == 0, res.stderr
+    for f in (tmp_path / "osc").iterdir():
+        assert asam_issues(f) == [], f.name
+    (xosc,) = (tmp_path / "osc").glob("*.xosc")
+    ox, oy = road_offset(next((tmp_path / "osc").glob("*.xodr")))
+    root = ET.parse(xosc).getroot()
+    (poly,) = root.iter("Polyline")  # car1's path (ego is parked: it has none)
+    pts = np.array([[float(v.find("Position/WorldPosition").get(a)) for a in "xy"] for v in poly.findall("Vertex")])
+    pts += [ox, oy]
+    assert len(pts) == 80 and all(_in_lane(np.column_stack([pts, np.zeros(len(pts))])))
