@@ -56,7 +56,15 @@ HEIGHTS: dict[str, float] = {"Car": 1.7, "Truck": 3.2, "Bus": 3.2, "Trailer": 3.
                              "Animal": 0.8, "Barrier": 1.0, "TrafficCone": 0.7, "PushableObject": 1.0,
                              "Debris": 0.3, "BicycleRack": 1.0, "Object": 1.0}
 assert set(TRACK_TYPES) == set(ENTITY_TYPES) == set(HEIGHTS)
-LINE_TYPE = "ROAD_LINE_SOLID_SINGLE_WHITE"  # scene JSON keeps no line type: one for all road lines
+LINE_TYPE = "ROAD_LINE_SOLID_SINGLE_WHITE"  # a road line whose source type MetaDrive does not know
+# The source's own type where it is one of MetaDrive's (a ScenarioNet source wrote it), else what ScenarioNet's
+# Argoverse 2 converter writes for AV2's own (converter/argoverse2/type.py: bus lanes are street lanes).
+LANE_TYPES = ("LANE_SURFACE_STREET", "LANE_UNKNOWN", "LANE_FREEWAY", "LANE_BIKE_LANE")
+LINE_TYPES = ("UNKNOWN_LINE", "ROAD_LINE_BROKEN_SINGLE_WHITE", "ROAD_LINE_SOLID_SINGLE_WHITE",
+              "ROAD_LINE_SOLID_DOUBLE_WHITE", "ROAD_LINE_BROKEN_SINGLE_YELLOW", "ROAD_LINE_BROKEN_DOUBLE_YELLOW",
+              "ROAD_LINE_SOLID_SINGLE_YELLOW", "ROAD_LINE_SOLID_DOUBLE_YELLOW", "ROAD_LINE_PASSING_DOUBLE_YELLOW",
+              "ROAD_EDGE_BOUNDARY", "ROAD_EDGE_MEDIAN")
+AV2_LANE_TYPES = {"VEHICLE": "LANE_SURFACE_STREET", "BUS": "LANE_SURFACE_STREET", "BIKE": "LANE_BIKE_LANE"}
 EDGE_TYPE = "ROAD_EDGE_BOUNDARY"  # a drivable area's ring, as a road edge (ScenarioNet has no area feature)
 
 
@@ -148,19 +156,20 @@ def _object_summary(tid: str, track: dict) -> dict[str, Any]:
 
 def map_features(road: RoadMap) -> dict[str, dict[str, Any]]:
     """A road (in the world frame) as ScenarioNet map_features: lanes (centre line `polyline`, `polygon`, the
-    lane graph as entry / exit lanes and neighbours; intersection lanes LANE_SURFACE_UNSTRUCTURE), road lines,
-    crosswalks, drivable areas as road edges; intersection areas have no ScenarioNet feature and are left out."""
+    lane graph as entry / exit lanes and neighbours; intersection lanes LANE_SURFACE_UNSTRUCTURE, the others their
+    source's lane type: lane_type), road lines (their source's type: line_type), crosswalks, drivable areas as road
+    edges; intersection areas have no ScenarioNet feature and are left out."""
     out: dict[str, dict[str, Any]] = {}
     for f in road.features:
         if f.kind == LANE:
             n = len(f.line)
             d: dict[str, Any] = {
-                "type": "LANE_SURFACE_UNSTRUCTURE" if f.is_intersection else "LANE_SURFACE_STREET",
+                "type": "LANE_SURFACE_UNSTRUCTURE" if f.is_intersection else lane_type(f.source_type),
                 "polyline": np.asarray(f.line, dtype=float), "polygon": np.asarray(f.polygon, dtype=float),
                 "entry_lanes": list(f.predecessors), "exit_lanes": list(f.successors),
                 "left_neighbor": _neighbour(f.left, n), "right_neighbor": _neighbour(f.right, n)}
         elif f.kind == ROAD_LINE:
-            d = {"type": LINE_TYPE, "polyline": np.asarray(f.line, dtype=float)}
+            d = {"type": line_type(f.source_type), "polyline": np.asarray(f.line, dtype=float)}
         elif f.kind == CROSSWALK:
             d = {"type": "CROSSWALK", "polygon": np.asarray(f.polygon, dtype=float)}
         elif f.kind == DRIVABLE_AREA:
@@ -169,6 +178,17 @@ def map_features(road: RoadMap) -> dict[str, dict[str, Any]]:
             continue
         out[f.feature_id] = d
     return out
+
+
+def lane_type(source_type: str) -> str:
+    """A lane's ScenarioNet type from its source's (a lane in no intersection: the reader makes
+    LANE_SURFACE_UNSTRUCTURE an intersection lane, which map_features writes as such)."""
+    return source_type if source_type in LANE_TYPES else AV2_LANE_TYPES.get(source_type, "LANE_SURFACE_STREET")
+
+
+def line_type(source_type: str) -> str:
+    """A road line's ScenarioNet type: its source's where MetaDrive knows it (road edges included), else LINE_TYPE."""
+    return source_type if source_type in LINE_TYPES else LINE_TYPE
 
 
 def _neighbour(lane: str | None, n: int) -> list[dict[str, Any]]:

@@ -518,15 +518,21 @@ def in_ego_frame(road: RoadMap, x: float, y: float, heading: float, radius: floa
 
 # Scene JSON's "road" (docs/formats.md): the map id and one object per feature.
 ROAD_KEYS = ("map_id", "features")
-FEATURE_KEYS = ("id", "kind", "polygon", "line", "left", "right", "successors", "predecessors", "is_intersection")
+FEATURE_KEYS = ("id", "kind", "source_type", "polygon", "line", "left", "right", "successors", "predecessors",
+                "is_intersection")
 MAX_FEATURES = 100_000
 MAX_FEATURE_ID_LENGTH = 256  # a feature id names an OpenDRIVE road (r2s export): printable, as a frame id is
 
 
-def road_to_dict(road: RoadMap) -> dict:
+def road_to_dict(road: RoadMap, source_types: bool = True) -> dict:
+    """A road as scene JSON's `road`. `source_types`: each feature's source type where it has one (what exports
+    write back as the source's own types: road line types, bike lanes); the Scenic text's record leaves them out,
+    since nothing it renders reads them."""
     out = []
     for f in road.features:
         d: dict = {"id": f.feature_id, "kind": f.kind}
+        if source_types and f.source_type:
+            d["source_type"] = f.source_type
         if f.polygon:
             d["polygon"] = [list(p) for p in f.polygon]
         if f.line:
@@ -568,7 +574,11 @@ def road_from_dict(raw: object) -> RoadMap:
         inter = d.get("is_intersection", False)
         if not isinstance(inter, bool):
             raise MapError(f"{where}: is_intersection must be true or false")
-        out.append(MapFeature(map_id, d["id"], d["kind"], polygon=_coords(d.get("polygon"), where),
+        source_type = d.get("source_type", "")
+        if not isinstance(source_type, str) or len(source_type) > MAX_FEATURE_ID_LENGTH or not source_type.isprintable():
+            raise MapError(f"{where}: source_type must be a printable string of at most {MAX_FEATURE_ID_LENGTH} "
+                           "characters")
+        out.append(MapFeature(map_id, d["id"], d["kind"], source_type=source_type, polygon=_coords(d.get("polygon"), where),
                               line=_coords(d.get("line"), where), left=refs["left"], right=refs["right"],
                               successors=tuple(lists["successors"]), predecessors=tuple(lists["predecessors"]),
                               is_intersection=inter))

@@ -291,7 +291,7 @@ def _source_record(program: Program, scene: Scene, config: SynthConfig, header: 
     consts = {"v_stop": config.v_stop, "dv": config.dv} if motion else {}
     road = {}
     if scene.road is not None:
-        road = {"road": road_to_dict(scene.road)}
+        road = {"road": road_to_dict(scene.road, source_types=False)}
     return {"frame_id": scene.frame_id, "header": header, "delta1": config.delta1, "delta2": config.delta2,
             **consts, "entities": [_entity_record(scene.ego, motion), *others], "program": str(program), **road}
 

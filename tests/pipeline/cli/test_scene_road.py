@@ -82,6 +82,8 @@ def test_synthesis_reads_a_scene_with_a_road_and_a_bad_road_is_one_line(excerpt_
         ({**lane, "polygon": [[0, 0], [4, 4], [4, 0], [0, 4]]}, "self-intersecting polygon"),
         ({**lane, "left": "no-such-lane"}, "which is not a lane of the map"),
         ({**lane, "colour": "red"}, "unknown key 'colour'"),
+        ({**lane, "source_type": 3}, "source_type must be a printable string"),
+        ({**lane, "source_type": "LANE\x00"}, "source_type must be a printable string"),
         ({**lane, "polygon": [[0, 0], [1, "x"], [2, 0]]}, "number pairs"),
         # ids name OpenDRIVE roads (r2s export): printable, as frame ids, so XML can hold them
         *[({**lane, "id": bad_id}, "is not a printable string of 1 to 256")

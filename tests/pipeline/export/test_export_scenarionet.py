@@ -21,6 +21,7 @@ from extractors.scenarionet import TAXONOMY
 from pipeline.export.scenarionet import TRACK_TYPES, file_name
 from synth.scene import ENTITY_TYPES, scene_from_dict, scene_from_json
 from tests.support import assert_one_line_error, run_r2s
+from tests.support.extract import EXCERPT
 
 from .conftest import FRAMES
 
@@ -245,3 +246,22 @@ def test_metadrive_s_check_is_not_blind(recorded, metadrive_format_check, tmp_pa
         spoil(sd)
         with pytest.raises((AssertionError, KeyError)):
             metadrive_format_check(sd, check_self_type=True, valid_check=True)
+
+
+def test_the_map_keeps_the_source_s_own_types(recorded, tmp_path):
+    """Every exported road line and lane outside intersections carries the type the source (ScenarioNet's nuScenes
+    converter) wrote for it, which scene JSON now keeps (`source_type`): road lines were all written as one type."""
+    source = {}
+    for pkl in sorted((EXCERPT / "scenarionet").glob("sd_*.pkl")):
+        source.update({fid: f["type"] for fid, f in load_pickle(pkl)["map_features"].items()})
+    scene_file, _ = recorded[FRAMES[1]]
+    road = json.loads(scene_file.read_text())["road"]["features"]
+    assert all(f["source_type"] == source[f["id"]] for f in road if f["kind"] in ("lane", "road_line"))
+    _export(scene_file, None, tmp_path / "db")
+    (sd,) = _database(tmp_path / "db")
+    lines = {fid: f["type"] for fid, f in sd["map_features"].items() if f["type"].startswith(("ROAD_LINE", "ROAD_EDGE"))
+             and fid in source}
+    lanes = {fid: f["type"] for fid, f in sd["map_features"].items() if f["type"].startswith("LANE_") and fid in source}
+    assert len({*lines.values()}) >= 2, "the excerpt's road lines are of several types"
+    assert all(source[fid] == t for fid, t in lines.items())
+    assert all(source[fid] == t for fid, t in lanes.items() if t != "LANE_SURFACE_UNSTRUCTURE")
