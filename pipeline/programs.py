@@ -38,6 +38,13 @@ STATUSES = ("optimal", "feasible", "timeout", "memout", "error")
 WINDOW_FIELDS = (("scene", pa.string()), ("last_frame", pa.string()), ("first_timestamp_us", pa.int64()),
                  ("last_timestamp_us", pa.int64()), ("n_frames", pa.int32()), ("window_s", pa.float64()))
 WINDOW_SCHEMA = pa.schema(list(PROGRAMS_SCHEMA) + [pa.field(n, t) for n, t in WINDOW_FIELDS])
+# `r2s run --clip`: one row per clip (docs/formats.md, "Clip programs"): the programs columns (program: the clip
+# program; frame_hash: the hash of all its frames' rows and timestamps), the window columns but clip_s for window_s,
+# and what `r2s synth --behaviours --format json` adds (boundaries: its JSON object as text) and every timestamp.
+CLIP_FIELDS = (*WINDOW_FIELDS[:-1], ("clip_s", pa.float64()), ("duration_s", pa.float64()),
+               ("relational_cost", pa.int32()), ("boundaries", pa.string()), ("behaviours_s", pa.float64()),
+               ("timestamps_us", pa.list_(pa.int64())))
+CLIP_SCHEMA = pa.schema(list(PROGRAMS_SCHEMA) + [pa.field(n, t) for n, t in CLIP_FIELDS])
 
 
 class ProgramsError(InputError, ValueError):

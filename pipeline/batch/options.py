@@ -36,10 +36,16 @@ class RunOptions:
     window_s: float | None = None
     stride_s: float | None = None
     max_gap_s: float | None = None
+    # r2s run --clip: one clip program per clip of `clip_s` seconds (pipeline.batch.clips), tiled as windows are.
+    clip_s: float | None = None
 
     @property
     def window(self):
-        """The window options as a WindowSpec, or None for one program per frame."""
+        """The window (or clip) options as a WindowSpec (a ClipSpec), or None for one program per frame."""
+        if self.clip_s is not None:
+            from pipeline.batch.clips import ClipSpec
+
+            return ClipSpec(self.clip_s, self.stride_s, self.max_gap_s)
         if self.window_s is None:
             return None
         from pipeline.batch.windows import WindowSpec
@@ -58,9 +64,12 @@ class RunOptions:
             raise UserError(f"unknown backend {self.backend!r} (backends: {', '.join(BACKENDS)})")
         if self.scheduler and self.backend != "dask":
             raise UserError("--scheduler needs --backend dask")
-        if self.window_s is None and (self.stride_s is not None or self.max_gap_s is not None):
-            raise UserError("--stride and --max-gap need --window")
+        if self.window_s is not None and self.clip_s is not None:
+            raise UserError("--window and --clip are two kinds of rows: give one")
+        if self.window is None and (self.stride_s is not None or self.max_gap_s is not None):
+            raise UserError("--stride and --max-gap need --window or --clip")
         if self.window is not None:
             self.window.check()
             if self.synthesizer is not None:
-                raise UserError("a synthesizer replaces one frame's synthesis; --window synthesizes windows")
+                raise UserError(f"a synthesizer replaces one frame's synthesis; --{self.window.name} synthesizes "
+                                f"{self.window.name}s")

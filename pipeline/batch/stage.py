@@ -40,7 +40,7 @@ from pipeline.batch.store import RunStore, is_single_file
 from pipeline.batch.task import ChunkTask, ChunkUnreadable
 from pipeline.errors import UserError
 from pipeline.outputs import check_apart
-from pipeline.programs import PROGRAMS_SCHEMA, WINDOW_SCHEMA
+from pipeline.programs import CLIP_SCHEMA, PROGRAMS_SCHEMA, WINDOW_SCHEMA
 from storage.atomic import temp_directory
 from storage.frame_index import FrameIndex, frame_hashes
 from synth.config import SynthConfig, as_config
@@ -67,16 +67,18 @@ def run_frames(
     window_s: float | None = None,
     stride_s: float | None = None,
     max_gap_s: float | None = None,
+    clip_s: float | None = None,
 ) -> Summary:
     """Synthesize a program for every frame of `frames` (a frames Parquet file or a directory of them) into `out`
     (a dataset directory, or one file if the name ends in .parquet); frames already in `out` from the same rows
     with the same config are kept. `config`: a SynthConfig, a dict of its fields, or None for the defaults
     (docs/api.md). With `window_s`, one program per window of a scene's frames instead (docs/dsl.md, "Programs over
-    a window"; rows: docs/formats.md, "Window programs"). Returns the summary; raises UserError / FramesError /
+    a window"; rows: docs/formats.md, "Window programs"); with `clip_s`, one clip program per clip of a scene's
+    frames (docs/dsl.md, "Behaviour programs"; rows: docs/formats.md, "Clip programs"). Returns the summary; raises UserError / FramesError /
     ProgramsError / ConfigError on bad input (nothing written then). `log` receives one line at a time (default: stderr); the other keywords are the
     fields of RunOptions (pipeline.batch.options), which says what each means."""
     options = RunOptions(jobs, backend, scheduler, chunk_size, part_rows, log_every_s, terminal, synthesizer, window_s,
-                         stride_s, max_gap_s)
+                         stride_s, max_gap_s, clip_s)
     return run(frames, out, as_config(config), options, log or _stderr)
 
 
@@ -84,14 +86,14 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
         log: Callable[[str], None]) -> Summary:
     """run_frames with its options as one value."""
     options.check()
-    if options.window is not None:
+    if options.window is not None and options.clip_s is None:
         from synth.window.program import check_window_config  # only --window loads the window synthesis
 
         check_window_config(config)
     check_apart(out, [("input frames", frames)], directory=not is_single_file(out))
     if is_single_file(out):  # its parts go beside it, in <out>.parts/
         check_apart(f"{out}.parts", [("input frames", frames)], directory=True)
-    run = _WindowRun if options.window is not None else _Run
+    run = _Run if options.window is None else _ClipRun if options.clip_s is not None else _WindowRun
     return run(str(frames), Path(out), config, options, log).go()
 
 
@@ -289,6 +291,11 @@ class _WindowRun(_Run):
     def schema(self):
         return WINDOW_SCHEMA
 
+    def _task_type(self):
+        from pipeline.batch.window_task import WindowTask
+
+        return WindowTask
+
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         from pipeline.batch.windows import plan_windows
 
@@ -304,8 +311,7 @@ class _WindowRun(_Run):
             spec.config_hash(self.config)
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
-        from pipeline.batch.window_task import WindowTask
-
+        task = self._task_type()
         spec = self.options.window
         maps = self._maps(dataset)
         parts = tuple((p.path, p.read_columns(maps is not None)) for p in dataset.parts)
@@ -318,7 +324,30 @@ class _WindowRun(_Run):
         at, n = 0, 0
         while at < len(windows):
             size = next(sizes)
-            yield WindowTask(f"w{n}", dataset.url, parts, tuple(windows[at:at + size]), self.config, spec,
+            yield task(f"w{n}", dataset.url, parts, tuple(windows[at:at + size]), self.config, spec,
                              spec.config_hash(self.config), hard_cap=pool.own_processes, progress_dir=progress_dir,
                              maps=maps)
             at, n = at + size, n + 1
+
+
+class _ClipRun(_WindowRun):
+    """The run with --clip: a window run whose units are clips (pipeline.batch.clips), each synthesized into a clip
+    program; the frames need timestamps (the plan refuses frames without) and speeds."""
+
+    unit = "clips"
+
+    @property
+    def schema(self):
+        return CLIP_SCHEMA
+
+    def _task_type(self):
+        from pipeline.batch.clips import ClipTask
+
+        return ClipTask
+
+    def _units(self, dataset) -> tuple[int, Any, Any, str]:
+        lacking = [p.path for p in dataset.parts if "speed" not in p.columns]
+        if lacking:
+            raise UserError(f"{dataset.source}: {lacking[0]} has no speed column; --clip needs every entity's speed "
+                            "(extract the frames with speeds, as r2s extract writes them)")
+        return super()._units(dataset)

@@ -29,7 +29,7 @@ from pipeline.batch.task import (
     hash_rows,
     one_line,
 )
-from pipeline.batch.windows import WindowSpec, WindowUnit, window_hash
+from pipeline.batch.windows import WindowSpec, WindowUnit
 from pipeline.programs import WINDOW_SCHEMA, failure_row, programs_table, result_row
 from synth.config import SynthConfig
 from synth.search.budget import peak_rss_mb
@@ -73,8 +73,10 @@ class WindowTask(Units):
         order = {p.frame_id: i for i, p in enumerate(unit.frames)}
         ranked = sorted(zip(frames, lanes), key=lambda fl: order[fl[0][0]])
         ids = [f[0] for f, _ in ranked]
-        digest = window_hash(unit, ids, np.array([a for _, (a, _) in ranked], dtype=np.uint64),
-                             np.array([b for _, (_, b) in ranked], dtype=np.uint64))
+        # The timestamps as read (not as planned): a row records what it was computed from.
+        read = unit._replace(timestamps_us=tuple(_first_timestamp(f[1]) for f, _ in ranked))
+        digest = self.spec.unit_hash(read, ids, np.array([a for _, (a, _) in ranked], dtype=np.uint64),
+                                     np.array([b for _, (_, b) in ranked], dtype=np.uint64))
         return [f[1] for f, _ in ranked], digest
 
     def run(self) -> pa.Table:
@@ -92,7 +94,14 @@ class WindowTask(Units):
                 os.unlink(marker)
             except FileNotFoundError:
                 pass
-        return programs_table(out, WINDOW_SCHEMA)
+        return programs_table(out, self.schema)
+
+    schema = WINDOW_SCHEMA  # of the rows
+
+    def synthesize(self, scenes: list, unit: WindowUnit, digest: str) -> dict:
+        """The row of a window whose frames are `scenes` (synth.window.program)."""
+        return {**result_row(synthesize_window(scenes, self.config), digest), **self._window_fields(unit),
+                "config_hash": self.config_hash}
 
     def _run_window(self, unit: WindowUnit, roads: FrameRoads | None) -> dict:
         started = time.perf_counter()
@@ -105,8 +114,7 @@ class WindowTask(Units):
         _reset_peak_rss()
         try:
             with _hard_memory_cap(self.config.memory_limit if self.hard_cap else None):
-                result = synthesize_window(scenes, self.config)
-            return {**result_row(result, digest), **self._window_fields(unit), "config_hash": self.config_hash}
+                return self.synthesize(scenes, unit, digest)
         except MemoryError:
             status, message = "memout", "out of memory outside the search (hard cap of the worker reached)"
         except Exception as exc:  # the run goes on: the window is recorded as an error, with the reason
@@ -136,4 +144,9 @@ class WindowTask(Units):
             except ChunkUnreadable:
                 digest, n_entities = None, 0
             rows.append(self._failure(unit, status, reason, n_entities, digest))
-        return programs_table(rows, WINDOW_SCHEMA)
+        return programs_table(rows, self.schema)
+
+
+def _first_timestamp(rows: pa.Table) -> int | None:
+    """A frame's timestamp_us (its rows all carry it)."""
+    return rows.column("timestamp_us")[0].as_py() if "timestamp_us" in rows.column_names else None

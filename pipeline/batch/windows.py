@@ -17,7 +17,7 @@ import hashlib
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -44,14 +44,17 @@ class WindowSpec:
     stride_s: float | None = None
     max_gap_s: float | None = None
 
+    name: ClassVar[str] = "window"  # the option that asks for these units (--window), and the unit in messages
+
     def check(self) -> None:
         """Refuse values no run can use (UserError: one line), before anything is read."""
-        for name, value in (("--window", self.window_s), ("--stride", self.stride_s), ("--max-gap", self.max_gap_s)):
+        for name, value in ((f"--{self.name}", self.window_s), ("--stride", self.stride_s),
+                            ("--max-gap", self.max_gap_s)):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise UserError(f"{name} must be a positive number of seconds, got {value}")
         # --max-gap too: a gap past the window changes nothing, and seconds far past it overflow microseconds.
         if max(self.window_s, self.stride_s or 0, self.max_gap_s or 0) > MAX_WINDOW_S:
-            raise UserError(f"--window, --stride and --max-gap are at most {MAX_WINDOW_S:g} s")
+            raise UserError(f"--{self.name}, --stride and --max-gap are at most {MAX_WINDOW_S:g} s")
 
     def us(self, seconds: float | None) -> int | None:
         return None if seconds is None else max(1, round(seconds * 1e6))
@@ -61,7 +64,11 @@ class WindowSpec:
 
     @property
     def text(self) -> str:
-        return f"window={self.window_s!r} stride={self.stride_s!r} max_gap={self.max_gap_s!r}"
+        return f"{self.name}={self.window_s!r} stride={self.stride_s!r} max_gap={self.max_gap_s!r}"
+
+    def unit_hash(self, unit: WindowUnit, frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
+        """A unit's frame_hash (what its row is computed from): window_hash."""
+        return window_hash(unit, frame_ids, lane0, lane1)
 
     def config_hash(self, config: SynthConfig) -> str:
         """The config_hash of a window row: the configuration's and the window options' (16 hex digits, as
@@ -78,13 +85,14 @@ class FramePlace(NamedTuple):
 
 class WindowUnit(NamedTuple):
     """One window to compute: `label` names it in log lines (its first and last frame), `frames` its frames in
-    order, `frame_hash` the hash the coordinator expects of them (resume)."""
+    order, with their timestamps."""
 
     label: str
     scene: str
     frames: tuple[FramePlace, ...]
     first_timestamp_us: int
     last_timestamp_us: int
+    timestamps_us: tuple[int, ...] = ()  # every frame's (a clip's durations depend on them: its hash covers them)
 
 
 def window_hash(unit: WindowUnit, frame_ids, lane0: np.ndarray, lane1: np.ndarray) -> str:
@@ -135,10 +143,10 @@ def plan_windows(dataset, hasher, spec: WindowSpec) -> tuple[list[WindowUnit], l
     scenes: dict[str, list[tuple[int, int, int, FramePlace]]] = {}
     for n, (place, scene, index, stamp) in enumerate(frame_places(dataset)):
         if scene is None:
-            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no scene; --window cuts scenes")
+            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no scene; --{spec.name} cuts scenes")
         if stamp is None:
-            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no timestamp_us; --window needs the "
-                            "frames' timestamps")
+            raise UserError(f"{dataset.source}: frame {place.frame_id!r} has no timestamp_us; --{spec.name} needs "
+                            "the frames' timestamps")
         scenes.setdefault(scene, []).append((-1 if index is None else index, n, stamp, place))
     tiles = {}
     for scene in sorted(scenes):
@@ -148,15 +156,16 @@ def plan_windows(dataset, hasher, spec: WindowSpec) -> tuple[list[WindowUnit], l
         if bad is not None:
             a, b = frames[bad - 1][3].frame_id, frames[bad][3].frame_id
             raise UserError(f"{dataset.source}: scene {scene!r}: frame {b!r} is not later than {a!r} "
-                            f"(timestamps {stamps[bad - 1]}, {stamps[bad]}); --window needs increasing timestamps")
+                            f"(timestamps {stamps[bad - 1]}, {stamps[bad]}); --{spec.name} needs increasing timestamps")
         tiles[scene] = spec.tile(stamps)
     # Counted on the (first, last) pairs, before a window's frames are gathered.
     total = sum(last - first + 1 for pairs in tiles.values() for first, last in pairs)
     if total > MAX_WINDOW_FRAMES:
         frames_in = sum(map(len, scenes.values()))
-        raise UserError(f"{dataset.source}: the windows would hold {total:,} frames in all ({total / frames_in:,.0f} "
-                        f"per frame of the input), more than the bound of {MAX_WINDOW_FRAMES:,}: give a longer "
-                        "--stride or a shorter --window (docs/cli.md, Inputs and their bounds)")
+        raise UserError(f"{dataset.source}: the {spec.name}s would hold {total:,} frames in all "
+                        f"({total / frames_in:,.0f} per frame of the input), more than the bound of "
+                        f"{MAX_WINDOW_FRAMES:,}: give a longer --stride or a shorter --{spec.name} (docs/cli.md, "
+                        "Inputs and their bounds)")
     units: list[WindowUnit] = []
     for scene, pairs in tiles.items():
         frames = scenes[scene]
@@ -164,12 +173,12 @@ def plan_windows(dataset, hasher, spec: WindowSpec) -> tuple[list[WindowUnit], l
         for first, last in pairs:
             places = tuple(f[3] for f in frames[first:last + 1])
             units.append(WindowUnit(f"{places[0].frame_id}..{places[-1].frame_id}", scene, places, stamps[first],
-                                    stamps[last]))
+                                    stamps[last], tuple(stamps[first:last + 1])))
     ids = [p.frame_id for unit in units for p in unit.frames]
     lane0, lane1 = hasher.lanes(ids) if ids else (np.zeros(0, np.uint64), np.zeros(0, np.uint64))
     hashes, at = [], 0
     for unit in units:
         k = len(unit.frames)
-        hashes.append(window_hash(unit, ids[at:at + k], lane0[at:at + k], lane1[at:at + k]))
+        hashes.append(spec.unit_hash(unit, ids[at:at + k], lane0[at:at + k], lane1[at:at + k]))
         at += k
     return units, hashes

@@ -52,9 +52,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="one program per window of S seconds of a scene's frames (by timestamp_us), holding in each "
                         "of its frames, instead of one per frame; rows: docs/formats.md, \"Window programs\"")
     g.add_argument("--stride", type=float, metavar="S",
-                   help="seconds from one window's start to the next (default: the window: consecutive windows)")
+                   help="seconds from one window's (or clip's) start to the next (default: the window: consecutive "
+                        "windows)")
     g.add_argument("--max-gap", type=float, metavar="S",
-                   help="no window spans a gap of more than S seconds between consecutive frames (default: none)")
+                   help="no window (or clip) spans a gap of more than S seconds between consecutive frames (default: "
+                        "none)")
+    g.add_argument("--clip", type=float, metavar="S",
+                   help="one clip program per clip of S seconds of a scene's frames, tiled as --window tiles windows "
+                        "(docs/dsl.md, \"Behaviour programs\"; the frames need speeds); rows: docs/formats.md, "
+                        "\"Clip programs\"")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         run_frames(args.frames, args.out, config, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                    chunk_size=args.chunk_size, part_rows=args.part_rows, log_every_s=args.log_every,
-                   window_s=args.window, stride_s=args.stride, max_gap_s=args.max_gap)
+                   window_s=args.window, stride_s=args.stride, max_gap_s=args.max_gap, clip_s=args.clip)
     finally:
         signal.signal(signal.SIGTERM, previous)
     return 0
