@@ -45,6 +45,8 @@ CLIP_FIELDS = (*WINDOW_FIELDS[:-1], ("clip_s", pa.float64()), ("duration_s", pa.
                ("relational_cost", pa.int32()), ("boundaries", pa.string()), ("behaviours_s", pa.float64()),
                ("timestamps_us", pa.list_(pa.int64())))
 CLIP_SCHEMA = pa.schema(list(PROGRAMS_SCHEMA) + [pa.field(n, t) for n, t in CLIP_FIELDS])
+# The column that tells each kind of rows apart (an output holds one kind), and what its rows are.
+UNIT_COLUMNS = {"window_s": "window", "clip_s": "clip"}
 
 
 class ProgramsError(InputError, ValueError):

@@ -40,6 +40,7 @@ from pipeline.outputs import output_place
 from pipeline.programs import (
     LATER_COLUMNS,
     PROGRAMS_SCHEMA,
+    UNIT_COLUMNS,
     ProgramsError,
     as_programs,
     check_programs_schema,
@@ -145,9 +146,14 @@ class RunStore:
         for s, path in enumerate(sources):
             try:
                 table = _read_keys(path)
-                missing = [n for n in self.schema.names if n not in pq.read_schema(path).names
-                           and n not in LATER_COLUMNS]
-                if missing:  # rows of the other kind (per frame, per window) are never mixed in one output
+                names = pq.read_schema(path).names
+                # Rows of another kind (per frame, per window, per clip) are never mixed in one output.
+                kind = [n for n in UNIT_COLUMNS if n in names and n not in self.schema.names]
+                if kind:
+                    raise ProgramsError(f"{path} holds rows with column {kind[0]}: "
+                                        f"{UNIT_COLUMNS[kind[0]]} programs")
+                missing = [n for n in self.schema.names if n not in names and n not in LATER_COLUMNS]
+                if missing:
                     raise ProgramsError(f"{path} holds rows without column(s) {', '.join(missing)}: "
                                         f"{'per-frame' if 'n_frames' in missing else 'other'} programs")
             except ProgramsError as exc:
