@@ -63,6 +63,9 @@ LAZY: dict[tuple[str, str], str] = {
     ("pipeline.batch.stage", "synth.window.program"): WINDOW,
     ("pipeline.batch.stage", "pipeline.batch.windows"): WINDOW,
     ("pipeline.batch.stage", "pipeline.batch.window_task"): WINDOW,
+    ("pipeline.batch.options", "pipeline.batch.clips"): "options.py stays light for --help (docs/layout.md); the "
+                                                        "clip planner loads numpy, pyarrow and the behaviour synthesis",
+    ("pipeline.batch.stage", "pipeline.batch.clips"): "only `r2s run --clip` loads the behaviour synthesis",
     # pipeline.cli: each verb's module is light for `r2s VERB --help`; its run imports what it runs
     ('pipeline.cli.check', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.check', 'synth.behaviour.program'): VERB,
