@@ -147,15 +147,10 @@ class RunStore:
             try:
                 table = _read_keys(path)
                 names = pq.read_schema(path).names
-                # Rows of another kind (per frame, per window, per clip) are never mixed in one output.
-                kind = [n for n in UNIT_COLUMNS if n in names and n not in self.schema.names]
-                if kind:
-                    raise ProgramsError(f"{path} holds rows with column {kind[0]}: "
-                                        f"{UNIT_COLUMNS[kind[0]]} programs")
                 missing = [n for n in self.schema.names if n not in names and n not in LATER_COLUMNS]
-                if missing:
-                    raise ProgramsError(f"{path} holds rows without column(s) {', '.join(missing)}: "
-                                        f"{'per-frame' if 'n_frames' in missing else 'other'} programs")
+                if missing:  # rows of the other kind (per frame, per window, per clip) are never mixed in one output
+                    kind = next((UNIT_COLUMNS[n] for n in UNIT_COLUMNS if n in names), "per-frame")
+                    raise ProgramsError(f"{path} holds rows without column(s) {', '.join(missing)}: {kind} programs")
             except ProgramsError as exc:
                 # Never overwrite or delete a file we may not have written: an unreadable output file, or a part
                 # of a dataset directory, refuses the run. Parts beside a single file are ours alone (they
