@@ -65,6 +65,7 @@ demo: setup
 	$(R2S) simulate $(DEMO)/clip.json $(foreach k,$(DEMO_CLIP),$(DEMO)/clip/f$(k).json) --motion --lanes --n 2 --seed 0 --time-limit 60 --out $(DEMO)/simulated
 	$(R2S) export $(DEMO)/simulated --scene $(DEMO_LOG_ID)-sim000 --to openscenario --out $(DEMO)/simulated-openscenario
 	$(R2S) render $(foreach k,$(DEMO_CLIP),$(DEMO)/clip/f$(k).json) --simulated $(DEMO)/simulated --out $(DEMO)/clip.png
+	$(R2S) run $(DEMO_LOG) --clip 2 --motion --lanes --out $(DEMO)/clip-programs --jobs $(JOBS)
 	@echo
 	@echo "demo done: report at $(DEMO)/report/report.html ($(DEMO)/report/report.md)"
 	@echo "           one frame ($(DEMO_FRAME)): $(DEMO)/scene.dsl, scene.scenic, scene.png, samples/"
@@ -73,6 +74,7 @@ demo: setup
 	@echo "           that frame and 5 variants for simulators: $(DEMO)/scenarionet (MetaDrive), $(DEMO)/openscenario (esmini)"
 	@echo "           a second of the AV2 log, its behaviours ($(DEMO)/clip.json) and 2 simulated variants: $(DEMO)/simulated"
 	@echo "           the first variant for esmini: $(DEMO)/simulated-openscenario; recorded vs simulated: $(DEMO)/clip.png"
+	@echo "           the whole log in clips of 2 s, a behaviour program each: $(DEMO)/clip-programs"
 	@echo "next: . $(VENV)/bin/activate   (in each new shell: puts r2s and the venv's python on PATH for the README's examples)"
 
 # Two pytest-xdist workers, each given whole test files (--dist loadfile: a module's fixtures are built once):
