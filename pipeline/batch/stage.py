@@ -86,6 +86,11 @@ def run(frames: str | os.PathLike, out: str | os.PathLike, config: SynthConfig, 
         log: Callable[[str], None]) -> Summary:
     """run_frames with its options as one value."""
     options.check()
+    if options.clip_s is not None and not config.lanes:
+        # A clip's frames are placed in the world (their times, their moves) by the ego rows' world pose, which a
+        # run reads, checks and hashes with each frame's road: without it every clip would be an error row.
+        raise UserError("--clip needs --lanes: a clip's frames are placed by their world pose and road, which "
+                        "--lanes reads")
     if options.window is not None and options.clip_s is None:
         from synth.window.program import check_window_config  # only --window loads the window synthesis
 

@@ -129,17 +129,30 @@ def test_bad_clip_runs_are_one_line_and_write_nothing(frames, log, tmp_path):
     for more, says in ((("--clip", "0"), "--clip must be a positive"), (("--clip", "nan"), "--clip must be"),
                        (("--clip", "1", "--window", "1"), "give one"), (("--clip", "4000"), "at most"),
                        (("--stride", "1"), "need --window or --clip")):
+        more = (*more, "--lanes")
         assert_one_line_error(run_r2s("run", str(frames), "--out", str(out), *more), 2, says)
     no_speed = tmp_path / "no-speed.parquet"
     write_frames(log.drop(columns="speed"), no_speed)
-    assert_one_line_error(run_r2s("run", str(no_speed), "--out", str(out), "--clip", "1"), 2, "speed")
+    assert_one_line_error(run_r2s("run", str(no_speed), "--out", str(out), "--clip", "1", "--lanes"), 2, "speed")
+    assert_one_line_error(run_r2s("run", str(frames), "--out", str(out), "--clip", "1"), 2, "--clip needs --lanes")
     assert not out.exists()
+    # An entity without a speed in one frame: an error row for its clip that names it; the other clips go on.
+    gap = log.copy()
+    victim = gap[(gap.frame_id == _clips(log, 1_000_000)[0][3]) & ~gap.is_ego].index[0]
+    gap.loc[victim, "speed"] = None
+    gapped = _copy(gap, tmp_path / "gap" / "frames.parquet")
+    _run(gapped, out)
+    rows = pq.read_table(out).to_pandas()
+    assert sorted(rows.status) == ["error", "optimal", "optimal"]
+    error = rows[rows.status == "error"].iloc[0]
+    assert f"entity {gap.loc[victim, 'entity_id']!r} has no speed" in error.error
     # Clip rows never go into an output of window or per-frame rows, nor window rows into one of clip rows (a
     # per-frame run drops them, as it drops window rows: docs/formats.md).
     for kind, more in (("window", ("--window", "1")), ("per-frame", ())):
         other = tmp_path / kind
         assert run_r2s("run", str(frames), "--out", str(other), "--jobs", "2", *more).returncode == 0
-        assert_one_line_error(run_r2s("run", str(frames), "--out", str(other), "--clip", "1"), 2, f"{kind} programs")
+        assert_one_line_error(run_r2s("run", str(frames), "--out", str(other), "--clip", "1", "--lanes"), 2,
+                              f"{kind} programs")
     clips = tmp_path / "clips"
     _run(frames, clips)
     assert_one_line_error(run_r2s("run", str(frames), "--out", str(clips), "--window", "1"), 2, "clip programs")
