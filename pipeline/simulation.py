@@ -23,6 +23,7 @@ import signal
 import sys
 import tempfile
 import threading
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -219,7 +220,8 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
             xodr = str(Path(scratch) / "road.xodr")
             export_road(str(scenes[0]), None, xodr)
         sim = variant_scenic(f"variants of {doc.get('first_frame')} to {doc.get('last_frame')}",
-                             [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config)
+                             [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config,
+                             road_offset(xodr))
         with timer.stage("compile"):
             scenario = _compile(sim.text)
         kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
@@ -242,6 +244,13 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
                 (stage / SUMMARY_FILE).write_text(json.dumps(result.to_json_dict(), indent=1) + "\n",
                                                   encoding="utf-8")
     return result
+
+
+def road_offset(xodr: str) -> tuple[float, float]:
+    """The world place of an OpenDRIVE file's origin (its header's offset, which r2s export writes and Scenic's
+    reader does not apply); (0, 0) without one."""
+    found = ET.parse(xodr).getroot().find("header/offset")
+    return (0.0, 0.0) if found is None else (float(found.get("x", 0.0)), float(found.get("y", 0.0)))
 
 
 def _compile(text: str):
@@ -330,8 +339,8 @@ def variant_rows(name: str, sim: Simulated, clip: Clip, records, index: RoadInde
     out = []
     for k, (scene, step) in enumerate(zip(clip.scenes, sim.frame_steps)):
         now = states[min(step, max(states))]
-        xs = [s[0] for s in now]
-        ys = [s[1] for s in now]
+        xs = [s[0] + sim.offset[0] for s in now]  # Scenic's place on the road file, back in the world
+        ys = [s[1] + sim.offset[1] for s in now]
         hs = [normalize(math.degrees(s[2]) + 90.0) for s in now]  # Scenic's 0 is +y; the world's yaw from +x
         facts = index.facts(xs, ys, hs)
         ego = WorldPose(xs[0], ys[0], hs[0])

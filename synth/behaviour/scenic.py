@@ -83,9 +83,12 @@ def speed_bound(behaviour: Behaviour, track: Track, v_stop: float) -> float:
     return top
 
 
-def placed(e: Entity, world: WorldPose) -> tuple[str, str]:
-    """The Scenic class and the specifiers of an entity at its recorded pose in the world."""
+def placed(e: Entity, world: WorldPose, offset: tuple[float, float] = (0.0, 0.0)) -> tuple[str, str]:
+    """The Scenic class and the specifiers of an entity at its recorded pose in the world, less `offset`: the road
+    file's origin in the world (its header's offset, which Scenic's OpenDRIVE reader does not apply), so that the
+    entity stands on Scenic's road where it stood on the recorded one."""
     x, y = world.point(e.x, e.y)
+    x, y = x - offset[0], y - offset[1]
     heading = world.heading + e.heading - 90.0  # Scenic's 0 is +y; the world's yaw is from +x
     length, width = e.dimensions()
     cls = "Pedestrian" if e.type == "Pedestrian" else "Car" if e.type in VEHICLE_CLASSES else "Object"

@@ -39,24 +39,73 @@ class SpeedPlan:
     lo: tuple[float, ...]
     hi: tuple[float, ...]
     rows: tuple[Row, ...]
+    means: tuple[float | None, ...] = ()  # per segment: its mean speed (length / duration), None: unkept
 
     def holds(self, u: Sequence[float], eps: float = 1e-9) -> bool:
         """Does u obey the plan (within eps)?"""
         return (all(lo - eps <= x <= hi + eps for x, lo, hi in zip(u, self.lo, self.hi))
                 and all(a * u[i] + b * u[j] <= c + eps for i, a, j, b, c in self.rows))
 
+    def knots(self, u: Sequence[float]) -> list[float]:
+        """Each segment's speed at its half-time (`knot`)."""
+        return [knot(u[j], u[j + 1], m) for j, m in enumerate(self.means or [None] * (len(u) - 1))]
 
-def speed_plan(behaviour: Behaviour, boundaries: Sequence[int], track: Track, config: SynthConfig) -> SpeedPlan:
-    """The plan of a behaviour's segments on the track's boundary samples (module docstring)."""
+
+def knot(u: float, w: float, mean: float | None) -> float:
+    """The speed at a segment's half-time that makes the piecewise-linear profile u -> knot -> w have the mean speed
+    `mean` (its area (u + 2 knot + w) / 4 * T is the segment's length); a straight line u -> w where mean is None."""
+    return (u + w) / 2 if mean is None else 2 * mean - (u + w) / 2
+
+
+def profile(u: float, m: float, w: float, duration: float, tau: float) -> tuple[float, float]:
+    """(speed, distance covered) at time tau in [0, duration] of a segment whose speed is linear from u to m over
+    its first half and from m to w over its second (exact integrals: the car's place along its path)."""
+    half = duration / 2
+    if tau <= half:
+        return u + (m - u) * tau / half, u * tau + (m - u) * tau * tau / duration
+    x = tau - half
+    return m + (w - m) * x / half, (u + m) * half / 2 + m * x + (w - m) * x * x / duration
+
+
+def speed_plan(behaviour: Behaviour, boundaries: Sequence[int], track: Track, config: SynthConfig,
+               means: Sequence[float] | None = None) -> SpeedPlan:
+    """The plan of a behaviour's segments on the track's boundary samples (module docstring). `means`: each
+    segment's mean speed to keep (its recorded length along its path over its duration); kept only where the
+    recorded boundary speeds obey the plan with them (else the plan is the one without, and the segment's
+    length varies with the draw)."""
     r = [track.samples[b].speed for b in boundaries]
     lo, hi = [0.0] * len(r), [math.inf] * len(r)
     rows: list[Row] = []
+    kept: list[Row] = []  # the rows that keep each segment's length: on its knot (knot)
+
+    def knot_within(j: int, mean: float, low: float, high: float) -> None:
+        # low <= 2 mean - (u_j + u_j+1) / 2 <= high, as two rows on u_j + u_j+1
+        kept.append((j, 1.0, j + 1, 1.0, 2 * (2 * mean - low)))
+        if math.isfinite(high):
+            kept.append((j, -1.0, j + 1, -1.0, -2 * (2 * mean - high)))
+
+    def knot_between(j: int, mean: float, rising: bool) -> None:
+        # u_j <= knot <= u_j+1 (rising) or u_j >= knot >= u_j+1: a profile through its knot never turns back
+        sign = 1.0 if rising else -1.0
+        kept.append((j, sign * 1.5, j + 1, sign * 0.5, sign * 2 * mean))
+        kept.append((j, -sign * 0.5, j + 1, -sign * 1.5, -sign * 2 * mean))
 
     def cap(k: int, low: float, high: float) -> None:
         lo[k], hi[k] = max(lo[k], low), min(hi[k], high)
 
     for j, seg in enumerate(behaviour.segments):
         pace = seg.pace
+        mean = None if means is None else means[j]
+        if mean is not None:
+            if isinstance(pace, Stopped):
+                knot_within(j, mean, 0.0, config.v_stop)
+            elif isinstance(pace, SlowingToAStop):
+                knot_within(j, mean, 0.0, math.inf)
+                knot_between(j, mean, rising=False)
+            elif isinstance(pace, Cruising):
+                knot_within(j, mean, pace.range.lo, pace.range.hi)
+                if isinstance(pace, (SpeedingUp, SlowingDown)):
+                    knot_between(j, mean, rising=isinstance(pace, SpeedingUp))
         if isinstance(pace, Stopped):
             cap(j, 0.0, config.v_stop)
             cap(j + 1, 0.0, config.v_stop)
@@ -75,6 +124,9 @@ def speed_plan(behaviour: Behaviour, boundaries: Sequence[int], track: Track, co
     lo[0] = hi[0] = r[0]
     # A boundary no pace bounds above (none between two paces can be: a stop and a start share none) keeps r.
     hi = [h if math.isfinite(h) else max(x, low) for h, x, low in zip(hi, r, lo)]
+    plan = SpeedPlan(tuple(r), tuple(lo), tuple(hi), tuple(rows + kept), tuple(means or ()))
+    if means is not None and plan.holds(r, 1e-6):
+        return plan
     return SpeedPlan(tuple(r), tuple(lo), tuple(hi), tuple(rows))
 
 
@@ -103,7 +155,7 @@ def turns(boundaries: Sequence[int], track: Track) -> list[float]:
 # The behaviour of a variant's moving entity: its boundary speeds drawn (feasible), then per segment the speed
 # linear from one boundary's to the next's and the heading turning at a steady rate, at the boundaries' steps.
 PRELUDE = STEER + '''
-from synth.behaviour.variants import feasible
+from synth.behaviour.variants import feasible, knot, profile
 
 def r2s__states(objects):
     """Each object's place, heading (its walking direction for a walker), speed: what r2s simulate writes."""
@@ -126,23 +178,24 @@ def r2s__along(path, s):
         s -= piece
     return path[-1]
 
-behavior R2sVariant(ends, turns, recorded, lo, hi, rows, q, f, walks, path):
+behavior R2sVariant(ends, turns, recorded, lo, hi, rows, means, q, f, walks, path):
     speeds = feasible(recorded, lo, hi, rows, q, f)
     heading = self.heading
-    travelled = 0
+    done = 0  # the path's length at the segment's start
     dt = simulation().timestep
     for j in range(len(turns)):
         start, a, b = heading, ends[j], ends[j + 1]
+        duration = (b - a) * dt
+        middle = knot(speeds[j], speeds[j + 1], means[j])
         for k in range(a, b):
             share = (k + 1 - a) / (b - a)
-            speed = speeds[j] + (speeds[j + 1] - speeds[j]) * share
+            speed, covered = profile(speeds[j], middle, speeds[j + 1], duration, (k + 1 - a) * dt)
             heading = start + turns[j] * share
             if path is not None:
                 # along the recorded path: where this step ends (the car moves on its present heading), aim at the
-                # path's point one more step on
-                travelled += speed * dt
+                # path's point one more step on past where the profile has it at the step's end
                 ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
-                tx, ty = r2s__along(path, travelled + speed * dt)
+                tx, ty = r2s__along(path, done + covered + speed * dt)
                 if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
                     heading = math.atan2(-(tx - ahead.x), ty - ahead.y)
             if walks:
@@ -150,6 +203,7 @@ behavior R2sVariant(ends, turns, recorded, lo, hi, rows, q, f, walks, path):
             else:
                 error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
                 take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / dt))
+        done += profile(speeds[j], middle, speeds[j + 1], duration, duration)[1]
     while True:
         take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
 '''
@@ -164,20 +218,35 @@ class Simulated:
     placed: tuple[str, ...]
     timestep: float
     frame_steps: tuple[int, ...]
+    offset: tuple[float, float] = (0.0, 0.0)  # the road file's origin in the world: Scenic's (0, 0)
 
     @property
     def steps(self) -> int:
         return self.frame_steps[-1]
 
 
-def path_of(behaviour: Behaviour, track: Track, clip: Clip) -> str:
-    """The recorded path a moving vehicle follows by arc length (its world positions at its samples, Scenic text), so
-    that a variant at other speeds keeps the recording's lanes; `None` (heading by time, the recorded turns) where
-    some segment is a `heading` Range, which only the recorded arc of headings keeps, and for a walker."""
-    if track.type == "Pedestrian" or any(isinstance(s.path, HeadingPath) for s in behaviour.segments):
-        return "None"
+def track_points(track: Track, clip: Clip, offset: tuple[float, float] = (0.0, 0.0)) -> list[tuple[float, float]]:
+    """A track's recorded places in the world less `offset` (the road file's origin), one per sample."""
     rows = [scene.ego if track.id == "ego" else scene.by_id().get(track.id) for scene in clip.scenes]
     points = [scene.world.point(e.x, e.y) for scene, e in zip(clip.scenes, rows) if e is not None]
+    return [(x - offset[0], y - offset[1]) for x, y in points]
+
+
+def segment_means(points: Sequence[tuple[float, float]], boundaries: Sequence[int],
+                  ends: Sequence[int], dt: float) -> list[float]:
+    """Each segment's mean speed in the simulation: its recorded length along the path (the polyline through the
+    points, as R2sVariant measures it) over its simulated duration (its steps times dt)."""
+    piece = [math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(points, points[1:])]
+    return [sum(piece[a:b]) / max((e1 - e0) * dt, dt)
+            for a, b, e0, e1 in zip(boundaries, boundaries[1:], ends, ends[1:])]
+
+
+def path_of(behaviour: Behaviour, track: Track, points: Sequence[tuple[float, float]]) -> str:
+    """The recorded path a moving vehicle follows by arc length (its places, Scenic text), so that a variant at
+    other speeds keeps the recording's lanes; `None` (heading by time, the recorded turns) where some segment is a
+    `heading` Range, which only the recorded arc of headings keeps, and for a walker."""
+    if track.type == "Pedestrian" or any(isinstance(s.path, HeadingPath) for s in behaviour.segments):
+        return "None"
     return "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]"
 
 
@@ -189,7 +258,7 @@ def simulation_step(times: Sequence[float], most: float = 0.1) -> float:
 
 
 def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Sequence[Sequence[int]], clip: Clip,
-                   xodr: str, config: SynthConfig) -> Simulated:
+                   xodr: str, config: SynthConfig, offset: tuple[float, float] = (0.0, 0.0)) -> Simulated:
     """The dynamic Scenic scenario of a clip program's variants (module docstring): every entity of the clip's first
     frame at its recorded pose in the world (as synth.behaviour.scenic places it), each moving one (not parked, a
     car or a pedestrian) running R2sVariant with its plan and its draws, `require always` its speed bound,
@@ -207,15 +276,19 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
         if not track.from_start:
             continue
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, where = placed(e, first.world)
+        cls, where = placed(e, first.world, offset)
         if not behaviour.parked and cls != "Object":
-            plan = speed_plan(behaviour, bounds, track, config)
             ends = [frame_steps[clip.times.index(track.samples[b].t)] for b in bounds]
+            points = track_points(track, clip, offset)
+            plan = speed_plan(behaviour, bounds, track, config, segment_means(points, bounds, ends, dt))
+            means = plan.means or [None] * (len(bounds) - 1)
             draws = ", ".join(num(lo) if lo == hi else f"Range({num(lo)}, {num(hi)})" for lo, hi in zip(plan.lo, plan.hi))
             args = [repr(ends), "[" + ", ".join(num(t) for t in turns(bounds, track)) + "]",
                     *("[" + ", ".join(num(v) for v in vs) + "]" for vs in (plan.recorded, plan.lo, plan.hi)),
                     "[" + ", ".join(f"({i}, {num(a)}, {j}, {num(b)}, {num(c)})" for i, a, j, b, c in plan.rows) + "]",
-                    f"[{draws}]", "Range(0, 1)", "True" if cls == "Pedestrian" else "False", path_of(behaviour, track, clip)]
+                    "[" + ", ".join("None" if m is None else num(m) for m in means) + "]",
+                    f"[{draws}]", "Range(0, 1)", "True" if cls == "Pedestrian" else "False",
+                    path_of(behaviour, track, points)]
             where += f", with speed {num(plan.recorded[0])}, with behavior R2sVariant({', '.join(args)})"
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
@@ -224,4 +297,4 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             lines.append(f"require always {track.id}.speed <= {num(top + 0.01)}  # its paces")
     lines.append(f"record r2s__states([{', '.join(names)}]) as r2s_states")
     lines.append(f"terminate after {num(frame_steps[-1] * dt)} seconds")
-    return Simulated("\n".join(lines) + "\n", tuple(names), dt, frame_steps)
+    return Simulated("\n".join(lines) + "\n", tuple(names), dt, frame_steps, offset)
