@@ -1,15 +1,17 @@
 """Simulated variants of a clip program (docs/scenic.md, "Simulated variants"; `r2s simulate`): what a variant may
 vary, and the dynamic Scenic scenario that draws it.
 
-A moving entity's speed is piecewise linear between its segments' boundaries; the speeds u_0 .. u_m at the
-boundaries are the variant's draw. They obey every pace of the behaviour (a `SpeedPlan`: each boundary's box from
+A moving entity's speed is piecewise linear within each segment, through a knot at its half-time that makes the
+profile's area the segment's recorded length (`knot`, `profile`: every segment ends where the recorded one did);
+the speeds u_0 .. u_m at the boundaries are the variant's draw. They obey every pace of the behaviour (a `SpeedPlan`: each boundary's box from
 the Ranges, stops and V_STOP of the segments on either side of it, and the rises and falls of at least DV of
-`speeding up` / `slowing down` between two boundaries), a convex set that holds the recorded boundary speeds r.
+`speeding up` / `slowing down` between two boundaries, and rows that keep each knot in its pace, dropped for an
+entity whose recorded speeds do not obey them), a convex set that holds the recorded boundary speeds r.
 Scenic draws a point q of the boxes and a fraction f uniformly; the variant's speeds are r + f * t * (q - r), t the
 largest step in [0, 1] toward q that keeps every constraint (`feasible`), so every draw obeys the plan and the
 draws cover the segment from r toward every point of the boxes. u_0 is the recorded speed (the first frame's
 relational program may bound it). Durations and turns are the recorded ones (the boundary samples' times and the
-summed signed turn of each segment's steps). Values in, text out; the Scenic text imports `feasible` from here.
+summed signed turn of each segment's steps). Values in, text out; the Scenic text imports `feasible`, `knot` and `profile` from here.
 """
 
 from __future__ import annotations
