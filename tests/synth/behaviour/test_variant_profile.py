@@ -29,20 +29,27 @@ def plans(draw):
     speeds, segs, means, durations = [draw(st.floats(v_stop + 0.1, 15))], [], [], []
     for kind in kinds:
         u = speeds[-1]
-        w = {"cruising": lambda: draw(st.floats(max(0.0, u - 2), u + 2)),
-             "speeding up": lambda: u + draw(st.floats(dv, 5)),
-             "slowing down": lambda: max(0.0, u - draw(st.floats(dv, 5))),
-             "slowing to a stop": lambda: draw(st.floats(0, v_stop)),
-             "stopped": lambda: draw(st.floats(0, v_stop))}[kind]()
+        if kind == "cruising":
+            w = draw(st.floats(max(0.0, u - 2), u + 2))
+        elif kind == "speeding up":
+            w = u + draw(st.floats(dv, 5))
+        elif kind == "slowing down":
+            w = max(0.0, u - draw(st.floats(dv, 5)))
+        else:
+            w = draw(st.floats(0, v_stop))
         assume(kind != "slowing down" or u - w >= dv)
         assume(kind != "slowing to a stop" or u > v_stop)
         assume(kind != "stopped" or u <= v_stop)
         # the recorded mean: between the boundary speeds (a monotone recording's), a share of the way
-        mean = u + (w - u) * draw(st.floats(0.3, 0.7)) if kind != "cruising" else (u + w) / 2 + draw(st.floats(-0.2, 0.2))
-        lo, hi = min(u, w, mean) - draw(st.floats(0, 1)), max(u, w, mean) + draw(st.floats(0, 1))
-        pace = {"cruising": lambda: Cruising(Range(max(0.0, lo), hi)), "speeding up": lambda: SpeedingUp(Range(max(0.0, lo), hi)),
-                "slowing down": lambda: SlowingDown(Range(max(0.0, lo), hi)), "slowing to a stop": SlowingToAStop,
-                "stopped": Stopped}[kind]()
+        if kind == "cruising":
+            mean = (u + w) / 2 + draw(st.floats(-0.2, 0.2))
+        else:
+            mean = u + (w - u) * draw(st.floats(0.3, 0.7))
+        low = max(0.0, min(u, w, mean) - draw(st.floats(0, 1)))
+        high = max(u, w, mean) + draw(st.floats(0, 1))
+        ranged = {"cruising": Cruising, "speeding up": SpeedingUp, "slowing down": SlowingDown}
+        pace = ranged[kind](Range(low, high)) if kind in ranged else \
+            (SlowingToAStop() if kind == "slowing to a stop" else Stopped())
         segs.append(Segment(None if kind == "stopped" else FollowingLane(), pace, Range(1.0, 1.0)))
         means.append(max(0.0, mean))
         durations.append(draw(st.floats(0.5, 5)))
