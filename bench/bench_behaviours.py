@@ -23,10 +23,12 @@ simulated; of the written variants, the share in which `r2s query --events` on t
 of the same pattern with the same binding (target: >= 90%).
 
     .venv/bin/python bench/bench_behaviours.py
+    .venv/bin/python bench/bench_behaviours.py --only av2 "waymo 2b3e" ...   # those clips only: behaviours-subset.*
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import shutil
@@ -274,12 +276,17 @@ def variant_lines(rows: list[dict]) -> list[str]:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description="Behaviour programs of clips (module docstring).")
+    parser.add_argument("--only", nargs="+", metavar="NAME",
+                        help="only the clips whose name contains one of these (results in behaviours-subset.*)")
+    only = parser.parse_args().only
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         for name, frames, ids in clips(work):
-            rows.append(measure(name, frames, ids, work))
-        crowded = cost_row(work)
+            if only is None or any(o in name for o in only):
+                rows.append(measure(name, frames, ids, work))
+        crowded = cost_row(work) if only is None else None
     actors = [a for r in rows for a in r["actors"] if r["seconds"] >= CLIP_S - 0.5]
     summary = {"actors_8s": len(actors),
                "median_mean_m": statistics.median(a["mean_m"] for a in actors) if actors else None,
@@ -310,7 +317,7 @@ def main() -> None:
         lines += [f"Cost: {crowded['clip']}, {crowded['tracks']} tracks over {crowded['frames']} frames "
                   f"({crowded['seconds']} s): synthesis {crowded['synth_cpu_s']:.2f} CPU s (target: under 5 s for "
                   f"100 tracks over 9 s); the checker accepts the recording: {crowded['checker_accepts']}.", ""]
-    write_results("behaviours", {"machine": machine(), "summary": summary, "clips": rows, "crowded": crowded},
+    write_results("behaviours" if only is None else "behaviours-subset", {"machine": machine(), "summary": summary, "clips": rows, "crowded": crowded},
                   "\n".join(lines))
 
 

@@ -48,6 +48,7 @@ def test_written_variants_are_frames_the_checker_accepts(clip, tmp_path):
     assert summary["asked"] == 2
     assert (summary["written"] + summary["rejected_by_scenic"] + summary["timed_out"]
             + summary["rejected_by_checker"]) == 2
+    assert summary["rejected_by_checker"] == 0, summary  # every simulation Scenic accepts is in the program
     written = [v["scene"] for v in summary["variants"] if v["outcome"] == "written"]
     table = pq.read_table(sims / "part-000000.parquet")
     assert sorted(set(table.column("scene").to_pylist())) == sorted(written) and written
@@ -121,6 +122,14 @@ def test_bad_input_is_one_line(clip, tmp_path):
     text.write_text(json.loads(program.read_text())["program"])
     assert_one_line_error(run_r2s("simulate", str(text), *frames, "--out", out), 2, "not JSON")
     assert not (tmp_path / "out").exists()
+
+
+def test_every_variant_scenic_accepts_passes_the_checker_for_another_seed(clip, tmp_path):
+    frames, program, _, _ = clip
+    proc = run_r2s("simulate", str(program), *frames, *FLAGS, "--n", "3", "--seed", "1", "--out", str(tmp_path / "s"))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert summary["rejected_by_checker"] == 0 and summary["written"] + summary["rejected_by_scenic"] == 3, summary
 
 
 @st.composite
