@@ -1,6 +1,7 @@
 """`r2s simulate`: simulated variants of a clip program as frames, as a user runs it on a real clip (the shipped
 Argoverse 2 log, 6 frames with its map), every written variant passing the checker again when read back by other
-verbs as real processes; the variant draws against an independent brute force."""
+verbs as real processes; the variant draws against an independent brute force; the entities placed in Scenic's
+lanes."""
 
 from __future__ import annotations
 
@@ -11,9 +12,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pipeline.export.opendrive import export_road
 from pipeline.scenes import scene as frame_scene
+from pipeline.simulation import _boundaries, _compile, read_program_json, road_offset
 from synth.behaviour.program import ClipProgram, parse_clip_program
-from synth.behaviour.variants import SpeedPlan, feasible
+from synth.behaviour.track import read_clip
+from synth.behaviour.variants import SpeedPlan, feasible, variant_scenic
+from synth.config import as_config
 from tests.support import ROOT, assert_one_line_error, run_r2s
 
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
@@ -130,6 +135,39 @@ def test_every_variant_scenic_accepts_passes_the_checker_for_another_seed(clip, 
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((tmp_path / "s" / "summary.json").read_text())
     assert summary["rejected_by_checker"] == 0 and summary["written"] + summary["rejected_by_scenic"] == 3, summary
+
+
+def test_placed_entities_lie_in_scenics_lanes(clip, tmp_path):
+    """The road file is recentred (its header's offset) and Scenic's OpenDRIVE reader does not apply the offset, so
+    the scenario places every entity at its world place less it: each entity with a recorded lane lies in a lane of
+    the network Scenic reads from the file, and its place plus the offset is its world place."""
+    from scenic.domains.driving.roads import Network
+
+    frames, program, _, _ = clip
+    config = as_config({"motion": True, "lanes": True})
+    clip_program, bounds, _ = read_program_json(program.read_text(), str(program))
+    scenes = [json.loads(open(f).read()) for f in frames]
+    recorded = read_clip(scenes)
+    xodr = str(tmp_path / "road.xodr")
+    export_road(frames[0], None, xodr)
+    offset = road_offset(xodr)
+    assert offset != (0.0, 0.0)  # the road is recentred: the test means something
+    sim = variant_scenic("t", [clip_program.behaviour(t.id) for t in recorded.tracks],
+                         _boundaries(clip_program, bounds, recorded, config, "t"), recorded, xodr, config, offset)
+    scene, _ = _compile(sim.text).generate(maxIterations=10)
+    network = Network.fromFile(xodr)
+    first = recorded.scenes[0]
+    by_id = first.by_id()
+    laned = 0
+    for name, obj in zip(sim.placed, scene.objects):
+        e = first.ego if name == "ego" else by_id[name]
+        x, y = first.world.point(e.x, e.y)
+        assert obj.position.x + offset[0] == pytest.approx(x, abs=1e-5)
+        assert obj.position.y + offset[1] == pytest.approx(y, abs=1e-5)
+        if e.lane is not None and e.type in ("Car", "Truck", "Bus"):
+            laned += 1
+            assert network.laneAt(obj.position) is not None, f"{name} is off Scenic's lanes at {obj.position}"
+    assert laned >= 3
 
 
 @st.composite
