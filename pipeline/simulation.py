@@ -23,7 +23,6 @@ import signal
 import sys
 import tempfile
 import threading
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +37,7 @@ from frames.schema import MAPS_DIR
 from frames.writer import frames_writer
 from pipeline.cli.inputs import read_scene, read_text_file
 from pipeline.errors import UserError
-from pipeline.export.opendrive import export_road
+from pipeline.export.opendrive import export_road, header_frame
 from pipeline.outputs import staged_directory
 from synth.behaviour.check import check_clip, segment_holds
 from synth.behaviour.program import ClipProgram, parse_clip_program
@@ -221,7 +220,7 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
             export_road(str(scenes[0]), None, xodr)
         sim = variant_scenic(f"variants of {doc.get('first_frame')} to {doc.get('last_frame')}",
                              [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config,
-                             road_offset(xodr))
+                             (header_frame(xodr) or (0.0, 0.0))[:2])
         with timer.stage("compile"):
             scenario = _compile(sim.text)
         kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
@@ -244,13 +243,6 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
                 (stage / SUMMARY_FILE).write_text(json.dumps(result.to_json_dict(), indent=1) + "\n",
                                                   encoding="utf-8")
     return result
-
-
-def road_offset(xodr: str) -> tuple[float, float]:
-    """The world place of an OpenDRIVE file's origin (its header's offset, which r2s export writes and Scenic's
-    reader does not apply); (0, 0) without one."""
-    found = ET.parse(xodr).getroot().find("header/offset")
-    return (0.0, 0.0) if found is None else (float(found.get("x", 0.0)), float(found.get("y", 0.0)))
 
 
 def _compile(text: str):

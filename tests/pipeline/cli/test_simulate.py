@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.export.opendrive import export_road
+from pipeline.export.opendrive import export_road, header_frame
 from pipeline.scenes import scene as frame_scene
-from pipeline.simulation import _boundaries, _compile, read_program_json, road_offset
+from pipeline.simulation import _boundaries, _compile, read_program_json
 from synth.behaviour.program import ClipProgram, parse_clip_program
 from synth.behaviour.track import read_clip
 from synth.behaviour.variants import SpeedPlan, feasible, variant_scenic
@@ -150,7 +150,7 @@ def test_placed_entities_lie_in_scenics_lanes(clip, tmp_path):
     recorded = read_clip(scenes)
     xodr = str(tmp_path / "road.xodr")
     export_road(frames[0], None, xodr)
-    offset = road_offset(xodr)
+    offset = header_frame(xodr)[:2]
     assert offset != (0.0, 0.0)  # the road is recentred: the test means something
     sim = variant_scenic("t", [clip_program.behaviour(t.id) for t in recorded.tracks],
                          _boundaries(clip_program, bounds, recorded, config, "t"), recorded, xodr, config, offset)
