@@ -19,9 +19,10 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -234,7 +235,7 @@ class _Run:
                         if pool.own_processes else None)
         buffer = PartBuffer(self.options.part_rows, PART_MAX_AGE_S)
         self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started)
-        computed = written = 0
+        computed = 0
         stopped, refused = True, False
         try:
             tasks = self._tasks(dataset, done, todo, pool, progress_dir)
@@ -252,7 +253,7 @@ class _Run:
                 else:
                     self._progress.tick()
                 if buffer.due(now):
-                    written += _write_part(store, buffer.take())
+                    _write_part(store, buffer.take())
             stopped = False
             return computed
         except ChunkUnreadable as exc:
@@ -263,9 +264,11 @@ class _Run:
             raise UserError(f"{exc}{exc.hint}") from None
         finally:
             if buffer.count and not refused:
-                written += _write_part(store, buffer.take())
+                _write_part(store, buffer.take())
             if stopped:
-                saved = n_frames - todo + written
+                # The store's own count: a stop held back during a write is delivered as the write returns, before
+                # any count kept here could be updated, and the line would say one part less than is saved.
+                saved = n_frames - todo + store.rows_written
                 where = self.out if not store.single_file else store.parts
                 self.log(f"stopped: {saved:,} of {n_frames:,} {self.unit} are saved in {where}; "
                          "run the same command again to resume")
@@ -275,15 +278,36 @@ class _Run:
                 shutil.rmtree(progress_dir, ignore_errors=True)
 
 
-def _write_part(store, table) -> int:
-    """Write a part with SIGTERM held back: the rows have left the buffer, so an exit in the middle of the write
-    would lose them; the signal is delivered (and the run ends) right after."""
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
-    try:
+def _write_part(store, table) -> None:
+    """Write a part with Ctrl-C and SIGTERM held back: the rows have left the buffer, so a stop in the middle of the
+    write would lose them; a stop that arrives is delivered (and the run ends) right after."""
+    with _stops_held():
         store.write_part(table)
+
+
+@contextmanager
+def _stops_held() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM at the Python level, then deliver the first that arrived to the handler it was meant
+    for. Not by blocking the signal (pthread_sigmask): that blocks it in this thread only, and the kernel hands it
+    to another thread (pyarrow's, loky's), whose flag the interpreter then serves in this thread mid-write."""
+    if threading.current_thread() is not threading.main_thread():  # handlers can be changed in the main thread only
+        yield
+        return
+    arrived: list[tuple[int, Any]] = []
+    stops = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, frame: arrived.append((signum, frame))) for s in stops}
+    try:
+        yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
-    return table.num_rows
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if arrived:
+            signum, frame = arrived[0]
+            handler = previous[signum]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)  # the default action: the process ends as it would have
 
 
 class _WindowRun(_Run):

@@ -87,6 +87,7 @@ class RunStore:
         # points to a folder not made yet
         self.parts = Path(f"{self.out}.parts") if self.single_file else output_place(self.out)
         self._next = 0
+        self.rows_written = 0  # rows of the parts this store wrote: what a stopped run says it saved
         self._lock = None
         self._unreadable: list[Path] = []
 
@@ -238,6 +239,7 @@ class RunStore:
         self._next += 1
         with _writing(path), atomic_path(path) as tmp:  # .part-NNNNNN.parquet.*.tmp: hidden from dataset readers
             pq.write_table(table, tmp, compression="zstd")
+        self.rows_written += table.num_rows
         return path
 
     def finish(self) -> None:

@@ -840,3 +840,30 @@ def test_dask_workers_that_cannot_see_the_frames_are_refused_before_anything_is_
         finally:
             DaskPool.check_readable = original
     _assert_nothing_written(out)
+
+
+def test_a_stop_held_back_during_a_part_write_still_counts_that_part(tmp_path):
+    """SIGTERM during a write is delivered as the write returns; the rows it saved are counted all the same, so the
+    stop line's "N of M saved" is what a resume keeps (it once said one part less)."""
+    from pipeline.batch.stage import _write_part
+    from pipeline.batch.store import RunStore
+
+    class Stop(Exception):
+        pass
+
+    class Stopping(RunStore):
+        def write_part(self, table):
+            os.kill(os.getpid(), signal.SIGTERM)  # arrives while the stage holds SIGTERM back
+            return super().write_part(table)
+
+    def handler(signum, frame):
+        raise Stop
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        store = Stopping(tmp_path / "programs")
+        with pytest.raises(Stop):
+            _write_part(store, programs_table([_row("a"), _row("b")]))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert store.rows_written == 2 == len(read_programs(tmp_path / "programs"))
