@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from synth.road import lane_facts
 from synth.road.lane_facts import PackedSegments, RoadIndex, Segments, row_chunks
 from synth.road.lane_geometry import (
+    BEVEL_MERGE,
     MAX_TURNING,
     SHORT_TURNING,
     SHORT_WORK,
@@ -232,4 +233,6 @@ def test_a_batch_of_lanes_some_sided_widens_each_as_alone(lanes):
                                   shapely.buffer(g, -right, cap_style="flat", join_style="bevel",
                                                  single_sided=True)))
             area = area if area.geom_type == "Polygon" else max(area.geoms, key=lambda p: p.area)
-            assert shapely.Polygon(ring).equals(shapely.Polygon(area.exterior))  # its outer ring kept
+            # its outer ring kept: GEOS's, or the offset ring that bounds the same set but for merged bevels
+            near = BEVEL_MERGE ** 2 / (4 * min(left, right)) + 1e-9
+            assert shapely.hausdorff_distance(shapely.Polygon(ring), shapely.Polygon(area.exterior)) <= near
