@@ -3,7 +3,7 @@
 - **A lane without a polygon** (Waymo-converted scenarios give a centre line and widths; nuScenes lane
   connectors come with a centre line only) gets the polygon of its centre line widened to each side by its half
   widths (the mean of the source's per-vertex widths on each side where it gives them, else half of
-  DEFAULT_LANE_WIDTH): see `lane_polygon`.
+  DEFAULT_LANE_WIDTH): see `lane_polygon` (its offset ring where that is the buffer, else GEOS's buffer).
 - **A lane without neighbours in its source** (nuScenes via ScenarioNet) gets them by probing: from the point
   halfway along its centre line (by length), one lane width to the left and to the right, square to the
   centre-line segment there; the width is the lane's there, twice the distance to its polygon's boundary. The neighbour on a side is the lane containing the probe
@@ -73,14 +73,16 @@ def lane_polygon(line: Points, left: float | None = None, right: float | None = 
     DEFAULT_LANE_WIDTH); empty for a line of fewer than two distinct points.
 
     The set of points within those distances of the line, cut square at its ends: GEOS's buffer of the line
-    (flat caps, bevel joins; one single-sided buffer per side when the sides differ), its outer ring kept. Unlike
-    offsetting the vertices, a buffer never folds over itself where the line turns tighter than its width (a
-    third of the nuScenes lane connectors do, at the joints of their arcs)."""
+    (flat caps, bevel joins; one single-sided buffer per side when the sides differ), its outer ring kept; or,
+    where it provably bounds that set (`offset_rings`), the line's offset ring, without GEOS. Unlike the offset
+    ring everywhere, a buffer never folds over itself where the line turns tighter than its width (a third of the
+    nuScenes lane connectors do, at the joints of their arcs): those lines take GEOS's."""
     return lane_polygons([line], [left], [right])[0]
 
 
 def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[float | None]) -> list[Points]:
-    """`lane_polygon` of many lines, in a few vectorised GEOS calls (a map has hundreds of such lanes). A line
+    """`lane_polygon` of many lines, in a few vectorised numpy passes and GEOS calls (a map has hundreds of such
+    lanes). A line
     that cannot be widened gets an empty polygon, as one of fewer than two distinct points: a non-finite
     coordinate, a half width outside (0, inf), more work than `widening_work` allows, or an error of GEOS's."""
     import shapely

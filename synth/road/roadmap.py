@@ -46,9 +46,9 @@ class FloatPairs(tuple):
 
 
 class ShellRing(FloatPairs):
-    """The outer ring of a polygon GEOS made (synth.road.lane_geometry.lane_polygons: a buffer, which GEOS returns
-    valid), without its closing repeat: simple by construction, so check_simple need not ask GEOS again. Only
-    that function constructs it."""
+    """The outer ring of a lane's widened centre line (synth.road.lane_geometry.lane_polygons: a buffer, which GEOS
+    returns valid, or an offset ring GEOS found simple), without its closing repeat: simple by construction, so
+    check_simple need not ask GEOS again. Only that function constructs it."""
 
     __slots__ = ()
 
