@@ -459,7 +459,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
         raise MapError(f"map {map_id!r}: map_features is {_kind(map_features)}, not a dict of features")
     nuscenes = dataset == "nuscenes"
     features = []
-    widths: dict[str, tuple[float | None, float | None]] = {}  # lanes without polygon: their widths
+    widths: dict = {}  # lanes without polygon: their feature and number of points, then their widths
     dropped: set[str] = set()  # lanes of one point: links to them go with them
     any_neighbour = False
     for raw_id, feat in map_features.items():
@@ -494,7 +494,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
         rule = "source"
         if not polygon:
             # built below, for all such lanes at once
-            widths[fid], rule = _widths(map_id, fid, feat, len(line), repairs), "centre line"
+            widths[fid], rule = (feat, len(line)), "centre line"  # read below, for all such lanes at once
         features.append(MapFeature.fast(
             map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
             successors=_ids(map_id, fid, feat, "exit_lanes", repairs),
@@ -502,6 +502,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
             is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
             polygon_rule=rule))
     if widths:
+        widths = _all_widths(map_id, widths, repairs)
         todo = [i for i, f in enumerate(features) if f.feature_id in widths and f.kind == LANE]
         rings = lane_polygons([features[i].line for i in todo], [widths[features[i].feature_id][0] for i in todo],
                               [widths[features[i].feature_id][1] for i in todo])
@@ -592,6 +593,47 @@ def _neighbour(map_id: str, fid: str, feat: dict, key: str, repairs: MapRepairs)
     return ref
 
 
+def _all_widths(map_id: str, lanes: dict[str, tuple[dict, int]], repairs: MapRepairs
+                ) -> dict[str, tuple[float | None, float | None]]:
+    """`_widths` of many lanes (id: feature, number of centre-line points): the (N, 2) float arrays converters
+    write in one numpy pass over all of them (a map has hundreds), anything else one lane at a time."""
+    out: dict[str, tuple[float | None, float | None]] = {}
+    arrays, ids = [], []
+    for fid, (feat, n) in lanes.items():
+        w = feat.get("width")
+        if type(w) is np.ndarray and w.dtype in FLOATS and w.shape == (n, 2) and n:
+            arrays.append(w)
+            ids.append(fid)
+        else:
+            out[fid] = _widths(map_id, fid, feat, n, repairs)
+    if not arrays:
+        return out
+    n = np.fromiter(map(len, arrays), dtype=np.int64, count=len(arrays))
+    lane = np.repeat(np.arange(len(arrays)), n)
+    w = np.concatenate(arrays).astype(float)  # float32 (the Waymo converter's) widens exactly
+    finite = np.bincount(lane, weights=~np.isfinite(w).all(axis=1), minlength=len(arrays)) == 0
+    known = (w >= MIN_HALF_WIDTH) & (w <= MAX_HALF_WIDTH)
+    other = known[:, ::-1] & ~known  # unknown here, known on the other side
+    filled = np.where(known, w, np.where(other, w[:, ::-1], DEFAULT_LANE_WIDTH / 2))
+    means = (np.add.reduceat(filled, np.cumsum(n) - n, axis=0) / n[:, None]).tolist()
+    all_known = (np.bincount(lane, weights=~known.all(axis=1), minlength=len(arrays)) == 0).tolist()
+    either = (np.bincount(lane, weights=~(known | other).all(axis=1), minlength=len(arrays)) == 0).tolist()
+    for fid, ok, (left, right), all_, either_, k in zip(ids, finite.tolist(), means, all_known, either, n.tolist()):
+        if not ok:
+            out[fid] = _widths_unknown(map_id, fid, k, repairs)
+            continue
+        if not all_:
+            repairs.repaired(WIDTHS_OTHER_SIDE if either_ else WIDTHS_DEFAULT)
+        out[fid] = left, right
+    return out
+
+
+def _widths_unknown(map_id: str, fid: str, n: int, repairs: MapRepairs) -> tuple[None, None]:
+    repairs.broken(WIDTHS_DEFAULT, f"map {map_id!r}: lane {fid!r} has a width that is not an ({n}, 2) array of "
+                   "finite numbers")
+    return None, None
+
+
 def _widths(map_id: str, fid: str, feat: dict, n: int, repairs: MapRepairs) -> tuple[float | None, float | None]:
     """The widths to the left and to the right of the centre line: the means of `width` (N, 2: per vertex, the
     distances to the left and right boundaries), where a value of 0 or out of [MIN_HALF_WIDTH, MAX_HALF_WIDTH] is
@@ -604,9 +646,7 @@ def _widths(map_id: str, fid: str, feat: dict, n: int, repairs: MapRepairs) -> t
     except (TypeError, ValueError, OverflowError):
         w = None
     if w is None or w.shape != (n, 2) or not np.isfinite(w).all():
-        repairs.broken(WIDTHS_DEFAULT, f"map {map_id!r}: lane {fid!r} has a width that is not an ({n}, 2) array of "
-                       "finite numbers")
-        return None, None
+        return _widths_unknown(map_id, fid, n, repairs)
     known = (w >= MIN_HALF_WIDTH) & (w <= MAX_HALF_WIDTH)
     if known.all():
         return float(w[:, 0].mean()), float(w[:, 1].mean())
