@@ -165,8 +165,7 @@ def offset_rings(xy: np.ndarray, kept: np.ndarray, left: np.ndarray, right: np.n
     (indices), their rings packed (without closing repeat, clockwise as GEOS's) and each ring's point count."""
     import shapely
 
-    mine = np.repeat(which, kept)
-    sub, k = xy[mine], kept[which]
+    sub, k = (xy, kept) if which.all() else (xy[np.repeat(which, kept)], kept[which])
     lines = np.flatnonzero(which)
     if not len(lines):
         return lines, np.empty((0, 2)), np.zeros(0, dtype=np.int64)
@@ -184,7 +183,7 @@ def offset_rings(xy: np.ndarray, kept: np.ndarray, left: np.ndarray, right: np.n
     normal[last] = before[last]
     before[first] = normal[first]
     cross = before[:, 0] * normal[:, 1] - before[:, 1] * normal[:, 0]
-    dot = np.einsum("ij,ij->i", before, normal)
+    dot = before[:, 0] * normal[:, 0] + before[:, 1] * normal[:, 1]
     bad = np.bincount(line[dot <= -0.5], minlength=len(lines)) > 0  # a joint of over 120 degrees: the miter
     # is far and ill-conditioned; GEOS decides
     seg = np.ones(len(sub) - 1, dtype=bool)  # d[i] is a segment of a line
@@ -192,13 +191,17 @@ def offset_rings(xy: np.ndarray, kept: np.ndarray, left: np.ndarray, right: np.n
     bad |= np.bincount(line[:-1][seg & ~(length >= MIN_SEGMENT)], minlength=len(lines)) > 0
     with np.errstate(all="ignore"):
         miter = (before + normal) / (1.0 + dot)[:, None]
+    gap = np.hypot(*(before - normal).T)  # of the bevel's two points, per metre of width
     sides = []
-    for width, towards in ((left[which][line][:, None], cross > 0), (-right[which][line][:, None], cross < 0)):
-        a, b = sub + width * before, sub + width * normal
-        one = towards | (np.abs(width[:, 0]) * np.hypot(*(before - normal).T) < BEVEL_MERGE)
-        a[one] = b[one] = sub[one] + width[one] * miter[one]
+    for width, towards in ((left[which][line], cross > 0), (-right[which][line], cross < 0)):
+        one = towards | (np.abs(width) * gap < BEVEL_MERGE)
+        w = width[:, None]
+        m = sub + w * miter
+        a = np.where(one[:, None], m, sub + w * before)
+        b = np.where(one[:, None], m, sub + w * normal)
         # each offset segment (b of its start to a of its end) runs the way of its centre segment
-        against = seg & ~(np.einsum("ij,ij->i", a[1:] - b[:-1], t) > 0)
+        step = a[1:] - b[:-1]
+        against = seg & ~(step[:, 0] * t[:, 0] + step[:, 1] * t[:, 1] > 0)
         bad |= np.bincount(line[:-1][against], minlength=len(lines)) > 0
         sides.append((a, b, one))
     (la, lb, lone), (ra, rb, rone) = sides
