@@ -50,6 +50,7 @@ from synth.road.roadmap import (
     DROPPED_LINKS,
     LANE,
     ROAD_LINE,
+    ArrayPairs,
     FloatPairs,
     MapError,
     MapFeature,
@@ -545,8 +546,9 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     # What converters write, converted without numpy's per-element work: a float array, or a list of [x, y]
     # (or [x, y, z]) float points (RoadMap.of checks that they are finite). Anything else takes the general way.
     if type(value) is np.ndarray and value.dtype in FLOATS and value.ndim == 2 and value.shape[1] >= 2:
-        # float32 (the Waymo converter's) widens to a Python float exactly, as np.asarray(value, float) does
-        return FloatPairs(zip(value[:, 0].tolist(), value[:, 1].tolist()))
+        # float32 (the Waymo converter's) widens to a Python float exactly, as np.asarray(value, float) does; the
+        # points keep that float64 array, which packing them later reuses
+        return ArrayPairs.of(value[:, :2])
     if type(value) is list and value:
         try:
             lens = set(map(len, value))

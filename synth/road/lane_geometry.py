@@ -142,7 +142,7 @@ def _emit(out: list[Points], which: np.ndarray, ring: np.ndarray, counts: np.nda
     pts = list(zip(ring[:, 0].tolist(), ring[:, 1].tolist()))  # all points in one pass, then sliced
     ends = np.cumsum(counts).tolist()
     for i, end, k in zip(which.tolist(), ends, counts.tolist()):
-        out[i] = ShellRing(pts[end - k:end])
+        out[i] = ShellRing(pts[end - k:end]).with_array(ring[end - k:end])
 
 
 # Two bevel points closer than this (metres) are one: the miter point of their joint, which lies beyond their

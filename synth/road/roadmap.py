@@ -45,12 +45,39 @@ class FloatPairs(tuple):
     __slots__ = ()
 
 
-class ShellRing(FloatPairs):
+class ArrayPairs(FloatPairs):
+    """FloatPairs that keep the (N, 2) float64 array they were made from (`xy`, read-only, the same values): `packed`
+    concatenates these arrays instead of converting every coordinate back from Python floats (on the 12 Waymo
+    scenarios' maps, most of what RoadMap.of and the widening spent packing). Made only by `of` (or a subclass's
+    maker that sets `xy` to its points); a tuple in every other respect."""
+
+    # no __slots__: a tuple subclass cannot have a non-empty one; the instance dict holds `xy`
+
+    @classmethod
+    def of(cls, xy: np.ndarray) -> ArrayPairs:
+        """The points of a float64 (N, 2) array, which they keep (made read-only: points are frozen)."""
+        xy = xy.astype(float)  # a C-contiguous copy of its own
+        xy.flags.writeable = False
+        out = cls(zip(xy[:, 0].tolist(), xy[:, 1].tolist()))
+        out.xy = xy
+        return out
+
+    def with_array(self, xy: np.ndarray) -> ArrayPairs:
+        """These points keeping `xy`, their own values as a float64 (N, 2) array (the caller's promise)."""
+        self.xy = _frozen(xy)
+        return self
+
+
+def _frozen(xy: np.ndarray) -> np.ndarray:
+    xy = np.ascontiguousarray(xy, dtype=float)
+    xy.flags.writeable = False
+    return xy
+
+
+class ShellRing(ArrayPairs):
     """The outer ring of a lane's widened centre line (synth.road.lane_geometry.lane_polygons: a buffer, which GEOS
     returns valid, or an offset ring GEOS found simple), without its closing repeat: simple by construction, so
     check_simple need not ask GEOS again. Only that function constructs it."""
-
-    __slots__ = ()
 
 
 class MapError(InputError, ValueError):
@@ -445,6 +472,9 @@ def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
     conversion of each small tuple on its own costs more than the work done on it). Every point must be a pair."""
     counts = np.fromiter(map(len, seqs), dtype=np.int64, count=len(seqs))
     total = int(counts.sum())
+    arrays = [getattr(s, "xy", None) for s in seqs if len(s)]
+    if arrays and all(a is not None for a in arrays):  # all ArrayPairs: their arrays hold the same floats
+        return np.concatenate(arrays), counts
     flat = np.fromiter(chain.from_iterable(chain.from_iterable(seqs)), dtype=float, count=2 * total)
     return flat.reshape(total, 2), counts
 
@@ -457,7 +487,11 @@ def packed_subset(seqs: tuple[np.ndarray, np.ndarray], mine: np.ndarray) -> tupl
 
 def open_ring(pts: Points) -> Points:
     """A ring without its closing repeat of the first vertex (sources write rings both ways)."""
-    return type(pts)(pts[:-1]) if len(pts) > 1 and pts[0] == pts[-1] else pts
+    if not (len(pts) > 1 and pts[0] == pts[-1]):
+        return pts
+    out = type(pts)(pts[:-1])
+    xy = getattr(pts, "xy", None)
+    return out.with_array(xy[:-1]) if xy is not None else out
 
 
 def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[MapFeature]:
