@@ -537,6 +537,13 @@ FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
 def _text(value: Any) -> str | None:
     """A map feature's id, type or link as text: a string (that UTF-8 can write: no lone surrogate) or an int
     (numpy's too; converters write both); None for anything else."""
+    # what converters write, decided first without the general checks (a Waymo map has ~2,000 ids and links):
+    # an ASCII string, which UTF-8 writes; a plain int (not bool, whose type is not int) as _as_id bounds it
+    kind = type(value)
+    if kind is str and value.isascii():
+        return value
+    if kind is int:
+        return str(value) if value.bit_length() < 64 else None
     return _as_id(value) if not isinstance(value, (bool, np.bool_)) else None
 
 

@@ -184,11 +184,12 @@ def offset_rings(xy: np.ndarray, kept: np.ndarray, left: np.ndarray, right: np.n
     before[first] = normal[first]
     cross = before[:, 0] * normal[:, 1] - before[:, 1] * normal[:, 0]
     dot = before[:, 0] * normal[:, 0] + before[:, 1] * normal[:, 1]
-    bad = np.bincount(line[dot <= -0.5], minlength=len(lines)) > 0  # a joint of over 120 degrees: the miter
-    # is far and ill-conditioned; GEOS decides
+    # the points whose line GEOS widens (one bincount at the end): a joint of over 120 degrees (the miter is far
+    # and ill-conditioned), a segment too short, an offset segment running against its centre segment (below)
+    wrong = dot <= -0.5
     seg = np.ones(len(sub) - 1, dtype=bool)  # d[i] is a segment of a line
     seg[last[:-1]] = False
-    bad |= np.bincount(line[:-1][seg & ~(length >= MIN_SEGMENT)], minlength=len(lines)) > 0
+    wrong[:-1] |= seg & ~(length >= MIN_SEGMENT)
     with np.errstate(all="ignore"):
         miter = (before + normal) / (1.0 + dot)[:, None]
     gap = np.hypot(*(before - normal).T)  # of the bevel's two points, per metre of width
@@ -196,14 +197,15 @@ def offset_rings(xy: np.ndarray, kept: np.ndarray, left: np.ndarray, right: np.n
     for width, towards in ((left[which][line], cross > 0), (-right[which][line], cross < 0)):
         one = towards | (np.abs(width) * gap < BEVEL_MERGE)
         w = width[:, None]
-        m = sub + w * miter
-        a = np.where(one[:, None], m, sub + w * before)
-        b = np.where(one[:, None], m, sub + w * normal)
+        # the direction first, then one product and sum a point: the same floats as the miter point's or the
+        # bevel point's own sub + w * direction
+        a = sub + w * np.where(one[:, None], miter, before)
+        b = sub + w * np.where(one[:, None], miter, normal)
         # each offset segment (b of its start to a of its end) runs the way of its centre segment
         step = a[1:] - b[:-1]
-        against = seg & ~(step[:, 0] * t[:, 0] + step[:, 1] * t[:, 1] > 0)
-        bad |= np.bincount(line[:-1][against], minlength=len(lines)) > 0
+        wrong[:-1] |= seg & ~(step[:, 0] * t[:, 0] + step[:, 1] * t[:, 1] > 0)
         sides.append((a, b, one))
+    bad = np.bincount(line[wrong], minlength=len(lines)) > 0
     (la, lb, lone), (ra, rb, rone) = sides
     # ring of line j: its points' (a, b) on the left forward, then (b, a) on the right backward; a single point
     # where a joint has one (`one`)
