@@ -330,7 +330,7 @@ def main() -> None:
                   f"{100 * (cost - st['stages']['widening']) / allowed:.0f}%. The points read from arrays keep "
                   "them (roadmap.ArrayPairs: RoadMap.of and the widening pack by concatenation), the widths are read "
                   "in one pass; what is left is mostly making the points themselves (one Python tuple a point, "
-                  "~10^5 a map: the readers' lines and the widened rings, about 0.05 s of the 12 scenarios), "
+                  "~10^5 a map: the readers' lines and the widened rings, about 0.06 s of the 12 scenarios), "
                   "per-feature reading, and the nearest centre-line segment of points in several lanes (about "
                   "0.02 s): the target needs the maps' points kept as arrays end to end (MapFeature's points, the "
                   "maps' columns from RoadMap's packed arrays), not a faster widening alone."]
