@@ -15,7 +15,7 @@ from extractors import scenarionet
 from synth.road.lane_geometry import DEFAULT_LANE_WIDTH, dedup_packed, offset_rings
 from synth.road.roadmap import MapRepairs
 from tests.support import SHARED
-from tests.synth.road.test_offset_rings import bound, geos_ring
+from tests.support.widening import bound, geos_ring
 
 WAYMO = SHARED / "data" / "waymo"
 

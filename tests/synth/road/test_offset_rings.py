@@ -12,24 +12,8 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synth.road.lane_geometry import BEVEL_MERGE, dedup, dedup_packed, lane_polygons, offset_rings
-
-
-def geos_ring(line, left, right):
-    """The independent rule: GEOS's buffer of the line (both sides at once where they agree, else the union of
-    two single-sided ones), flat caps, bevel joins, its largest part's outer ring."""
-    g = shapely.LineString(dedup(tuple(line)))
-    area = (shapely.buffer(g, left, cap_style="flat", join_style="bevel") if left == right else
-            shapely.union(shapely.buffer(g, left, cap_style="flat", join_style="bevel", single_sided=True),
-                          shapely.buffer(g, -right, cap_style="flat", join_style="bevel", single_sided=True)))
-    area = area if area.geom_type == "Polygon" else max(area.geoms, key=lambda p: p.area)
-    return shapely.Polygon(area.exterior)
-
-
-def bound(left, right):
-    # a merged bevel's miter point lies beyond the bevel's chord by at most its gap squared over 4 half widths
-    return BEVEL_MERGE ** 2 / (4 * min(left, right)) + 1e-7
-
+from synth.road.lane_geometry import dedup_packed, lane_polygons, offset_rings
+from tests.support.widening import bound, geos_ring
 
 # lanes as the sources draw them: a walk of steps 0.2..5 m turning a little each step (curves, bends, hairpins
 # when the turns add up), and widths of real lanes, sides alike or not
