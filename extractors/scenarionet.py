@@ -460,7 +460,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
         raise MapError(f"map {map_id!r}: map_features is {_kind(map_features)}, not a dict of features")
     nuscenes = dataset == "nuscenes"
     features = []
-    widths: dict = {}  # lanes without polygon: their feature and number of points, then their widths
+    unwidened: dict[str, tuple[dict, int]] = {}  # lanes without polygon: their feature, number of points
     dropped: set[str] = set()  # lanes of one point: links to them go with them
     any_neighbour = False
     for raw_id, feat in map_features.items():
@@ -493,17 +493,16 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
         right = _neighbour(map_id, fid, feat, "right_neighbor", repairs)
         any_neighbour = any_neighbour or left is not None or right is not None
         rule = "source"
-        if not polygon:
-            # built below, for all such lanes at once
-            widths[fid], rule = (feat, len(line)), "centre line"  # read below, for all such lanes at once
+        if not polygon:  # widths read and polygons built below, for all such lanes at once
+            unwidened[fid], rule = (feat, len(line)), "centre line"
         features.append(MapFeature.fast(
             map_id, fid, kind, polygon=polygon, line=line, source_type=source_type, left=left, right=right,
             successors=_ids(map_id, fid, feat, "exit_lanes", repairs),
             predecessors=_ids(map_id, fid, feat, "entry_lanes", repairs),
             is_intersection=source_type == "LANE_SURFACE_UNSTRUCTURE" or (nuscenes and "polygon" not in feat),
             polygon_rule=rule))
-    if widths:
-        widths = _all_widths(map_id, widths, repairs)
+    if unwidened:
+        widths = _all_widths(map_id, unwidened, repairs)
         todo = [i for i, f in enumerate(features) if f.feature_id in widths and f.kind == LANE]
         rings = lane_polygons([features[i].line for i in todo], [widths[features[i].feature_id][0] for i in todo],
                               [widths[features[i].feature_id][1] for i in todo])

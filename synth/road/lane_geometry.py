@@ -82,9 +82,9 @@ def lane_polygon(line: Points, left: float | None = None, right: float | None = 
 
 def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[float | None]) -> list[Points]:
     """`lane_polygon` of many lines, in a few vectorised numpy passes and GEOS calls (a map has hundreds of such
-    lanes). A line
-    that cannot be widened gets an empty polygon, as one of fewer than two distinct points: a non-finite
-    coordinate, a half width outside (0, inf), more work than `widening_work` allows, or an error of GEOS's."""
+    lanes). A line that cannot be widened gets an empty polygon, as one of fewer than two distinct points: a
+    non-finite coordinate, a half width outside (0, inf), more work than `widening_work` allows, or an error of
+    GEOS's."""
     import shapely
 
     half = DEFAULT_LANE_WIDTH / 2
