@@ -500,9 +500,13 @@ def bindings_query(pattern: Pattern, config: SynthConfig, chunk: Chunk | None = 
         # Injective: a different input row from every earlier name whose types can coincide.
         on += [f"{a}.ord <> {alias[other.id]}.ord" for other in pattern.statements[:k] if _overlap(st.type, other.type)]
         bcond = Condition.all(_binary(st, alias, config))
-        on.append(f"({bcond.candidate})")
         sure_parts.append(f"({bcond.sure})")
-        candidate_parts.append(f"({bcond.candidate})")
+        # The candidate conditions of the clauses on the anchor hold on every row of the pairs (pairs_cte): only
+        # the others filter the join (queue-of-three evaluated its distances and cones twice a binding).
+        rest = bcond if anc is None else Condition.all(_binary(st, alias, config, skip=anc.ref))
+        if rest.candidate != "TRUE":
+            on.append(f"({rest.candidate})")
+            candidate_parts.append(f"({rest.candidate})")
         joins.append(f"JOIN {source} ON {' AND '.join(on)}")
     if pattern.ego is not None:
         # The ego line: conditions on g, the frame's ego row, in the final filter (the ego CTE keeps every frame:
@@ -564,9 +568,11 @@ def _shared_pairs(pattern: Pattern, config: SynthConfig, alias: dict[str, str], 
     return {name: named[t] for name, t in chosen.items()}
 
 
-def _binary(st: Statement, alias: dict[str, str], config: SynthConfig) -> list[Condition]:
-    """The conditions of a statement's clauses between two pattern names (they filter the join)."""
-    return [clause_condition(c, alias[st.id], alias[c.ref], config) for c in clauses(st) if c.ref not in (None, EGO_ID)]
+def _binary(st: Statement, alias: dict[str, str], config: SynthConfig, skip: str | None = None) -> list[Condition]:
+    """The conditions of a statement's clauses between two pattern names (they filter the join), but those on
+    `skip`."""
+    return [clause_condition(c, alias[st.id], alias[c.ref], config) for c in clauses(st)
+            if c.ref not in (None, EGO_ID, skip)]
 
 
 def estimate_ctes(pattern: Pattern, config: SynthConfig, fanout: bool, label: str = "p",
