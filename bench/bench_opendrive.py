@@ -49,6 +49,7 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     from scenic.simulators.newtonian import NewtonianSimulator
 
     from synth.road.opendrive import lane_graph
+    from tests.support.opendrive import recorded
 
     lanes = {f.feature_id: f for f in road.lanes}
     succ, _ = lane_graph(lanes)
@@ -68,14 +69,15 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
                      "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
     code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
             "def lane_of(name, x, y):\n"
-            "    here = [l for l in network.lanes if name in l.road.name.split(' > ') and l.containsPoint((x, y))]\n"
+            "    here = [l for l in network.lanes if name in l.road.name.split(' | ')[-l.sections[0].openDriveID - 1]"
+            ".split(' > ') and l.containsPoint((x, y))]\n"
             "    return here[0] if here else network.laneAt((x, y))\n"
             + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
     scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
     scene, _ = scenario.generate(maxIterations=1)
     trajectory = NewtonianSimulator().simulate(scene, maxSteps=STEPS).trajectory
     network = scene.workspace.network
-    names = [set(lane.road.name.split(" > ")) for lane in network.lanes]
+    names = [set(recorded(lane)) for lane in network.lanes]
     tree = shapely.STRtree([lane.polygon for lane in network.lanes])
     inside = [[set() for _ in starts] for _ in trajectory]  # step -> car -> the recorded lanes holding it
     points = shapely.points([tuple(step[i])[:2] for step in trajectory for i in range(len(starts))])

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from synth.road.opendrive_group import grouped
+from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road, Side
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
 MAP_SUFFIX = ".xodr"  # an OpenDRIVE file's; the only map a Scenic text names (Scenic unpickles a .snet map)
@@ -72,74 +74,6 @@ ROAD_MARKS = {
     "ROAD_EDGE_BOUNDARY": ("curb", "standard", "none"),
     "ROAD_EDGE_MEDIAN": ("curb", "standard", "none"),
 }
-NO_MARK = ("none", "standard", "both")
-
-
-@dataclass(frozen=True)
-class Link:
-    """A road's predecessor or successor: another road (met at its `contact` end) or a junction."""
-
-    kind: str  # "road" or "junction"
-    id: int
-    contact: str | None = None  # "start" or "end" for a road
-
-
-@dataclass(frozen=True)
-class Road:
-    """One OpenDRIVE road: its reference line (points in the recentred frame, consecutive ones distinct), its
-    lane's width at each point, the recorded lanes it follows, its junction (-1: none) and links."""
-
-    id: int
-    lanes: tuple[str, ...]
-    points: tuple[tuple[float, float], ...]
-    widths: tuple[float, ...]
-    junction: int = -1
-    predecessor: Link | None = None
-    successor: Link | None = None
-    marks: tuple[tuple[str, str, str], tuple[str, str, str]] = (NO_MARK, NO_MARK)  # left and right edge (ROAD_MARKS)
-
-    @property
-    def name(self) -> str:
-        return " > ".join(self.lanes)
-
-    @property
-    def s(self) -> tuple[float, ...]:
-        """The distance along the reference line of each point."""
-        d = np.hypot(*np.diff(np.asarray(self.points), axis=0).T) if len(self.points) > 1 else np.zeros(0)
-        return tuple(np.concatenate([[0.0], np.cumsum(d)]).tolist())
-
-
-@dataclass(frozen=True)
-class Junction:
-    """A junction: its connections, each (incoming road, connecting road), the connecting road entered at its
-    start."""
-
-    id: int
-    connections: tuple[tuple[int, int], ...]
-
-
-@dataclass(frozen=True)
-class Crosswalk:
-    """A recorded crosswalk as an object of the road nearest its centroid: at (s, t) on the road's reference
-    line, its outline's corners (u, v) in the frame there (u along the reference line, v to its left)."""
-
-    feature_id: str
-    road: int
-    s: float
-    t: float
-    outline: tuple[tuple[float, float], ...]
-
-
-@dataclass(frozen=True)
-class Network:
-    """A linked road network: roads, junctions, the offset subtracted from every coordinate (the recorded frame's
-    point that is the network's origin) and what could not be kept (notes for the user)."""
-
-    roads: tuple[Road, ...]
-    junctions: tuple[Junction, ...]
-    offset: tuple[float, float]
-    notes: tuple[str, ...] = ()
-    crosswalks: tuple[Crosswalk, ...] = ()
 
 
 def _clean(line: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -365,10 +299,10 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
                           links.get((i, 0)), links.get((i, 1))))
     junctions = defaultdict(list)
     for n, (inc, _, _) in enumerate(paths):
-        junctions[path_junction[n]].append((rid[inc], n_ord + n + 1))
+        junctions[path_junction[n]].append((rid[inc], n_ord + n + 1, -1))
     roads = _marked(roads, road, offset)
-    return Network(tuple(roads), tuple(Junction(j, tuple(c)) for j, c in sorted(junctions.items())), offset,
-                   tuple(notes), _crosswalks(roads, road, offset))
+    roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes)
+    return Network(tuple(roads), tuple(joined), offset, tuple(notes) + group_notes, _crosswalks(roads, road, offset))
 
 
 def _edges(r: Road) -> tuple[np.ndarray, np.ndarray]:
