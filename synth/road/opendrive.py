@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.road.opendrive_group import grouped
+from synth.road.opendrive_group import cuts, grouped
 from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road, Side
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
@@ -51,7 +51,8 @@ MAX_PATHS = 100_000  # connecting roads in one network at most (paths through ju
 MAX_PATH_LANES = 64  # junction lanes in one path at most
 # the keys of a split lane's second half (no feature id holds a control character): a junction lane's, an
 # ordinary lane's
-TAIL, MIDDLE, BRIDGE = "\x00tail", "\x00middle", "\x00to\x00"
+TAIL, MIDDLE, BRIDGE, PART, REST = "\x00tail", "\x00middle", "\x00to\x00", "\x00part", "\x00rest"
+FORK_PIECE = 5.0  # metres: a fork's or a merge's lane's piece in its junction (at most half the lane)
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
 LINK_GAP = 0.1  # metres: linked lane ends farther apart are bridged (nearer ones meet at their mean point)
 MARK_DISTANCE = 0.5  # metres: a recorded road line this near a point of a road's edge runs along it there
@@ -187,10 +188,11 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
             junction.add(bridge)
             bridges += 1
 
-    def split(k: str, mark: str) -> str:
-        """Cut lane k at half its length: k keeps the first half, a new key the second and k's successors."""
+    def split(k: str, mark: str, at: float | None = None) -> str:
+        """Cut lane k where `at` metres of it are run (default: half its length): k keeps the first piece, a new
+        key the second and k's successors."""
         new = k + mark
-        shape[k], shape[new] = _halves(*shape[k])
+        shape[k], shape[new] = _halves(*shape[k], at)
         recorded[new] = recorded[k]
         succ[new], pred[new] = succ[k], [k]
         for s in succ[k]:
@@ -198,6 +200,20 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
         succ[k] = [new]
         return new
 
+    # a fork's or a merge's lane the map does not call an intersection lane: its first FORK_PIECE metres (at most
+    # half of it) are the junction's, the rest an ordinary road (Waymo's lanes run on for tens of metres after a
+    # fork: a connecting road whole, such a lane could be no lane of one road with its neighbours)
+    rest = {k: k for k in lanes if k not in junction}  # recorded lane -> the key of its ordinary part
+    for k in sorted(junction & lanes.keys()):
+        length = float(np.hypot(*np.diff(np.asarray(shape[k][0]), axis=0).T).sum())
+        if not lanes[k].is_intersection and succ[k] and not any(s in junction for s in succ[k]):
+            rest[k] = split(k, REST, min(FORK_PIECE, length / 2))
+    # lanes with recorded same-direction neighbours cut where a neighbour starts or ends beside them, so that
+    # pieces side by side begin and end across from each other: lanes of one road (synth.road.opendrive_group)
+    for k, at in cuts({k: shape[key][0] for k, key in rest.items()}, lanes).items():
+        piece, done = rest[k], 0.0
+        for n, s in enumerate(at):
+            piece, done = split(piece, f"{PART}{n}", s - done), s
     # a junction lane followed by another junction lane or by none: its second half is an ordinary road, so
     # that every path through a junction is one junction lane from an ordinary road to an ordinary road (paths
     # through chains of them multiply: 10^5 and more on a Waymo map; Scenic gives a path without an outgoing
@@ -406,12 +422,12 @@ def _junctions(paths: list[tuple[str, tuple[str, ...], str | None]]) -> list[int
     return [jid.setdefault(group.find(("path", i)), len(jid) + 1) for i in range(len(paths))]
 
 
-def _halves(line: list, widths: list) -> tuple[tuple[list, list], tuple[list, list]]:
-    """A centre line and its widths cut where half its length is run: the point there (widths interpolated)
-    ends the first half and starts the second."""
+def _halves(line: list, widths: list, at: float | None = None) -> tuple[tuple[list, list], tuple[list, list]]:
+    """A centre line and its widths cut where `at` metres of it are run (default: half its length): the point
+    there (widths interpolated) ends the first piece and starts the second."""
     a = np.asarray(line, dtype=float)
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
-    half = s[-1] / 2
+    half = s[-1] / 2 if at is None else at
     i = int(np.searchsorted(s, half, side="right")) - 1  # the segment [i, i + 1] holding the cut
     t = (half - s[i]) / (s[i + 1] - s[i])
     p = tuple((a[i] + t * (a[i + 1] - a[i])).tolist())

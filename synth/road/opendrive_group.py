@@ -32,7 +32,9 @@ STEP = 1.0  # metres: a group's reference line has a point at least this often (
 TOLERANCE = 0.05  # metres: a grouped lane's centre from its recorded centre line at most (issue 37 allows 0.10)
 POSE_TOLERANCE = 0.005  # metres: two grouped lane ends that meet are this near (ASAM allows 0.01)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a grouped lane's fitted width
-SAME_DIRECTION = math.cos(math.radians(30))
+SAME_DIRECTION = math.cos(math.radians(30))  # the chords of lanes side by side at most 30 degrees apart
+MIN_PIECE = 1.0  # metres: a lane is cut no nearer its ends or its other cuts (where a neighbour starts or ends)
+ROUNDS = 3  # times cuts are passed on to neighbours
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -94,6 +96,55 @@ def lane_centres(ref: np.ndarray, offsets: np.ndarray, samples: int = 4) -> np.n
     return np.concatenate([ref + offsets[:, None] * n, inner.reshape(-1, 2)])
 
 
+def right_neighbours(lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
+    """Each lane's recorded right neighbours among `lanes`: its own, and the lanes naming it their left."""
+    rights: dict[str, set[str]] = {}
+    for k, f in lanes.items():
+        if f.right in lanes:
+            rights.setdefault(k, set()).add(f.right)
+        if f.left in lanes:
+            rights.setdefault(f.left, set()).add(k)
+    return rights
+
+
+def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list[float]]:
+    """Where to cut each lane of `lines` (distances along its line, increasing) so that its pieces begin and end
+    across from where its recorded same-direction neighbours (either side) begin, end or are cut: the foot on it
+    of each such point, at least MIN_PIECE from its ends and its other cuts, ROUNDS times over (a cut passes on
+    to the next neighbour)."""
+    near: dict[str, set[str]] = {}
+    for a, bs in right_neighbours(lanes).items():
+        for b in bs:
+            if a in lines and b in lines and _same_direction(lines[a], lines[b]):
+                near.setdefault(a, set()).add(b)
+                near.setdefault(b, set()).add(a)
+    geo = {k: shapely.LineString(lines[k]) for k in near}
+    at: dict[str, list[float]] = {k: [] for k in near}
+    points = {k: [tuple(lines[k][0]), tuple(lines[k][-1])] for k in near}
+    for _ in range(ROUNDS):
+        new = False
+        for a in sorted(near):
+            for b in sorted(near[a]):
+                for p in list(points[b]):
+                    point = shapely.Point(p)
+                    s = geo[a].project(point)
+                    if not MIN_PIECE <= s <= geo[a].length - MIN_PIECE or geo[a].distance(point) > 2 * MAX_WIDTH:
+                        continue
+                    if any(abs(s - x) < MIN_PIECE for x in at[a]):
+                        continue
+                    at[a].append(s)
+                    points[a].append(tuple(shapely.get_coordinates(geo[a].interpolate(s))[0]))
+                    new = True
+        if not new:
+            break
+    return {k: sorted(v) for k, v in at.items() if v}
+
+
+def _same_direction(a, b) -> bool:
+    da, db = _unit(np.subtract(a[-1], a[0], dtype=float)), _unit(np.subtract(b[-1], b[0], dtype=float))
+    return float(da @ db) >= SAME_DIRECTION
+
+
 def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
     """Each single-lane ordinary road's right partner: the road of its lane's recorded right neighbour (or of a
     lane naming it as its left neighbour) in the same direction with its ends across (ALIGN), nearest."""
@@ -101,12 +152,7 @@ def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
     for r in roads:
         if r.junction == -1 and len(r.lanes) == 1 and len(r.points) >= 2 and not r.side:
             by_lane.setdefault(r.lanes[0], []).append(r)
-    rights: dict[str, set[str]] = {}
-    for k, f in lanes.items():
-        if f.right is not None:
-            rights.setdefault(k, set()).add(f.right)
-        if f.left is not None:
-            rights.setdefault(f.left, set()).add(k)
+    rights = right_neighbours(lanes)
     out: dict[int, int] = {}
     taken: set[int] = set()
     for k in sorted(rights):
