@@ -30,6 +30,7 @@ from synth.road.roadmap import MapFeature
 ALIGN = 0.05  # metres: the ends of lanes side by side are this near the perpendicular through the first's end
 STEP = 1.0  # metres: a group's reference line has a point at least this often (its lanes' centres are fitted there)
 TOLERANCE = 0.05  # metres: a grouped lane's centre from its recorded centre line at most (issue 37 allows 0.10)
+NECK = 1.0  # metres: a road's piece that becomes a connecting road where a group's lanes lead to different roads
 POSE_TOLERANCE = 0.005  # metres: two grouped lane ends that meet are this near (ASAM allows 0.01)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a grouped lane's fitted width
 SAME_DIRECTION = math.cos(math.radians(30))  # the chords of lanes side by side at most 30 degrees apart
@@ -262,6 +263,40 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
         if not bad:
             break
         del fits[bad[0]]
+    # ends whose lanes lead to different roads: through a junction, each such road's first (last) NECK metres
+    # its connecting road
+    extra: dict[int, list] = {}
+    next_junction = max([j.id for j in junctions] + [0]) + 1
+    next_road = max(by_id) + 1
+    for g in sorted(fits):
+        for end in (0, 1):
+            necks = _necks(g, end, fits, by_id, owner, root)
+            if not necks:
+                continue
+            joined = {root.get(link.id, link.id) for rid in fits[g][0]
+                      if (link := _link(by_id[rid], end)) is not None and link.kind == "junction"}
+            if joined:
+                j = joined.pop()
+            else:
+                j, next_junction = next_junction, next_junction + 1
+            for rid, x in necks:
+                road = by_id[x]
+                if end:  # the road after lane rid: its first NECK metres lead from the lane into it
+                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, NECK)
+                    neck = Road(next_road, road.lanes, p0, w0, j, Link("road", rid, "end"), Link("road", x, "start"))
+                    by_id[x] = replace(road, points=p1, widths=w1, predecessor=Link("junction", j))
+                    by_id[rid] = replace(by_id[rid], successor=Link("junction", j))
+                    extra.setdefault(j, []).append((rid, next_road, -1))
+                else:  # the road before lane rid: its last NECK metres lead from it into the lane
+                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, _length(road.points) - NECK)
+                    neck = Road(next_road, road.lanes, p1, w1, j, Link("road", x, "end"), Link("road", rid, "start"))
+                    by_id[x] = replace(road, points=p0, widths=w0, successor=Link("junction", j))
+                    by_id[rid] = replace(by_id[rid], predecessor=Link("junction", j))
+                    extra.setdefault(j, []).append((x, next_road, -1))
+                by_id[next_road] = neck
+                next_road += 1
+    first_new = max(r.id for r in roads) + 1
+    roads = [by_id[k] for k in sorted(by_id)]
     poses = {}  # (road id, end) of a grouped lane right of lane -1 -> its pose in the group
     for g, (chain, ref, offsets, widths) in fits.items():
         for k, rid in enumerate(chain[1:], start=1):
@@ -283,12 +318,12 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
         out.append(replace(r, points=points, widths=widths_, predecessor=pre, successor=suc,
                            junction=root.get(r.junction, r.junction), lane_links=((pre_lane, suc_lane),)))
     connections: dict[int, list] = {}
-    for j in junctions:
+    for j in junctions + [Junction(j, tuple(c)) for j, c in extra.items()]:
         connections.setdefault(root.get(j.id, j.id), []).extend(
             (owner.get(inc, (inc, lane))[0], conn, owner.get(inc, (inc, lane))[1]) for inc, conn, lane in j.connections)
     moved = [Junction(j, tuple(c)) for j, c in sorted(connections.items())]
     grouped_lanes = sum(len(chain) for chain, *_ in fits.values())
-    apart = sum(len(c) for c in chains(roads, lanes)) - grouped_lanes
+    apart = sum(len(c) for c in chains([r for r in roads if r.id < first_new], lanes)) - grouped_lanes
     notes = ((f"{apart} lane(s) with a recorded same-direction neighbour side by side left a road of their own "
               "(their ends not across, or their links or fitted widths not kept in one road)",) if apart else ())
     return out, moved, notes
@@ -337,6 +372,57 @@ def _both_ends(roads, fits, by_id, owner, root) -> list[int]:
     return sorted(set(out))
 
 
+def _link(road: Road, end: int) -> Link | None:
+    return road.successor if end else road.predecessor
+
+
+def _length(points) -> float:
+    return float(np.hypot(*np.diff(np.asarray(points, dtype=float), axis=0).T).sum())
+
+
+def _cut(points, widths, at: float) -> tuple[tuple[tuple, tuple], tuple[tuple, tuple]]:
+    """A line and its widths cut `at` metres along it, inside a segment (so that both pieces have one heading
+    where they meet)."""
+    a = np.asarray(points, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
+    i = min(int(np.searchsorted(s, at, side="right")) - 1, len(a) - 2)
+    f = min(max((at - s[i]) / (s[i + 1] - s[i]), 0.01), 0.99)
+    p = tuple((a[i] + f * (a[i + 1] - a[i])).tolist())
+    w = widths[i] + f * (widths[i + 1] - widths[i])
+    first = (tuple(map(tuple, a[:i + 1].tolist())) + (p,), tuple(widths[:i + 1]) + (w,))
+    second = ((p,) + tuple(map(tuple, a[i + 1:].tolist())), (w,) + tuple(widths[i + 1:]))
+    return first, second
+
+
+def _necks(g, end: int, fits, by_id, owner, root) -> list[tuple[int, int]] | None:
+    """A group end whose lanes lead to different roads, as (lane's road, road) pairs whose roads' first (last)
+    NECK metres become connecting roads of one junction at that end; [] where the end needs none; None where it
+    cannot be had: a road led to is grouped, shorter than 4 NECK, or would have both ends at that junction, or
+    the group's other end is at it."""
+    chain = fits[g][0]
+    targets = [t for t in _targets(chain, by_id, owner, root, end) if t is not None]
+    into = [lane for _, lane in targets if lane is not None]
+    if len({t for t, _ in targets}) <= 1 and len(into) == len(set(into)):
+        return []
+    joined = {t[1] for t, _ in targets if t[0] == "junction"}
+    other = {t[1] for t, _ in (x for x in _targets(chain, by_id, owner, root, 1 - end) if x is not None)
+             if t[0] == "junction"}
+    if len(joined) > 1 or joined & other:
+        return None
+    out = []
+    for rid in chain:
+        link = _link(by_id[rid], end)
+        if link is None or link.kind != "road":
+            continue
+        x = by_id[link.id]
+        far = _link(x, end)
+        if link.id in owner or x.junction != -1 or _length(x.points) < 4 * NECK or len(x.points) < 4 or (
+                far is not None and far.kind == "junction" and root.get(far.id, far.id) in joined):
+            return None
+        out.append((rid, link.id))
+    return out
+
+
 def _moved(link: Link | None, owner: dict, root: dict) -> tuple[Link | None, int | None]:
     """A link to a road as a link to the road its lane is grouped into, and that lane (-1 for a road of one lane;
     None for a junction or no link); a link to a junction as one to the junction it is joined into."""
@@ -366,10 +452,9 @@ def _linkable(g, fits, by_id, owner, root) -> bool:
     chain, ref, offsets, widths = fits[g]
     for end in (0, 1):
         targets = [t for t in _targets(chain, by_id, owner, root, end) if t is not None]
-        if len({t for t, _ in targets}) > 1:
-            return False
         into = [lane for _, lane in targets if lane is not None]
-        if len(into) != len(set(into)):
+        if (len({t for t, _ in targets}) > 1 or len(into) != len(set(into))) \
+                and _necks(g, end, fits, by_id, owner, root) is None:
             return False
         for k, rid in enumerate(chain):
             link = by_id[rid].successor if end else by_id[rid].predecessor
