@@ -33,7 +33,7 @@ TOLERANCE = 0.05  # metres: a grouped lane's centre from its recorded centre lin
 NECK = 1.0  # metres: a road's piece that becomes a connecting road where a group's lanes lead to different roads
 POSE_TOLERANCE = 0.005  # metres: two grouped lane ends that meet are this near (ASAM allows 0.01)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a grouped lane's fitted width
-SAME_DIRECTION = math.cos(math.radians(30))  # the chords of lanes side by side at most 30 degrees apart
+SAME_DIRECTION = math.cos(math.radians(30))  # lanes side by side run at most 30 degrees apart
 MIN_PIECE = 1.0  # metres: a lane is cut no nearer its ends or its other cuts (where a neighbour starts or ends)
 ROUNDS = 3  # times cuts are passed on to neighbours
 
@@ -142,8 +142,21 @@ def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list
 
 
 def _same_direction(a, b) -> bool:
-    da, db = _unit(np.subtract(a[-1], a[0], dtype=float)), _unit(np.subtract(b[-1], b[0], dtype=float))
-    return float(da @ db) >= SAME_DIRECTION
+    """Whether line b runs the way line a does where they are side by side: their directions within 30 degrees
+    at the middle one of a's points within MAX_WIDTH of b and its foot on b (False where none is)."""
+    la, lb = shapely.LineString(a), shapely.LineString(b)
+    pts = shapely.points(np.asarray(a, dtype=float))
+    near = np.flatnonzero(shapely.distance(pts, lb) <= MAX_WIDTH)
+    if not len(near):
+        return False
+    p = pts[near[len(near) // 2]]
+    return float(_tangent(la, la.project(p)) @ _tangent(lb, lb.project(p))) >= SAME_DIRECTION
+
+
+def _tangent(line, s: float) -> np.ndarray:
+    """A line's unit direction around s (over a metre)."""
+    p, q = (shapely.get_coordinates(line.interpolate(x))[0] for x in (max(0.0, s - 0.5), min(line.length, s + 0.5)))
+    return _unit(q - p)
 
 
 def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
@@ -159,14 +172,12 @@ def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
     for k in sorted(rights):
         for a in by_lane.get(k, ()):
             line = shapely.LineString(a.points)
-            head = _unit(np.asarray(a.points[-1]) - np.asarray(a.points[0]))
             best = None
             for b in (b for n in sorted(rights[k]) for b in by_lane.get(n, ())):
                 if b.id in taken or b.id == a.id:
                     continue
                 s0, s1 = line.project(shapely.Point(b.points[0])), line.project(shapely.Point(b.points[-1]))
-                bh = _unit(np.asarray(b.points[-1]) - np.asarray(b.points[0]))
-                if s0 > ALIGN or line.length - s1 > ALIGN or float(head @ bh) < SAME_DIRECTION:
+                if s0 > ALIGN or line.length - s1 > ALIGN or not _same_direction(a.points, b.points):
                     continue
                 gap = line.distance(shapely.LineString(b.points).interpolate(0.5, normalized=True))
                 if gap <= 2 * MAX_WIDTH and (best is None or gap < best[0]):

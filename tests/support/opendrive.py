@@ -23,8 +23,8 @@ def recorded(lane) -> list[str]:
 
 
 def adjacent_pairs(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
-    """The recorded same-direction neighbour pairs (lane, its right neighbour) both of whose lanes are in the
-    network, split into those Scenic reports as adjacent lanes (lane.adjacentLanes) and those it does not."""
+    """The recorded same-direction neighbour pairs (lane, its right neighbour) that run side by side
+    (_side_by_side), both of whose lanes are in the network, split into those Scenic reports as adjacent lanes (lane.adjacentLanes) and those it does not."""
     by_name: dict[str, list] = {}
     for lane in net.lanes:
         for n in recorded(lane):
@@ -33,7 +33,7 @@ def adjacent_pairs(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tupl
     pairs = set()
     for k, f in lanes.items():
         for a, b in ((k, f.right), (f.left, k)):
-            if a in by_name and b in by_name and _same_direction(lanes[a], lanes[b]):
+            if a in by_name and b in by_name and _side_by_side(lanes[a], lanes[b]):
                 pairs.add((a, b))
     seen, not_seen = [], []
     for a, b in sorted(pairs):
@@ -42,8 +42,18 @@ def adjacent_pairs(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tupl
     return seen, not_seen
 
 
-def _same_direction(a, b) -> bool:
-    da, db = np.subtract(a.line[-1], a.line[0]), np.subtract(b.line[-1], b.line[0])
+def _side_by_side(a, b) -> bool:
+    """Whether two recorded neighbour lanes run side by side one way: their centre lines do not cross (Waymo
+    records crossing lanes in intersections as neighbours too), and their directions at b's nearest vertex to
+    a's middle and a's nearest vertex to that point the same side (positive dot product)."""
+    if shapely.LineString(a.line).crosses(shapely.LineString(b.line)):
+        return False
+    pa, pb = np.asarray(a.line, dtype=float), np.asarray(b.line, dtype=float)
+    mid = pa[len(pa) // 2]
+    j = int(np.hypot(*(pb - mid).T).argmin())
+    i = int(np.hypot(*(pa - pb[j]).T).argmin())
+    da = pa[min(i + 1, len(pa) - 1)] - pa[max(i - 1, 0)]
+    db = pb[min(j + 1, len(pb) - 1)] - pb[max(j - 1, 0)]
     return float(da @ db) > 0
 
 
