@@ -210,10 +210,12 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
             rest[k] = split(k, REST, min(FORK_PIECE, length / 2))
     # lanes with recorded same-direction neighbours cut where a neighbour starts or ends beside them, so that
     # pieces side by side begin and end across from each other: lanes of one road (synth.road.opendrive_group)
+    joints = []  # (piece, the piece after it) of each such cut: put back together where not grouped
     for k, at in cuts({k: shape[key][0] for k, key in rest.items()}, lanes).items():
         piece, done = rest[k], 0.0
         for n, s in enumerate(at):
-            piece, done = split(piece, f"{PART}{n}", s - done), s
+            before, piece, done = piece, split(piece, f"{PART}{n}", s - done), s
+            joints.append((before, piece))
     # a junction lane followed by another junction lane or by none: its second half is an ordinary road, so
     # that every path through a junction is one junction lane from an ordinary road to an ordinary road (paths
     # through chains of them multiply: 10^5 and more on a Waymo map; Scenic gives a path without an outgoing
@@ -317,7 +319,8 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
     for n, (inc, _, _) in enumerate(paths):
         junctions[path_junction[n]].append((rid[inc], n_ord + n + 1, -1))
     roads = _marked(roads, road, offset)
-    roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes)
+    roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes,
+                                         [(rid[a], rid[b]) for a, b in joints if a in rid and b in rid])
     return Network(tuple(roads), tuple(joined), offset, tuple(notes) + group_notes, _crosswalks(roads, road, offset))
 
 

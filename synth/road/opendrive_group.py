@@ -255,11 +255,12 @@ def repinned(points, widths, end: int, pose) -> tuple[tuple, tuple]:
     return tuple(p), tuple(w)
 
 
-def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFeature]
-            ) -> tuple[list[Road], list[Junction], tuple[str, ...]]:
+def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFeature],
+            joints: list[tuple[int, int]] = ()) -> tuple[list[Road], list[Junction], tuple[str, ...]]:
     """The roads with recorded same-direction neighbours side by side grouped into roads of several lanes, the
     junctions' connections from their lanes, and a note on the neighbours left roads of their own (module
-    docstring)."""
+    docstring). `joints`: (road, the road after it) where a lane was cut for a neighbour (synth.road.opendrive's
+    cuts): one road again where neither piece is grouped."""
     by_id = {r.id: r for r in roads}
     fits = {}
     for chain in chains(roads, lanes):
@@ -307,6 +308,31 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
                 by_id[next_road] = neck
                 next_road += 1
     first_new = max(r.id for r in roads) + 1
+    junction_of = {}
+    for j in junctions + [Junction(j, tuple(c)) for j, c in extra.items()]:
+        for inc, _, _ in j.connections:
+            junction_of.setdefault(inc, j.id)
+    into: dict[int, int] = {}  # a piece put back -> the road it is part of now
+    for a, b in joints:
+        a = into.get(a, a)
+        if a in owner or b in owner or a not in by_id or b not in by_id:
+            continue
+        ra, rb = by_id[a], by_id[b]
+        pre, suc = ra.predecessor, rb.successor
+        if ra.successor != Link("road", b, "start") or rb.predecessor != Link("road", a, "end") or (
+                pre is not None and suc is not None and pre.kind == suc.kind == "junction"
+                and root.get(pre.id, pre.id) == root.get(suc.id, suc.id)):
+            continue
+        by_id[a] = replace(ra, points=ra.points + rb.points[1:], widths=ra.widths + rb.widths[1:], successor=suc)
+        del by_id[b]
+        into[b] = a
+        for k, r in by_id.items():
+            if r.predecessor is not None and r.predecessor.kind == "road" and r.predecessor.id == b:
+                by_id[k] = replace(r, predecessor=Link("road", a, r.predecessor.contact))
+        for j, conns in extra.items():
+            extra[j] = [(a if inc == b else inc, conn, lane) for inc, conn, lane in conns]
+        junctions = [Junction(j.id, tuple((a if inc == b else inc, conn, lane) for inc, conn, lane in j.connections))
+                     if b in junction_of and junction_of[b] == j.id else j for j in junctions]
     roads = [by_id[k] for k in sorted(by_id)]
     poses = {}  # (road id, end) of a grouped lane right of lane -1 -> its pose in the group
     for g, (chain, ref, offsets, widths) in fits.items():

