@@ -3,13 +3,15 @@ lane becomes, how roads link, which form junctions, and each road's reference li
 written at the edge (pipeline/export/opendrive.py).
 
 One road per recorded lane outside junctions, with one driving lane (-1, right-hand traffic) centred on the
-reference line. Same-direction neighbours stay separate roads (not lanes of one road): lane changes are left to
-a simulator's own lane graph.
+reference line; lanes cut where a same-direction neighbour starts or ends beside them, and pieces side by side
+then made lanes of one road (synth.road.opendrive_group).
 
 Roles. A lane is a junction's (a connecting road's piece) when the map says it is an intersection lane, or when
 it could not be linked directly: OpenDRIVE links a road to one road at each end, so a lane that is one of
 several successors of a lane (a fork) or that has several predecessors (a merge) is a junction's too; an
-intersection lane without predecessors is an ordinary road (the area begins there). A junction lane followed by
+intersection lane without predecessors is an ordinary road (the area begins there). Of a fork's or merge's lane
+that is not an intersection lane, followed by an ordinary lane, only the first FORK_PIECE metres are the
+junction's (the rest an ordinary road that can be a lane beside its neighbours). A junction lane followed by
 another junction lane, or by none, is cut at half its length, its second half an ordinary road: so every path
 through a junction is one junction lane from an ordinary road to an ordinary road (chains of them multiply paths
 beyond 10^5 on a Waymo map; Scenic's parser gives a path without an outgoing road no maneuver). Each such path

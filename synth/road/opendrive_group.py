@@ -1,19 +1,22 @@
 """Same-direction neighbours as lanes of one OpenDRIVE road (docs/formats.md, "OpenDRIVE", "Lanes side by
-side"): the roads of synth.road.opendrive.network, one per recorded lane, grouped where the map records two lanes
-as left / right neighbours that run side by side from end to end. Pure.
+side"): the roads of synth.road.opendrive.network, one per recorded lane (or piece of one: `cuts` says where a
+lane is cut so that pieces side by side begin and end across from each other), grouped where the map records two
+lanes as left / right neighbours that run side by side from end to end. Pure.
 
 A group is a chain of single-lane ordinary roads, each the recorded right neighbour of the one before (a map
 records it on either side), in the same direction, whose ends are across from each other (each end within ALIGN
-of the perpendicular through the first road's end). The first (leftmost) road's reference line, cut into pieces of
-at most STEP, is the group's; lane -1 keeps its widths; lane -k's centre is where the normal (the bisector at a
-vertex) through each point of the reference line meets its recorded centre line, and its width is what puts its
-centre there (twice the distance from lane -(k-1)'s right edge). A lane whose width would leave [MIN_WIDTH,
-MAX_WIDTH], or whose centre, sampled between the points, would lie farther than TOLERANCE from its recorded line,
-ends the chain there. Links stay per lane: a group's end links where its lanes link (one road or one junction for
-all of them, lane links to each lane), and the ends of the roads linked to a lane of it are moved onto that lane's
-end (its centre, the reference line's heading, its width). A group whose lanes link to different roads or
-junctions at one end, or that meets another group off its lanes' ends, is undone: its lanes stay roads of their
-own (counted in the notes).
+of the perpendicular through the first road's end). The first (leftmost) road's reference line, with a point at
+least every STEP, is the group's; lane -1 keeps its widths; lane -k's centre is where the normal (the bisector at
+a vertex) through each point of the reference line meets its centre line, and its width is what puts its centre
+there (twice the distance from lane -(k-1)'s right edge). A lane whose width would leave [MIN_WIDTH, MAX_WIDTH],
+or whose centre, sampled between the points, would lie farther than TOLERANCE from its centre line, ends the
+chain there. Links stay per lane: a group's end links where its lanes link (one road, or one junction: the
+junctions its lanes enter are joined), lane links to each lane; where its lanes lead to different roads, the end
+is at a junction whose connecting roads are those roads' first (last) NECK metres. The ends of the roads linked
+to a lane of a group are moved onto that lane's end (its centre, the reference line's heading, its width). A group
+whose ends cannot be linked so, or that meets another group off its lanes' ends, is undone: its lanes stay roads
+of their own (counted in the notes), and pieces of a lane cut for grouping that are not grouped are put back
+into one road.
 """
 
 from __future__ import annotations
@@ -263,6 +266,7 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
     cuts): one road again where neither piece is grouped."""
     by_id = {r.id: r for r in roads}
     fits = {}
+    by_lanes = {r.id: r.lanes for r in roads}
     for chain in chains(roads, lanes):
         ref, offsets, widths = fit(chain, by_id)
         if len(offsets) >= 2:
@@ -359,10 +363,13 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
         connections.setdefault(root.get(j.id, j.id), []).extend(
             (owner.get(inc, (inc, lane))[0], conn, owner.get(inc, (inc, lane))[1]) for inc, conn, lane in j.connections)
     moved = [Junction(j, tuple(c)) for j, c in sorted(connections.items())]
-    grouped_lanes = sum(len(chain) for chain, *_ in fits.values())
-    apart = sum(len(c) for c in chains([r for r in roads if r.id < first_new], lanes)) - grouped_lanes
-    notes = ((f"{apart} lane(s) with a recorded same-direction neighbour side by side left a road of their own "
-              "(their ends not across, or their links or fitted widths not kept in one road)",) if apart else ())
+    kept = {lane for chain, *_ in fits.values() for rid in chain for lane in by_lanes[rid]}
+    beside = {x for a, bs in right_neighbours(lanes).items() for b in bs for x in (a, b)
+              if _same_direction(lanes[a].line, lanes[b].line)}
+    apart = sorted(beside - kept)
+    notes = ((f"{len(apart)} of {len(beside)} lane(s) with a recorded same-direction neighbour are a lane of no "
+              "road with it (their ends not across, a junction's lane, or their links or fitted widths not kept in "
+              "one road; e.g. " + ", ".join(map(repr, apart[:3])) + ")",) if apart else ())
     return out, moved, notes
 
 

@@ -2,7 +2,8 @@
 nuScenes scenes (scene JSON: their road within r2s scene's radius) and the shipped Argoverse 2 log's whole map
 (its maps dataset). ASAM's checker reports no issue; Scenic's own parser loads the file with the map's junctions
 as intersections, each lane within 0.10 m of the recorded centre line it follows, the recorded successor links
-kept as successors or junction maneuvers; a lane-following car in Scenic's Newtonian simulator drives from a
+kept as successors or junction maneuvers, lanes of one road side by side as recorded neighbours Scenic sees as
+adjacent; a lane-following car in Scenic's Newtonian simulator drives from a
 lane into its successor."""
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def waymo(tmp_path_factory) -> tuple[Path, Path]:
 @pytest.mark.parametrize("which", ["av2", "waymo"])
 def test_scenic_loads_the_map_with_its_junctions_and_lanes_on_the_recorded_centre_lines(which, request):
     pytest.importorskip("scenic")
-    from tests.support.opendrive import centre_line_gaps, kept_links, offset, scenic_network
+    from tests.support.opendrive import adjacent_pairs, centre_line_gaps, kept_links, offset, scenic_network
 
     maps, av2 = (AV2_MAPS, request.getfixturevalue("av2")) if which == "av2" else request.getfixturevalue("waymo")
     road = next(iter(read_maps(maps)))
@@ -94,6 +95,12 @@ def test_scenic_loads_the_map_with_its_junctions_and_lanes_on_the_recorded_centr
     assert len(gaps) >= 0.95 * len(road.lanes) and max(gaps.values()) < TOLERANCE
     kept, lost = kept_links(net, road)
     assert len(kept) >= 0.99 * (len(kept) + len(lost)) and len(kept) > 100  # issue 37's bar (all of them today)
+    # lanes side by side: each pair of neighbouring lanes of one written road (its name's lanes left to right)
+    # is a recorded neighbour pair, and Scenic sees it as adjacent lanes
+    adjacent, _ = adjacent_pairs(net, road)
+    written = {tuple(x.split(" > ")[0] for x in pair) for r in ET.parse(av2).getroot().findall("road")
+               for pair in zip(r.get("name").split(" | "), r.get("name").split(" | ")[1:])}
+    assert written and written <= set(adjacent)
 
 
 def test_a_map_dataset_of_several_maps_needs_one_named(tmp_path):

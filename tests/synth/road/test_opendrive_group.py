@@ -100,4 +100,4 @@ def test_lanes_side_by_side_are_one_road_on_their_recorded_centre_lines(case):
         for lanes, (_, nxt) in zip(r.lane_names, r.lane_links):
             assert after.lane_names[-nxt - 1][0] in (lanes[0],) + road[lanes[0]].successors
     assert sum(r.successor is not None for r in grouped) == 1 + (late and n == 3)
-    assert not any("left a road of their own" in note for note in net.notes)
+    assert not any("are a lane of no road with it" in note for note in net.notes)
