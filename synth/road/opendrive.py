@@ -37,12 +37,11 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from synth.road.opendrive_group import cuts, grouped
-from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road, Side
+from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
 MAP_SUFFIX = ".xodr"  # an OpenDRIVE file's; the only map a Scenic text names (Scenic unpickles a .snet map)

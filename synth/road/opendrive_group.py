@@ -311,7 +311,6 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
                     extra.setdefault(j, []).append((x, next_road, -1))
                 by_id[next_road] = neck
                 next_road += 1
-    first_new = max(r.id for r in roads) + 1
     junction_of = {}
     for j in junctions + [Junction(j, tuple(c)) for j, c in extra.items()]:
         for inc, _, _ in j.connections:
@@ -339,7 +338,7 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
                      if b in junction_of and junction_of[b] == j.id else j for j in junctions]
     roads = [by_id[k] for k in sorted(by_id)]
     poses = {}  # (road id, end) of a grouped lane right of lane -1 -> its pose in the group
-    for g, (chain, ref, offsets, widths) in fits.items():
+    for chain, ref, offsets, widths in fits.values():
         for k, rid in enumerate(chain[1:], start=1):
             for end in (0, 1):
                 poses[(rid, end)] = end_pose(ref, offsets[k], widths[k], end)
@@ -519,7 +518,7 @@ def _group_road(fitted, by_id, owner, root) -> Road:
     first = by_id[chain[0]]
     ends = [_targets(chain, by_id, owner, root, end) for end in (0, 1)]
     link = []
-    for end, targets in enumerate(ends):
+    for targets in ends:
         kinds = [t for t in targets if t is not None]
         link.append(None if not kinds else Link(kinds[0][0][0], kinds[0][0][1], kinds[0][0][2]))
     lane_links = tuple((p[1] if p is not None else None, s[1] if s is not None else None)
