@@ -35,7 +35,21 @@ from common import R2S_CHILD, machine, run_child, write_results  # noqa: E402
 
 STEPS = 60  # 6 s at Scenic's 0.1 s step
 CHANGES, CHANGE_STEPS = 10, 40  # lane changes tried per map, each for 4 s
+NAMES = "l.road.name.split(' | ')[-l.sections[0].openDriveID - 1].split(' > ')"  # Scenic lane l's recorded lanes
 SHARED = ROOT.parent / "shared" / "data" / "waymo"
+
+
+def simulate(xodr: Path, helpers: str, cars: list[str], steps: int):
+    """A Scenic scene on the map (Newtonian driving model, 2D, render off) with Scenic helper definitions and one
+    line per car (the first made ego), and its trajectory over `steps` steps."""
+    import scenic
+    from scenic.simulators.newtonian import NewtonianSimulator
+
+    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n" + helpers
+            + "\n".join(["ego = " + cars[0].split(" = ", 1)[1]] + cars[1:]) + "\n")
+    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
+    scene, _ = scenario.generate(maxIterations=1)
+    return scene, NewtonianSimulator().simulate(scene, maxSteps=steps).trajectory
 
 
 def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
@@ -47,9 +61,7 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     (FollowLaneBehavior's laneToFollow); it drove on when at some step it is inside a Scenic lane of a recorded
     lane within three links after its own and no longer inside its own (every lane holding the point, not the
     one Scenic's laneAt picks)."""
-    import scenic
     import shapely
-    from scenic.simulators.newtonian import NewtonianSimulator
 
     from synth.road.opendrive import lane_graph
     from tests.support.opendrive import recorded
@@ -70,15 +82,9 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
         lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), facing {heading!r}, with behavior "
                      f"FollowLaneBehavior(target_speed=6, laneToFollow=lane_of({k!r}, {p.x!r}, {p.y!r})), "
                      "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
-    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
-            "def lane_of(name, x, y):\n"
-            "    here = [l for l in network.lanes if name in l.road.name.split(' | ')[-l.sections[0].openDriveID - 1]"
-            ".split(' > ') and l.containsPoint((x, y))]\n"
-            "    return here[0] if here else network.laneAt((x, y))\n"
-            + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
-    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
-    scene, _ = scenario.generate(maxIterations=1)
-    trajectory = NewtonianSimulator().simulate(scene, maxSteps=STEPS).trajectory
+    scene, trajectory = simulate(xodr, "def lane_of(name, x, y):\n"
+                                 f"    here = [l for l in network.lanes if name in {NAMES} and l.containsPoint((x, y))]\n"
+                                 "    return here[0] if here else network.laneAt((x, y))\n", lines, STEPS)
     network = scene.workspace.network
     names = [set(recorded(lane)) for lane in network.lanes]
     tree = shapely.STRtree([lane.polygon for lane in network.lanes])
@@ -107,8 +113,6 @@ def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES)
     third of its lane's Scenic centre line, facing along it, with LaneChangeBehavior into the neighbour's lane
     section there at 6 m/s for 4 s; it moved over when at some step it is inside the neighbour's Scenic lane and
     no longer inside its own."""
-    import scenic
-    from scenic.simulators.newtonian import NewtonianSimulator
 
     from tests.support.opendrive import recorded
 
@@ -121,14 +125,8 @@ def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES)
                      f"/ 3), facing roadDirection, with behavior LaneChangeBehavior(lane_named({b!r}).sections[0], "
                      "target_speed=6), with allowCollisions True, with requireVisible False, with regionContainedIn "
                      "everywhere")
-    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
-            "def lane_named(name):\n"
-            "    return [l for l in network.lanes if name in l.road.name.split(' | ')[-l.sections[0].openDriveID - 1]"
-            ".split(' > ')][0]\n"
-            + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
-    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
-    scene, _ = scenario.generate(maxIterations=1)
-    trajectory = NewtonianSimulator().simulate(scene, maxSteps=CHANGE_STEPS).trajectory
+    scene, trajectory = simulate(xodr, f"def lane_named(name):\n    return [l for l in network.lanes if name in {NAMES}][0]\n",
+                                 lines, CHANGE_STEPS)
     network = scene.workspace.network
     by_name = {}
     for lane in network.lanes:
