@@ -9,7 +9,9 @@ centre line it follows, sampled every metre; the recorded successor links Scenic
 per recorded lane that has a successor in the map, set 6 m before its end (at its middle if it is shorter than
 8 m), FollowLaneBehavior at 6 m/s in Scenic's Newtonian simulator (2D, render off, collisions allowed and cars anywhere: the
 cars do not see each other) for 6 s; a car drove on when at some step its lane is one of the recorded lanes within
-three links after its own. Writes bench/results/opendrive.json and opendrive.md.
+three links after its own; lanes side by side: the recorded same-direction neighbour pairs in the map that
+Scenic's network reports as adjacent lanes, and on up to 10 of those a LaneChangeBehavior car (lane_change).
+Writes bench/results/opendrive.json and opendrive.md.
 
     .venv/bin/python bench/bench_opendrive.py [--waymo 3]
 """
@@ -32,7 +34,22 @@ sys.path.insert(0, str(ROOT))
 from common import R2S_CHILD, machine, run_child, write_results  # noqa: E402
 
 STEPS = 60  # 6 s at Scenic's 0.1 s step
+CHANGES, CHANGE_STEPS = 10, 40  # lane changes tried per map, each for 4 s
+NAMES = "l.road.name.split(' | ')[-l.sections[0].openDriveID - 1].split(' > ')"  # Scenic lane l's recorded lanes
 SHARED = ROOT.parent / "shared" / "data" / "waymo"
+
+
+def simulate(xodr: Path, helpers: str, cars: list[str], steps: int):
+    """A Scenic scene on the map (Newtonian driving model, 2D, render off) with Scenic helper definitions and one
+    line per car (the first made ego), and its trajectory over `steps` steps."""
+    import scenic
+    from scenic.simulators.newtonian import NewtonianSimulator
+
+    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n" + helpers
+            + "\n".join(["ego = " + cars[0].split(" = ", 1)[1]] + cars[1:]) + "\n")
+    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
+    scene, _ = scenario.generate(maxIterations=1)
+    return scene, NewtonianSimulator().simulate(scene, maxSteps=steps).trajectory
 
 
 def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
@@ -44,11 +61,10 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     (FollowLaneBehavior's laneToFollow); it drove on when at some step it is inside a Scenic lane of a recorded
     lane within three links after its own and no longer inside its own (every lane holding the point, not the
     one Scenic's laneAt picks)."""
-    import scenic
     import shapely
-    from scenic.simulators.newtonian import NewtonianSimulator
 
     from synth.road.opendrive import lane_graph
+    from tests.support.opendrive import recorded
 
     lanes = {f.feature_id: f for f in road.lanes}
     succ, _ = lane_graph(lanes)
@@ -66,16 +82,11 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
         lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), facing {heading!r}, with behavior "
                      f"FollowLaneBehavior(target_speed=6, laneToFollow=lane_of({k!r}, {p.x!r}, {p.y!r})), "
                      "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
-    code = (f"param map = {str(xodr)!r}\nmodel scenic.simulators.newtonian.driving_model\n"
-            "def lane_of(name, x, y):\n"
-            "    here = [l for l in network.lanes if name in l.road.name.split(' > ') and l.containsPoint((x, y))]\n"
-            "    return here[0] if here else network.laneAt((x, y))\n"
-            + "\n".join(["ego = " + lines[0].split(" = ", 1)[1]] + lines[1:]) + "\n")
-    scenario = scenic.scenarioFromString(code, mode2D=True, params={"render": False})
-    scene, _ = scenario.generate(maxIterations=1)
-    trajectory = NewtonianSimulator().simulate(scene, maxSteps=STEPS).trajectory
+    scene, trajectory = simulate(xodr, "def lane_of(name, x, y):\n"
+                                 f"    here = [l for l in network.lanes if name in {NAMES} and l.containsPoint((x, y))]\n"
+                                 "    return here[0] if here else network.laneAt((x, y))\n", lines, STEPS)
     network = scene.workspace.network
-    names = [set(lane.road.name.split(" > ")) for lane in network.lanes]
+    names = [set(recorded(lane)) for lane in network.lanes]
     tree = shapely.STRtree([lane.polygon for lane in network.lanes])
     inside = [[set() for _ in starts] for _ in trajectory]  # step -> car -> the recorded lanes holding it
     points = shapely.points([tuple(step[i])[:2] for step in trajectory for i in range(len(starts))])
@@ -96,10 +107,45 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     return ok, len(starts), failed
 
 
+def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES) -> tuple[int, int, list[str]]:
+    """Cars that moved into the neighbour lane, cars started, and the pairs where they did not: for the first
+    `sample` recorded neighbour pairs Scenic sees as adjacent, one car each (cars do not see each other) set at a
+    third of its lane's Scenic centre line, facing along it, with LaneChangeBehavior into the neighbour's lane
+    section there at 6 m/s for 4 s; it moved over when at some step it is inside the neighbour's Scenic lane and
+    no longer inside its own."""
+
+    from tests.support.opendrive import recorded
+
+    chosen = pairs[:sample]
+    if not chosen:
+        return 0, 0, []
+    lines = []
+    for i, (a, b) in enumerate(chosen):
+        lines.append(f"c{i} = new Car on lane_named({a!r}).centerline.pointAlongBy(lane_named({a!r}).centerline.length "
+                     f"/ 3), facing roadDirection, with behavior LaneChangeBehavior(lane_named({b!r}).sections[0], "
+                     "target_speed=6), with allowCollisions True, with requireVisible False, with regionContainedIn "
+                     "everywhere")
+    scene, trajectory = simulate(xodr, f"def lane_named(name):\n    return [l for l in network.lanes if name in {NAMES}][0]\n",
+                                 lines, CHANGE_STEPS)
+    network = scene.workspace.network
+    by_name = {}
+    for lane in network.lanes:
+        for n in recorded(lane):
+            by_name.setdefault(n, []).append(lane)
+    ok, failed = 0, []
+    for i, (a, b) in enumerate(chosen):
+        moved = any(any(lane.containsPoint(step[i]) for lane in by_name[b])
+                    and not any(lane.containsPoint(step[i]) for lane in by_name[a]) for step in trajectory)
+        ok += moved
+        if not moved:
+            failed.append(f"{a} -> {b}")
+    return ok, len(chosen), failed
+
+
 def measure(maps: Path, map_id: str, work: Path) -> dict:
     from frames.maps import read_maps
     from tests.pipeline.export.test_export_openscenario import asam_issues
-    from tests.support.opendrive import centre_line_gaps, kept_links, offset, scenic_network
+    from tests.support.opendrive import adjacent_pairs, centre_line_gaps, kept_links, offset, scenic_network
 
     road = next(m for m in read_maps(maps) if m.map_id == map_id)
     xodr = work / f"{map_id}.xodr"
@@ -112,12 +158,16 @@ def measure(maps: Path, map_id: str, work: Path) -> dict:
     gaps = centre_line_gaps(net, road, offset(xodr))
     kept, lost = kept_links(net, road)
     drove, cars, failed = drive(xodr, road, offset(xodr))
+    adjacent, apart = adjacent_pairs(net, road)
+    changed, changes, not_changed = lane_change(xodr, adjacent)
     return {"map": map_id, "features": len(road.features), "lanes": len(road.lanes),
             "points": sum(len(f.line) + len(f.polygon) for f in road.features), "cpu_s": cost["cpu_s"],
             "wall_s": cost["wall_s"], "peak_rss_mb": cost["peak_rss_mb"], "xodr_mb": xodr.stat().st_size / 2**20,
             "asam_issues": len(issues), "scenic_load_s": load, "intersections": len(net.intersections),
             "max_gap_m": max(gaps.values()), "links_kept": len(kept), "links": len(kept) + len(lost),
-            "drove": drove, "cars": cars, "failed": failed[:10]}
+            "drove": drove, "cars": cars, "failed": failed[:10], "adjacent": len(adjacent),
+            "neighbour_pairs": len(adjacent) + len(apart), "changed": changed, "changes": changes,
+            "not_changed": not_changed}
 
 
 def main() -> None:
@@ -156,15 +206,18 @@ def markdown(payload: dict) -> str:
              f"`bench/bench_opendrive.py`; {m['cpu']}, commit {m['commit']}, {m['date']}, load average "
              f"{', '.join(map(str, m.get('load', [])))} at the end; {m['note']}.", "",
              "| map | features | points | export CPU s | wall s | peak MB | .xodr MB | ASAM issues | Scenic load s "
-             "| intersections | max lane gap m | links kept | drove on |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| intersections | max lane gap m | links kept | drove on | neighbours adjacent | lane changes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['map'][:16]} | {r['features']} | {r['points']:,} | {r['cpu_s']:.1f} | {r['wall_s']:.1f} "
                      f"| {r['peak_rss_mb']:.0f} | {r['xodr_mb']:.1f} | {r['asam_issues']} | {r['scenic_load_s']:.0f} "
                      f"| {r['intersections']} | {r['max_gap_m']:.3f} | {r['links_kept']} / {r['links']} "
-                     f"| {r['drove']} / {r['cars']} ({100 * r['drove'] / max(1, r['cars']):.0f}%) |")
+                     f"| {r['drove']} / {r['cars']} ({100 * r['drove'] / max(1, r['cars']):.0f}%) "
+                     f"| {r['adjacent']} / {r['neighbour_pairs']} | {r['changed']} / {r['changes']} |")
     lines += ["", "Cars that did not drive on (start lane: distance moved in 6 s, the Scenic lane it ended on):", ""]
     lines += [f"- {r['map'][:16]}: " + "; ".join(r["failed"]) for r in rows if r["failed"]]
+    lines += ["", "Lane changes that did not move over (lane -> neighbour):", ""]
+    lines += [f"- {r['map'][:16]}: " + "; ".join(r["not_changed"]) for r in rows if r["not_changed"]]
     return "\n".join(lines) + "\n"
 
 

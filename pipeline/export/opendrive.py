@@ -1,7 +1,7 @@
 """A linked road network (synth.road.opendrive.Network) as OpenDRIVE 1.7 XML, written with scenariogeneration
-(docs/formats.md, "OpenDRIVE"): one road per Network road, its reference line as line geometries, its one
-driving lane (-1) centred on it by a lane offset of half its width, widths and offsets linear between the
-reference line's points; road marks on both lane edges; crosswalks as objects with their outline; road and lane
+(docs/formats.md, "OpenDRIVE"): one road per Network road, its reference line as line geometries, its driving
+lanes (-1, and -2, ... for lanes side by side) with lane -1 centred on it by a lane offset of half its width,
+widths and offsets linear between the reference line's points; road marks on both lane edges; crosswalks as objects with their outline; road and lane
 links; junctions with their connections; the header offset (the recentring offset, or a scene's ego pose). `r2s export --to opendrive` writes this alone; `--to openscenario` writes it beside its scenarios."""
 
 from __future__ import annotations
@@ -68,35 +68,47 @@ def _crosswalk(c: Crosswalk, n: int):
     return obj
 
 
-def _profile(road: Road):
-    """The road's lanes: a centre lane and lane -1 with its width linear between points, and the lane offsets
-    that centre it (half the width); an entry only where the slope changes (ASAM flags repeated ones)."""
-    from scenariogeneration import xodr
-
-    s, w = road.s, road.widths
+def _pieces(s, w) -> list[tuple[float, float, float]]:
+    """A width linear between points as polynomial pieces (s, a, b): an entry only where the slope changes (ASAM
+    flags repeated ones)."""
     pieces: list[tuple[float, float, float]] = []
     for i in range(len(s) - 1):
         slope = (w[i + 1] - w[i]) / (s[i + 1] - s[i])
         if pieces and _same_line(pieces[-1], (s[i], w[i], slope)):
             continue
         pieces.append((s[i], w[i], slope))
+    return pieces
+
+
+def _profile(road: Road):
+    """The road's lanes: a centre lane and lanes -1, -2, ... with their widths linear between points, the lane
+    offsets that centre lane -1 on the reference line (half its width), each lane's road mark on its right edge
+    (the centre lane's: lane -1's left edge) and its lane links."""
+    from scenariogeneration import xodr
+
+    s = road.s
     centre = xodr.Lane(a=0)
     centre.add_roadmark(_mark(road.marks[0]))  # the centre lane's mark is lane -1's left edge
     section = xodr.LaneSection(0, centre)
-    s0, a, b = pieces[0]
-    lane = xodr.Lane(xodr.LaneType.driving, a=a, b=b)
-    for s0, a, b in pieces[1:]:
-        lane.add_lane_width(a=a, b=b, soffset=s0)
-    lane.add_roadmark(_mark(road.marks[1]))
     pre, suc = road.predecessor, road.successor
-    if pre is not None and pre.kind == "road":
-        lane.add_link("predecessor", -1)
-    if suc is not None and suc.kind == "road":
-        lane.add_link("successor", -1)
-    section.add_right_lane(lane)
+    widths = [road.widths] + [side.widths for side in road.side]
+    marks = [road.marks[1]] + [side.mark for side in road.side]
+    for k, (w, mark) in enumerate(zip(widths, marks)):
+        pieces = _pieces(s, w)
+        _, a, b = pieces[0]
+        lane = xodr.Lane(xodr.LaneType.driving, a=a, b=b)
+        for s0, a, b in pieces[1:]:
+            lane.add_lane_width(a=a, b=b, soffset=s0)
+        lane.add_roadmark(_mark(mark))
+        into = road.lane_links[k] if road.lane_links else (-1, -1)
+        if pre is not None and pre.kind == "road" and into[0] is not None:
+            lane.add_link("predecessor", into[0])
+        if suc is not None and suc.kind == "road" and into[1] is not None:
+            lane.add_link("successor", into[1])
+        section.add_right_lane(lane)
     profile = xodr.Lanes()
     profile.add_lanesection(section)
-    for s0, a, b in pieces:
+    for s0, a, b in _pieces(s, road.widths):
         profile.add_laneoffset(xodr.LaneOffset(s0, a / 2.0, b / 2.0))
     return profile
 
@@ -127,9 +139,9 @@ def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None 
         odr.add_road(r)
     for j in net.junctions:
         junction = xodr.Junction(f"junction {j.id}", j.id)
-        for n, (incoming, connecting) in enumerate(j.connections):
+        for n, (incoming, connecting, lane) in enumerate(j.connections):
             c = xodr.Connection(incoming, connecting, xodr.ContactPoint.start, id=n)
-            c.add_lanelink(-1, -1)
+            c.add_lanelink(lane, -1)
             junction.add_connection(c)
         odr.add_junction(junction)
     element = odr.get_element()

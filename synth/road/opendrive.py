@@ -3,13 +3,15 @@ lane becomes, how roads link, which form junctions, and each road's reference li
 written at the edge (pipeline/export/opendrive.py).
 
 One road per recorded lane outside junctions, with one driving lane (-1, right-hand traffic) centred on the
-reference line. Same-direction neighbours stay separate roads (not lanes of one road): lane changes are left to
-a simulator's own lane graph.
+reference line; lanes cut where a same-direction neighbour starts or ends beside them, and pieces side by side
+then made lanes of one road (synth.road.opendrive_group).
 
 Roles. A lane is a junction's (a connecting road's piece) when the map says it is an intersection lane, or when
 it could not be linked directly: OpenDRIVE links a road to one road at each end, so a lane that is one of
 several successors of a lane (a fork) or that has several predecessors (a merge) is a junction's too; an
-intersection lane without predecessors is an ordinary road (the area begins there). A junction lane followed by
+intersection lane without predecessors is an ordinary road (the area begins there). Of a fork's or merge's lane
+that is not an intersection lane, followed by an ordinary lane, only the first FORK_PIECE metres are the
+junction's (the rest an ordinary road that can be a lane beside its neighbours). A junction lane followed by
 another junction lane, or by none, is cut at half its length, its second half an ordinary road: so every path
 through a junction is one junction lane from an ordinary road to an ordinary road (chains of them multiply paths
 beyond 10^5 on a Waymo map; Scenic's parser gives a path without an outgoing road no maneuver). Each such path
@@ -35,10 +37,11 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from synth.road.opendrive_group import cuts, grouped
+from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
 MAP_SUFFIX = ".xodr"  # an OpenDRIVE file's; the only map a Scenic text names (Scenic unpickles a .snet map)
@@ -49,7 +52,8 @@ MAX_PATHS = 100_000  # connecting roads in one network at most (paths through ju
 MAX_PATH_LANES = 64  # junction lanes in one path at most
 # the keys of a split lane's second half (no feature id holds a control character): a junction lane's, an
 # ordinary lane's
-TAIL, MIDDLE, BRIDGE = "\x00tail", "\x00middle", "\x00to\x00"
+TAIL, MIDDLE, BRIDGE, PART, REST = "\x00tail", "\x00middle", "\x00to\x00", "\x00part", "\x00rest"
+FORK_PIECE = 5.0  # metres: a fork's or a merge's lane's piece in its junction (at most half the lane)
 HEADING_TOLERANCE = 1e-6  # radians: ASAM's redundancy check's tolerance (one line for collinear segments)
 LINK_GAP = 0.1  # metres: linked lane ends farther apart are bridged (nearer ones meet at their mean point)
 MARK_DISTANCE = 0.5  # metres: a recorded road line this near a point of a road's edge runs along it there
@@ -72,74 +76,6 @@ ROAD_MARKS = {
     "ROAD_EDGE_BOUNDARY": ("curb", "standard", "none"),
     "ROAD_EDGE_MEDIAN": ("curb", "standard", "none"),
 }
-NO_MARK = ("none", "standard", "both")
-
-
-@dataclass(frozen=True)
-class Link:
-    """A road's predecessor or successor: another road (met at its `contact` end) or a junction."""
-
-    kind: str  # "road" or "junction"
-    id: int
-    contact: str | None = None  # "start" or "end" for a road
-
-
-@dataclass(frozen=True)
-class Road:
-    """One OpenDRIVE road: its reference line (points in the recentred frame, consecutive ones distinct), its
-    lane's width at each point, the recorded lanes it follows, its junction (-1: none) and links."""
-
-    id: int
-    lanes: tuple[str, ...]
-    points: tuple[tuple[float, float], ...]
-    widths: tuple[float, ...]
-    junction: int = -1
-    predecessor: Link | None = None
-    successor: Link | None = None
-    marks: tuple[tuple[str, str, str], tuple[str, str, str]] = (NO_MARK, NO_MARK)  # left and right edge (ROAD_MARKS)
-
-    @property
-    def name(self) -> str:
-        return " > ".join(self.lanes)
-
-    @property
-    def s(self) -> tuple[float, ...]:
-        """The distance along the reference line of each point."""
-        d = np.hypot(*np.diff(np.asarray(self.points), axis=0).T) if len(self.points) > 1 else np.zeros(0)
-        return tuple(np.concatenate([[0.0], np.cumsum(d)]).tolist())
-
-
-@dataclass(frozen=True)
-class Junction:
-    """A junction: its connections, each (incoming road, connecting road), the connecting road entered at its
-    start."""
-
-    id: int
-    connections: tuple[tuple[int, int], ...]
-
-
-@dataclass(frozen=True)
-class Crosswalk:
-    """A recorded crosswalk as an object of the road nearest its centroid: at (s, t) on the road's reference
-    line, its outline's corners (u, v) in the frame there (u along the reference line, v to its left)."""
-
-    feature_id: str
-    road: int
-    s: float
-    t: float
-    outline: tuple[tuple[float, float], ...]
-
-
-@dataclass(frozen=True)
-class Network:
-    """A linked road network: roads, junctions, the offset subtracted from every coordinate (the recorded frame's
-    point that is the network's origin) and what could not be kept (notes for the user)."""
-
-    roads: tuple[Road, ...]
-    junctions: tuple[Junction, ...]
-    offset: tuple[float, float]
-    notes: tuple[str, ...] = ()
-    crosswalks: tuple[Crosswalk, ...] = ()
 
 
 def _clean(line: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -253,10 +189,11 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
             junction.add(bridge)
             bridges += 1
 
-    def split(k: str, mark: str) -> str:
-        """Cut lane k at half its length: k keeps the first half, a new key the second and k's successors."""
+    def split(k: str, mark: str, at: float | None = None) -> str:
+        """Cut lane k where `at` metres of it are run (default: half its length): k keeps the first piece, a new
+        key the second and k's successors."""
         new = k + mark
-        shape[k], shape[new] = _halves(*shape[k])
+        shape[k], shape[new] = _halves(*shape[k], at)
         recorded[new] = recorded[k]
         succ[new], pred[new] = succ[k], [k]
         for s in succ[k]:
@@ -264,6 +201,22 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
         succ[k] = [new]
         return new
 
+    # a fork's or a merge's lane the map does not call an intersection lane: its first FORK_PIECE metres (at most
+    # half of it) are the junction's, the rest an ordinary road (Waymo's lanes run on for tens of metres after a
+    # fork: a connecting road whole, such a lane could be no lane of one road with its neighbours)
+    rest = {k: k for k in lanes if k not in junction}  # recorded lane -> the key of its ordinary part
+    for k in sorted(junction & lanes.keys()):
+        length = float(np.hypot(*np.diff(np.asarray(shape[k][0]), axis=0).T).sum())
+        if not lanes[k].is_intersection and succ[k] and not any(s in junction for s in succ[k]):
+            rest[k] = split(k, REST, min(FORK_PIECE, length / 2))
+    # lanes with recorded same-direction neighbours cut where a neighbour starts or ends beside them, so that
+    # pieces side by side begin and end across from each other: lanes of one road (synth.road.opendrive_group)
+    joints = []  # (piece, the piece after it) of each such cut: put back together where not grouped
+    for k, at in cuts({k: shape[key][0] for k, key in rest.items()}, lanes).items():
+        piece, done = rest[k], 0.0
+        for n, s in enumerate(at):
+            before, piece, done = piece, split(piece, f"{PART}{n}", s - done), s
+            joints.append((before, piece))
     # a junction lane followed by another junction lane or by none: its second half is an ordinary road, so
     # that every path through a junction is one junction lane from an ordinary road to an ordinary road (paths
     # through chains of them multiply: 10^5 and more on a Waymo map; Scenic gives a path without an outgoing
@@ -365,10 +318,11 @@ def network(road: RoadMap, recentre: bool = True) -> Network:
                           links.get((i, 0)), links.get((i, 1))))
     junctions = defaultdict(list)
     for n, (inc, _, _) in enumerate(paths):
-        junctions[path_junction[n]].append((rid[inc], n_ord + n + 1))
+        junctions[path_junction[n]].append((rid[inc], n_ord + n + 1, -1))
     roads = _marked(roads, road, offset)
-    return Network(tuple(roads), tuple(Junction(j, tuple(c)) for j, c in sorted(junctions.items())), offset,
-                   tuple(notes), _crosswalks(roads, road, offset))
+    roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes,
+                                         [(rid[a], rid[b]) for a, b in joints if a in rid and b in rid])
+    return Network(tuple(roads), tuple(joined), offset, tuple(notes) + group_notes, _crosswalks(roads, road, offset))
 
 
 def _edges(r: Road) -> tuple[np.ndarray, np.ndarray]:
@@ -472,12 +426,12 @@ def _junctions(paths: list[tuple[str, tuple[str, ...], str | None]]) -> list[int
     return [jid.setdefault(group.find(("path", i)), len(jid) + 1) for i in range(len(paths))]
 
 
-def _halves(line: list, widths: list) -> tuple[tuple[list, list], tuple[list, list]]:
-    """A centre line and its widths cut where half its length is run: the point there (widths interpolated)
-    ends the first half and starts the second."""
+def _halves(line: list, widths: list, at: float | None = None) -> tuple[tuple[list, list], tuple[list, list]]:
+    """A centre line and its widths cut where `at` metres of it are run (default: half its length): the point
+    there (widths interpolated) ends the first piece and starts the second."""
     a = np.asarray(line, dtype=float)
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
-    half = s[-1] / 2
+    half = s[-1] / 2 if at is None else at
     i = int(np.searchsorted(s, half, side="right")) - 1  # the segment [i, i + 1] holding the cut
     t = (half - s[i]) / (s[i + 1] - s[i])
     p = tuple((a[i] + t * (a[i + 1] - a[i])).tolist())

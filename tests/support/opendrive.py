@@ -14,6 +14,47 @@ import shapely
 from synth.road.roadmap import RoadMap
 
 SEP = " > "  # how a connecting road's name joins the recorded lanes it follows (synth.road.opendrive.Road.name)
+LANE_SEP = " | "  # how a road's name joins its lanes' (lane -1 first: synth.road.opendrive_model.LANE_SEP)
+
+
+def recorded(lane) -> list[str]:
+    """The recorded lanes a Scenic lane follows: its OpenDRIVE lane's part of its road's name."""
+    return lane.road.name.split(LANE_SEP)[-lane.sections[0].openDriveID - 1].split(SEP)
+
+
+def adjacent_pairs(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """The recorded same-direction neighbour pairs (lane, its right neighbour) that run side by side
+    (_side_by_side), both of whose lanes are in the network, split into those Scenic reports as adjacent lanes (lane.adjacentLanes) and those it does not."""
+    by_name: dict[str, list] = {}
+    for lane in net.lanes:
+        for n in recorded(lane):
+            by_name.setdefault(n, []).append(lane)
+    lanes = {f.feature_id: f for f in road.lanes}
+    pairs = set()
+    for k, f in lanes.items():
+        for a, b in ((k, f.right), (f.left, k)):
+            if a in by_name and b in by_name and _side_by_side(lanes[a], lanes[b]):
+                pairs.add((a, b))
+    seen, not_seen = [], []
+    for a, b in sorted(pairs):
+        adjacent = any(o in la.adjacentLanes for la in by_name[a] for o in by_name[b])
+        (seen if adjacent else not_seen).append((a, b))
+    return seen, not_seen
+
+
+def _side_by_side(a, b) -> bool:
+    """Whether two recorded neighbour lanes run side by side one way: their centre lines do not cross (Waymo
+    records crossing lanes in intersections as neighbours too), and their directions at b's nearest vertex to
+    a's middle and a's nearest vertex to that point the same side (positive dot product)."""
+    if shapely.LineString(a.line).crosses(shapely.LineString(b.line)):
+        return False
+    pa, pb = np.asarray(a.line, dtype=float), np.asarray(b.line, dtype=float)
+    mid = pa[len(pa) // 2]
+    j = int(np.hypot(*(pb - mid).T).argmin())
+    i = int(np.hypot(*(pa - pb[j]).T).argmin())
+    da = pa[min(i + 1, len(pa) - 1)] - pa[max(i - 1, 0)]
+    db = pb[min(j + 1, len(pb) - 1)] - pb[max(j - 1, 0)]
+    return float(da @ db) > 0
 
 
 def scenic_network(xodr: Path):
@@ -33,14 +74,13 @@ def centre_line_gaps(net, road: RoadMap, shift: tuple[float, float], step: float
     every `step` metres, to the recorded centre line(s) it follows (shifted into the file's frame)."""
     out = {}
     for lane in net.lanes:
-        names = lane.road.name.split(SEP)
-        recorded = np.concatenate([np.asarray(road[n].line) for n in names]) - shift
-        line = shapely.LineString(recorded)
+        names = recorded(lane)
+        line = shapely.LineString(np.concatenate([np.asarray(road[n].line) for n in names]) - shift)
         pts = np.asarray([(p.x, p.y) if hasattr(p, "x") else tuple(p)[:2] for p in lane.centerline.points])
         scenic_line = shapely.LineString(pts)
         n = max(2, int(math.ceil(scenic_line.length / step)) + 1)
         samples = shapely.line_interpolate_point(scenic_line, np.linspace(0, scenic_line.length, n))
-        out[lane.road.name] = float(shapely.distance(samples, line).max())
+        out[SEP.join(names)] = float(shapely.distance(samples, line).max())
     return out
 
 
@@ -50,14 +90,14 @@ def kept_links(net, road: RoadMap) -> tuple[list[tuple[str, str]], list[tuple[st
     lane) and those it does not."""
     follows = set()
     for lane in net.lanes:
-        names = lane.road.name.split(SEP)
+        names = recorded(lane)
         follows.update(zip(names, names[1:]))
         if lane._successor is not None:
-            follows.add((names[-1], lane._successor.road.name.split(SEP)[0]))
+            follows.add((names[-1], recorded(lane._successor)[0]))
         for m in lane.maneuvers:  # a maneuver of a lane that is itself a connecting road's has no connecting lane
-            via = m.connectingLane.road.name.split(SEP) if m.connectingLane is not None else names
+            via = recorded(m.connectingLane) if m.connectingLane is not None else names
             follows.add((names[-1], via[0]))
-            follows.add((via[-1], m.endLane.road.name.split(SEP)[0]))
+            follows.add((via[-1], recorded(m.endLane)[0]))
     kept, lost = [], []
     for f in road.lanes:
         for s in f.successors:

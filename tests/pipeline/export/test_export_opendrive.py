@@ -2,7 +2,8 @@
 nuScenes scenes (scene JSON: their road within r2s scene's radius) and the shipped Argoverse 2 log's whole map
 (its maps dataset). ASAM's checker reports no issue; Scenic's own parser loads the file with the map's junctions
 as intersections, each lane within 0.10 m of the recorded centre line it follows, the recorded successor links
-kept as successors or junction maneuvers; a lane-following car in Scenic's Newtonian simulator drives from a
+kept as successors or junction maneuvers, lanes of one road side by side as recorded neighbours Scenic sees as
+adjacent; a lane-following car in Scenic's Newtonian simulator drives from a
 lane into its successor."""
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def waymo(tmp_path_factory) -> tuple[Path, Path]:
 @pytest.mark.parametrize("which", ["av2", "waymo"])
 def test_scenic_loads_the_map_with_its_junctions_and_lanes_on_the_recorded_centre_lines(which, request):
     pytest.importorskip("scenic")
-    from tests.support.opendrive import centre_line_gaps, kept_links, offset, scenic_network
+    from tests.support.opendrive import adjacent_pairs, centre_line_gaps, kept_links, offset, scenic_network
 
     maps, av2 = (AV2_MAPS, request.getfixturevalue("av2")) if which == "av2" else request.getfixturevalue("waymo")
     road = next(iter(read_maps(maps)))
@@ -94,6 +95,12 @@ def test_scenic_loads_the_map_with_its_junctions_and_lanes_on_the_recorded_centr
     assert len(gaps) >= 0.95 * len(road.lanes) and max(gaps.values()) < TOLERANCE
     kept, lost = kept_links(net, road)
     assert len(kept) >= 0.99 * (len(kept) + len(lost)) and len(kept) > 100  # issue 37's bar (all of them today)
+    # lanes side by side: each pair of neighbouring lanes of one written road (its name's lanes left to right)
+    # is a recorded neighbour pair, and Scenic sees it as adjacent lanes
+    adjacent, _ = adjacent_pairs(net, road)
+    written = {tuple(x.split(" > ")[0] for x in pair) for r in ET.parse(av2).getroot().findall("road")
+               for pair in zip(r.get("name").split(" | "), r.get("name").split(" | ")[1:])}
+    assert written and written <= set(adjacent)
 
 
 def test_a_map_dataset_of_several_maps_needs_one_named(tmp_path):
@@ -119,7 +126,7 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     from scenic.simulators.newtonian import NewtonianSimulator
 
     from synth.road.opendrive import lane_graph, network
-    from tests.support.opendrive import SEP, offset
+    from tests.support.opendrive import offset, recorded
 
     road = next(iter(read_maps(AV2_MAPS)))
     net = network(road)
@@ -136,14 +143,17 @@ def test_a_lane_following_car_drives_through_a_junction_into_the_next_road(av2, 
     scene, _ = scenario.generate(maxIterations=10)
     trajectory = NewtonianSimulator().simulate(scene, maxSteps=40).trajectory
     first, last, before = trajectory[0][0], trajectory[-1][0], trajectory[-2][0]
-    lane = scene.workspace.network.laneAt(last)
+    network = scene.workspace.network
     succ, _ = lane_graph({f.feature_id: f for f in road.lanes})
     after, frontier = set(), {start.lanes[-1]}
     for _ in range(3):  # the recorded lanes within three links after the start (some are shorter than a metre)
         frontier = {s for f in frontier for s in succ[f]} - after
         after |= frontier
     assert (first - last).norm() > 6 and (last - before).norm() > 0.1  # past the road's end, still moving
-    assert set(lane.road.name.split(SEP)) & after, (start.lanes, lane.road.name)
+    # on a recorded lane after its own at some step (the Newtonian lateral controller may weave off a lane
+    # after a turn: bench/results/opendrive.md)
+    lanes = [network.laneAt(step[0]) for step in trajectory]
+    assert any(set(recorded(lane)) & after for lane in lanes if lane is not None), start.lanes
 
 
 def test_what_opendrive_cannot_be_made_from_is_one_line_and_nothing_is_written(scenes, tmp_path):

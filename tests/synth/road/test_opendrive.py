@@ -70,7 +70,7 @@ def test_every_recorded_link_is_kept_and_linked_roads_meet(road):
         world = [(x + net.offset[0], y + net.offset[1]) for x, y in r.points]  # back from the recentring
         assert shapely.distance(shapely.points(world), shapely.union_all(named)).max() < 0.06
     for j in net.junctions:
-        for incoming, connecting in j.connections:
+        for incoming, connecting, _ in j.connections:
             inc, con = roads[incoming], roads[connecting]
             assert inc.successor.kind == "junction" and inc.successor.id == j.id and con.junction == j.id
             assert con.predecessor.kind == "road" and con.predecessor.id == incoming
