@@ -46,6 +46,12 @@ def _run(frames: Path, out: Path, *more: str):
     return proc
 
 
+def _contents(out: Path) -> dict[str, bytes]:
+    """An output's bytes by relative path (a file or a folder of parts)."""
+    files = sorted(out.rglob("*")) if out.is_dir() else [out]
+    return {str(f.relative_to(out.parent)): f.read_bytes() for f in files if f.is_file()}
+
+
 def _summary(stderr: str) -> str:
     return next(ln for ln in stderr.splitlines() if " clips (" in ln and " computed, " in ln)
 
@@ -65,9 +71,16 @@ def _clips(log: pd.DataFrame, clip_us: int) -> list[list[str]]:
     return out
 
 
-def test_clip_rows_are_r2s_synth_behaviours_on_each_clip(frames, log, tmp_path):
-    out = tmp_path / "clips"
-    proc = _run(frames, out)
+@pytest.fixture(scope="module")
+def clip_run(frames, tmp_path_factory):
+    """One `r2s run --clip 1` of the whole cut, shared: its rows are checked by one test and it is the clip output
+    another test tries to add window rows to (that test works on a copy, so the shared output is never written)."""
+    out = tmp_path_factory.mktemp("clip-run") / "clips"
+    return out, _run(frames, out)
+
+
+def test_clip_rows_are_r2s_synth_behaviours_on_each_clip(clip_run, frames, log, tmp_path):
+    out, proc = clip_run
     rows = pq.read_table(out).to_pandas().set_index("frame_id")
     expected = _clips(log, 1_000_000)
     assert len(expected) == 3 and len(rows) == 3
@@ -124,7 +137,7 @@ def test_resume_redoes_a_clip_whose_row_or_timestamp_changed(frames, log, tmp_pa
     assert "2 clips (2 computed, 0 kept)" in _summary(proc.stderr)
 
 
-def test_bad_clip_runs_are_one_line_and_write_nothing(frames, log, tmp_path):
+def test_bad_clip_runs_are_one_line_and_write_nothing(clip_run, frames, log, tmp_path):
     out = tmp_path / "never"
     for more, says in ((("--clip", "0"), "--clip must be a positive"), (("--clip", "nan"), "--clip must be"),
                        (("--clip", "1", "--window", "1"), "give one"), (("--clip", "4000"), "at most"),
@@ -148,11 +161,16 @@ def test_bad_clip_runs_are_one_line_and_write_nothing(frames, log, tmp_path):
     assert f"entity {gap.loc[victim, 'entity_id']!r} has no speed" in error.error
     # Clip rows never go into an output of window or per-frame rows, nor window rows into one of clip rows (a
     # per-frame run drops them, as it drops window rows: docs/formats.md).
+    # The window and per-frame outputs come from the first 3 frames: the refusal is about the rows' kind, not their
+    # number; the clip output is clip_run's, copied.
+    few = _copy(log[log.frame_index < 3], tmp_path / "few" / "frames.parquet")
     for kind, more in (("window", ("--window", "1")), ("per-frame", ())):
         other = tmp_path / kind
-        assert run_r2s("run", str(frames), "--out", str(other), "--jobs", "2", *more).returncode == 0
+        assert run_r2s("run", str(few), "--out", str(other), "--jobs", "2", *more).returncode == 0
         assert_one_line_error(run_r2s("run", str(frames), "--out", str(other), "--clip", "1", "--lanes"), 2,
                               f"{kind} programs")
     clips = tmp_path / "clips"
-    _run(frames, clips)
+    (shutil.copytree if clip_run[0].is_dir() else shutil.copy)(clip_run[0], clips)
+    before = _contents(clips)
     assert_one_line_error(run_r2s("run", str(frames), "--out", str(clips), "--window", "1"), 2, "clip programs")
+    assert _contents(clips) == before
