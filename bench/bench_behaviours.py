@@ -46,6 +46,7 @@ from common import machine, write_results  # noqa: E402
 
 from pipeline.cli import main as r2s  # noqa: E402
 from pipeline.errors import UserError  # noqa: E402
+from pipeline.export.opendrive import header_frame  # noqa: E402
 from pipeline.query.mining import query  # noqa: E402
 from pipeline.scenes import scene as frame_scene  # noqa: E402
 from pipeline.simulation import NoVariantWritten, simulate  # noqa: E402
@@ -94,7 +95,8 @@ def replay(result, scenes, work: Path) -> dict:
     if r2s(["export", str(first), "--to", "openscenario", "--out", str(export)]):
         raise SystemExit("bench_behaviours: r2s export failed")
     (road,) = export.glob("*.xodr")
-    text = clip_scenic(result, str(road), CONFIG.v_stop)
+    ox, oy, _ = header_frame(str(road)) or (0.0, 0.0, 0.0)
+    text = clip_scenic(result, str(road), CONFIG.v_stop, (ox, oy))
     scenario = scenic.scenarioFromString(text, mode2D=True)
     scene, _ = scenario.generate(maxIterations=20)
     steps = round(result.duration_s / STEP_S)
@@ -119,6 +121,7 @@ def replay(result, scenes, work: Path) -> dict:
             x, y = world[result.frame_ids[k]].point(e.x, e.y)
             step = min(round(sample.t / STEP_S), len(trajectory) - 1)
             sx, sy = trajectory[step][index][:2]
+            sx, sy = sx + ox, sy + oy  # Scenic's frame is the road file's: back to the world
             distances.append(math.hypot(sx - x, sy - y))
         actors.append({"id": track.id, "type": track.type, "mean_m": statistics.fmean(distances),
                        "max_m": max(distances)})

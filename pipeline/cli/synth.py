@@ -12,7 +12,7 @@ from pathlib import Path
 
 from pipeline.cli.options import add_synthesis_options, synthesis_config
 from pipeline.errors import UserError
-from pipeline.export.opendrive import check_road_frame, map_path
+from pipeline.export.opendrive import check_road_frame, header_frame, map_path
 from pipeline.outputs import check_apart, writing
 from storage.atomic import write_text_atomic
 from synth.scenic.emit import on_map
@@ -71,7 +71,9 @@ def run(args: argparse.Namespace) -> int:
     elif args.format == "scenic" and args.behaviours:
         from synth.behaviour.scenic import clip_scenic
 
-        text = clip_scenic(result, str(Path(args.road).resolve()), config.v_stop)
+        road = str(Path(args.road).resolve())
+        ox, oy, _ = header_frame(road) or (0.0, 0.0, 0.0)
+        text = clip_scenic(result, road, config.v_stop, (ox, oy))
     elif args.format == "scenic" and args.road is not None:
         text = on_map(result.scenic, map_path(args.road, args.out))
     elif args.format == "scenic":

@@ -11,49 +11,49 @@ import math
 
 from synth.behaviour.kinds import Cruising, SlowingToAStop, Stopped
 from synth.behaviour.program import Behaviour
+from synth.behaviour.scenic_common import ALONG, STEER, num, placed, track_points
 from synth.behaviour.segmentation import Segmented
 from synth.behaviour.synthesize import ClipResult
 from synth.behaviour.track import Track
 from synth.patterns.temporal import turn_of
-from synth.scene import VEHICLE_CLASSES, Entity
 from synth.syntax import fmt_number
-from synth.world import WorldPose
 
-# The behaviour every moving entity runs: per segment (seconds, speed at its start and end in m/s, turn in
-# degrees CCW), the speed goes linearly from one end to the other and the heading turns at a steady rate, both
-# steered step by step toward where they should be (cars: speed set along the heading and a steering angle
-# whose Newtonian yaw rate closes the heading error in one step; pedestrians: walking speed and direction).
-STEER = '''\
-import math
-
-def r2s__steer(car, speed, yaw_rate):
-    """The steering whose Newtonian yaw rate (-speed * sin(steer * pi / 2) / length) is yaw_rate (rad/s) at the
-    speed set in the same step (the simulator turns the car at its new speed)."""
-    speed = max(speed, 0.1)
-    return 2 / math.pi * math.asin(max(-1, min(1, -yaw_rate * car.length / speed)))
-'''
-PRELUDE = STEER + '''
-behavior R2sSegments(segments, walks):
+# A car with a recorded path (`path`, its polyline; `lengths`, each segment's recorded length along it) follows
+# the path by arc length: the segment's speed goes linearly between its recorded boundary speeds, scaled so the
+# segment covers its recorded length in its recorded duration, and the car steers at the path's point one step
+# past where that profile has it at the step's end (pure pursuit one step ahead). Without a path (walkers) the
+# heading turns at the segment's steady rate, as before.
+PRELUDE = STEER + ALONG + '''
+behavior R2sSegments(segments, walks, path=None, lengths=None):
     heading = self.heading
-    for duration, v0, v1, turn in segments:
-        steps = max(1, round(duration / simulation().timestep))
+    done = 0  # the path's length at the segment's start
+    dt = simulation().timestep
+    for j, (duration, v0, v1, turn) in enumerate(segments):
+        steps = max(1, round(duration / dt))
         start = heading
+        linear = (v0 + v1) / 2 * duration
+        scale = lengths[j] / linear if lengths is not None and linear > 1e-6 else 1
         for k in range(steps):
             f = (k + 1) / steps
-            speed = v0 + (v1 - v0) * f
+            speed = (v0 + (v1 - v0) * f) * scale
             heading = start + turn * f
+            if path is not None and not walks:
+                t = f * duration
+                covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale
+                ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
+                tx, ty = r2s__along(path, done + covered + speed * dt)
+                if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
+                    heading = math.atan2(-(tx - ahead.x), ty - ahead.y)
             if walks:
                 take SetWalkingDirectionAction(heading), SetWalkingSpeedAction(speed)
             else:
                 error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / simulation().timestep))
+                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / dt))
+        if lengths is not None:
+            done += lengths[j]
     while True:
         take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
 '''
-
-
-def num(v: float) -> str:
-    return repr(round(v, 6))
 
 
 def segment_parameters(segmented: Segmented, track: Track) -> list[tuple[float, float, float, float]]:
@@ -83,23 +83,11 @@ def speed_bound(behaviour: Behaviour, track: Track, v_stop: float) -> float:
     return top
 
 
-def placed(e: Entity, world: WorldPose, offset: tuple[float, float] = (0.0, 0.0)) -> tuple[str, str]:
-    """The Scenic class and the specifiers of an entity at its recorded pose in the world, less `offset`: the road
-    file's origin in the world (its header's offset, which Scenic's OpenDRIVE reader does not apply), so that the
-    entity stands on Scenic's road where it stood on the recorded one."""
-    x, y = world.point(e.x, e.y)
-    x, y = x - offset[0], y - offset[1]
-    heading = world.heading + e.heading - 90.0  # Scenic's 0 is +y; the world's yaw is from +x
-    length, width = e.dimensions()
-    cls = "Pedestrian" if e.type == "Pedestrian" else "Car" if e.type in VEHICLE_CLASSES else "Object"
-    return cls, (f"new {cls} at ({num(x)}, {num(y)}), facing {num(heading)} deg, with length {num(length)}, "
-                 f"with width {num(width)}, with regionContainedIn None, with allowCollisions True, "
-                 "with requireVisible False")
-
-
-def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
+def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5,
+                offset: tuple[float, float] = (0.0, 0.0)) -> str:
     """The dynamic Scenic scenario of a clip program (module docstring). `xodr`: the path of the clip's road as
-    OpenDRIVE in the world frame (r2s export --to openscenario writes it for the clip's first frame)."""
+    OpenDRIVE in the world frame (r2s export --to openscenario writes it for the clip's first frame); `offset`: its
+    header's offset (pipeline.export.opendrive.header_frame), Scenic's (0, 0) in the world."""
     clip = result.clip
     first = clip.scenes[0]
     world = first.world
@@ -118,11 +106,20 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5) -> str:
             continue
         behaviour = segmented.behaviour
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, where = placed(e, world)
+        cls, where = placed(e, world, offset)
         if not behaviour.parked and cls != "Object":
             segments = ", ".join(f"({', '.join(num(v) for v in p)})" for p in segment_parameters(segmented, track))
             walks = "True" if cls == "Pedestrian" else "False"
-            where += f", with speed {num(track.samples[0].speed)}, with behavior R2sSegments([{segments}], {walks})"
+            path = "None"
+            lengths = "None"
+            if cls != "Pedestrian":
+                points = track_points(track, clip, offset)
+                piece = [math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(points, points[1:])]
+                path = "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]"
+                lengths = "[" + ", ".join(num(sum(piece[a:b])) for a, b in
+                                          zip(segmented.boundaries, segmented.boundaries[1:])) + "]"
+            where += (f", with speed {num(track.samples[0].speed)}, "
+                      f"with behavior R2sSegments([{segments}], {walks}, {path}, {lengths})")
         lines.append(f"{track.id} = {where}")
         if cls != "Object":
             top = speed_bound(behaviour, track, v_stop)

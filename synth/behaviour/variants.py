@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from synth.behaviour.kinds import Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
 from synth.behaviour.kinds import Heading as HeadingPath
 from synth.behaviour.program import Behaviour
-from synth.behaviour.scenic import STEER, num, placed, speed_bound
+from synth.behaviour.scenic import speed_bound
+from synth.behaviour.scenic_common import STEER, num, placed, track_points
 from synth.behaviour.track import Clip, Track
 from synth.config import SynthConfig
 from synth.patterns.temporal import turn_of
@@ -225,13 +226,6 @@ class Simulated:
     @property
     def steps(self) -> int:
         return self.frame_steps[-1]
-
-
-def track_points(track: Track, clip: Clip, offset: tuple[float, float] = (0.0, 0.0)) -> list[tuple[float, float]]:
-    """A track's recorded places in the world less `offset` (the road file's origin), one per sample."""
-    rows = [scene.ego if track.id == "ego" else scene.by_id().get(track.id) for scene in clip.scenes]
-    points = [scene.world.point(e.x, e.y) for scene, e in zip(clip.scenes, rows) if e is not None]
-    return [(x - offset[0], y - offset[1]) for x, y in points]
 
 
 def segment_means(points: Sequence[tuple[float, float]], boundaries: Sequence[int],
