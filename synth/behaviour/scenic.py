@@ -24,7 +24,7 @@ from synth.syntax import fmt_number
 # past where that profile has it at the step's end (pure pursuit one step ahead). Without a path (walkers) the
 # heading turns at the segment's steady rate, as before.
 PRELUDE = STEER + ALONG + '''
-behavior R2sSegments(segments, walks, path=None, lengths=None):
+behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
     heading = self.heading
     done = 0  # the path's length at the segment's start
     dt = simulation().timestep
@@ -36,6 +36,8 @@ behavior R2sSegments(segments, walks, path=None, lengths=None):
         for k in range(steps):
             f = (k + 1) / steps
             speed = (v0 + (v1 - v0) * f) * scale
+            if top is not None:
+                speed = min(speed, top)  # within the program's speed bound (its `require always`)
             heading = start + turn * f
             if path is not None and not walks:
                 t = f * duration
@@ -119,7 +121,8 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5,
                 lengths = "[" + ", ".join(num(sum(piece[a:b])) for a, b in
                                           zip(segmented.boundaries, segmented.boundaries[1:])) + "]"
             where += (f", with speed {num(track.samples[0].speed)}, "
-                      f"with behavior R2sSegments([{segments}], {walks}, {path}, {lengths})")
+                      f"with behavior R2sSegments([{segments}], {walks}, {path}, {lengths}, "
+                      f"{num(speed_bound(behaviour, track, v_stop))})")
         lines.append(f"{track.id} = {where}")
         if cls != "Object":
             top = speed_bound(behaviour, track, v_stop)
