@@ -24,7 +24,7 @@ from synth.behaviour.kinds import Cruising, SlowingDown, SlowingToAStop, Speedin
 from synth.behaviour.kinds import Heading as HeadingPath
 from synth.behaviour.program import Behaviour
 from synth.behaviour.scenic import speed_bound
-from synth.behaviour.scenic_common import STEER, num, placed, track_points
+from synth.behaviour.scenic_common import ALONG, STEER, num, placed, track_points
 from synth.behaviour.track import Clip, Track
 from synth.config import SynthConfig
 from synth.patterns.temporal import turn_of
@@ -168,19 +168,7 @@ def r2s__states(objects):
         heading = control.get("heading")
         out.append((o.position.x, o.position.y, o.heading if heading is None else heading, o.velocity.norm()))
     return out
-
-def r2s__along(path, s):
-    """The point at arc length s along a polyline ((x, y), ...), past its end straight on along its last piece."""
-    for i in range(len(path) - 1):
-        x0, y0 = path[i]
-        x1, y1 = path[i + 1]  # (not `by`: a Scenic keyword)
-        piece = math.hypot(x1 - x0, y1 - y0)
-        if s <= piece or i == len(path) - 2:
-            share = s / piece if piece > 0 else 0
-            return x0 + (x1 - x0) * share, y0 + (y1 - y0) * share
-        s -= piece
-    return path[-1]
-
+''' + ALONG + '''
 behavior R2sVariant(ends, turns, recorded, lo, hi, rows, means, q, f, walks, path):
     speeds = feasible(recorded, lo, hi, rows, q, f)
     heading = self.heading
