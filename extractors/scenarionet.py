@@ -50,7 +50,7 @@ from synth.road.roadmap import (
     DROPPED_LINKS,
     LANE,
     ROAD_LINE,
-    ArrayPairs,
+    ArrayPoints,
     FloatPairs,
     MapError,
     MapFeature,
@@ -553,8 +553,8 @@ def _xy(map_id: str, fid: str, value: Any, what: str):
     # (or [x, y, z]) float points (RoadMap.of checks that they are finite). Anything else takes the general way.
     if type(value) is np.ndarray and value.dtype in FLOATS and value.ndim == 2 and value.shape[1] >= 2:
         # float32 (the Waymo converter's) widens to a Python float exactly, as np.asarray(value, float) does; the
-        # points keep that float64 array, which packing them later reuses
-        return ArrayPairs.of(value[:, :2])
+        # points keep that float64 array, which packing them later reuses, and make no Python pair unless asked
+        return ArrayPoints(value[:, :2])
     if type(value) is list and value:
         try:
             lens = set(map(len, value))

@@ -51,13 +51,22 @@ def maps_dir(out: str | os.PathLike) -> Path:
     return p.with_suffix(".maps") if p.suffix == ".parquet" else p / MAPS_DIR
 
 
+def _columns(pts) -> tuple[list[float], list[float]]:
+    """A feature's points as its x and y columns: read from the array of points that keep one (ArrayPoints: the
+    same floats, without making their pairs)."""
+    xy = getattr(pts, "xy", None)
+    if xy is not None:
+        return xy[:, 0].tolist(), xy[:, 1].tolist()
+    return [p[0] for p in pts], [p[1] for p in pts]
+
+
 def map_rows(road: RoadMap) -> list[dict]:
     rows = []
     for f in road.features:
+        (px, py), (lx, ly) = _columns(f.polygon), _columns(f.line)
         rows.append({
             "map_id": f.map_id, "feature_id": f.feature_id, "kind": f.kind, "source_type": f.source_type,
-            "polygon_x": [p[0] for p in f.polygon], "polygon_y": [p[1] for p in f.polygon],
-            "line_x": [p[0] for p in f.line], "line_y": [p[1] for p in f.line],
+            "polygon_x": px, "polygon_y": py, "line_x": lx, "line_y": ly,
             "left_neighbour": f.left, "right_neighbour": f.right, "successors": list(f.successors),
             "predecessors": list(f.predecessors), "is_intersection": f.is_intersection, "direction": f.direction,
             "polygon_rule": f.polygon_rule, "neighbour_rule": f.neighbour_rule,

@@ -139,10 +139,10 @@ def lane_polygons(lines: list[Points], lefts: list[float | None], rights: list[f
 
 def _emit(out: list[Points], which: np.ndarray, ring: np.ndarray, counts: np.ndarray) -> None:
     """Each of `which`'s lines' ring (packed, without closing repeat) into `out`, as a ShellRing."""
-    pts = list(zip(ring[:, 0].tolist(), ring[:, 1].tolist()))  # all points in one pass, then sliced
+    ring = np.ascontiguousarray(ring, dtype=float)  # made here: each ring keeps its slice of it, no copy
     ends = np.cumsum(counts).tolist()
     for i, end, k in zip(which.tolist(), ends, counts.tolist()):
-        out[i] = ShellRing(pts[end - k:end]).with_array(ring[end - k:end])
+        out[i] = ShellRing.owning(ring[end - k:end])
 
 
 # Two bevel points closer than this (metres) are one: the miter point of their joint, which lies beyond their

@@ -45,36 +45,86 @@ class FloatPairs(tuple):
     __slots__ = ()
 
 
-class ArrayPairs(FloatPairs):
-    """FloatPairs that keep the (N, 2) float64 array they were made from (`xy`, read-only, the same values): `packed`
-    concatenates these arrays instead of converting every coordinate back from Python floats (on the 12 Waymo
-    scenarios' maps, most of what RoadMap.of and the widening spent packing). Made only by `of` (or a subclass's
-    maker that sets `xy` to its points); a tuple in every other respect."""
+class ArrayPoints(Sequence):
+    """Points kept as the (N, 2) float64 array they were read or made as (`xy`, read-only): what a reader of float
+    arrays (ScenarioNet's polylines) and the lane widening make. A map holds ~10^5 points; as Python pairs (one
+    tuple and two floats a point) they were most of what a Waymo map cost beyond its widening, and extraction
+    never looks at them one by one: `packed` concatenates the arrays (RoadMap.of, the widening, the lane index)
+    and the maps' columns are read from them (frames.maps). As a sequence they ARE the plain tuple of (x, y)
+    pairs of Python floats, made on first use and kept: equal to it (and to other points of the same values),
+    hashed as it, iterated, indexed, sliced and added as it. Not a tuple subclass: a tuple's items are fixed when
+    it is made, and C code (json, pyarrow) reads a subclass's items directly."""
 
-    # no __slots__: a tuple subclass cannot have a non-empty one; the instance dict holds `xy`
+    __slots__ = ("xy", "_pairs")
+
+    def __init__(self, xy: np.ndarray) -> None:
+        """The points of a float (N, 2) array, which they keep as a read-only float64 copy of their own (the
+        caller's array may change; points may not)."""
+        self._keep(np.array(xy, dtype=float))
 
     @classmethod
-    def of(cls, xy: np.ndarray) -> ArrayPairs:
-        """The points of a float64 (N, 2) array, which they keep (made read-only: points are frozen)."""
-        xy = xy.astype(float)  # a C-contiguous copy of its own
-        xy.flags.writeable = False
-        out = cls(zip(xy[:, 0].tolist(), xy[:, 1].tolist()))
-        out.xy = xy
+    def of(cls, xy: np.ndarray) -> ArrayPoints:
+        return cls(xy)
+
+    @classmethod
+    def owning(cls, xy: np.ndarray) -> ArrayPoints:
+        """The points of an (N, 2) float64 array nobody else writes to (the caller's promise): no copy."""
+        out = cls.__new__(cls)
+        out._keep(np.ascontiguousarray(xy, dtype=float))
         return out
 
-    def with_array(self, xy: np.ndarray) -> ArrayPairs:
-        """These points keeping `xy`, their own values as a float64 (N, 2) array (the caller's promise)."""
-        self.xy = _frozen(xy)
-        return self
+    def _keep(self, xy: np.ndarray) -> None:
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise ValueError(f"points need an (N, 2) array, not one of shape {xy.shape}")
+        xy.flags.writeable = False
+        self.xy, self._pairs = xy, None
+
+    @property
+    def pairs(self) -> Points:
+        """The plain tuple of (x, y) pairs, made once."""
+        if self._pairs is None:
+            self._pairs = tuple(zip(self.xy[:, 0].tolist(), self.xy[:, 1].tolist()))
+        return self._pairs
+
+    def __len__(self) -> int:
+        return self.xy.shape[0]
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):  # the points of the slice, still an array's (a slice of a ring is no ring)
+            return ArrayPoints.owning(self.xy[i])
+        if self._pairs is not None:
+            return self._pairs[i]
+        x, y = self.xy[i].tolist()  # IndexError as a tuple's
+        return (x, y)
+
+    def __iter__(self):
+        return iter(self.pairs)
+
+    def __reversed__(self):
+        return reversed(self.pairs)
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, ArrayPoints):
+            other = other.pairs
+        return self.pairs == other if isinstance(other, tuple) else NotImplemented
+
+    def __hash__(self) -> int:
+        return hash(self.pairs)
+
+    def __add__(self, other: object):
+        return self.pairs + tuple(other) if isinstance(other, (tuple, ArrayPoints)) else NotImplemented
+
+    def __radd__(self, other: object):
+        return tuple(other) + self.pairs if isinstance(other, (tuple, ArrayPoints)) else NotImplemented
+
+    def __repr__(self) -> str:
+        return repr(self.pairs)
+
+    def __reduce__(self):
+        return type(self).owning, (self.xy,)
 
 
-def _frozen(xy: np.ndarray) -> np.ndarray:
-    xy = np.ascontiguousarray(xy, dtype=float)
-    xy.flags.writeable = False
-    return xy
-
-
-class ShellRing(ArrayPairs):
+class ShellRing(ArrayPoints):
     """The outer ring of a lane's widened centre line (synth.road.lane_geometry.lane_polygons: a buffer, which GEOS
     returns valid, or an offset ring GEOS found simple), without its closing repeat: simple by construction, so
     check_simple need not ask GEOS again. Only that function constructs it."""
@@ -327,7 +377,8 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
     """`packed` lines and polygons, if every point of every sequence is a pair of finite Python floats or ints
     (what `points` and the readers make): then check_feature need not look at the coordinates one feature at a
     time. None for anything else, which check_feature then judges (and names) feature by feature."""
-    seqs = [pts for pts in chain(lines, polygons) if not isinstance(pts, FloatPairs)]  # the others are float pairs
+    seqs = [pts for pts in chain(lines, polygons) if not isinstance(pts, (FloatPairs, ArrayPoints))]
+    # the others are float pairs
     try:
         if not set(map(len, chain.from_iterable(seqs))) <= {2}:
             return None
@@ -473,7 +524,7 @@ def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
     counts = np.fromiter(map(len, seqs), dtype=np.int64, count=len(seqs))
     total = int(counts.sum())
     arrays = [getattr(s, "xy", None) for s in seqs if len(s)]
-    if arrays and all(a is not None for a in arrays):  # all ArrayPairs: their arrays hold the same floats
+    if arrays and all(a is not None for a in arrays):  # all ArrayPoints: their arrays hold the same floats
         return np.concatenate(arrays), counts
     flat = np.fromiter(chain.from_iterable(chain.from_iterable(seqs)), dtype=float, count=2 * total)
     return flat.reshape(total, 2), counts
@@ -489,9 +540,7 @@ def open_ring(pts: Points) -> Points:
     """A ring without its closing repeat of the first vertex (sources write rings both ways)."""
     if not (len(pts) > 1 and pts[0] == pts[-1]):
         return pts
-    out = type(pts)(pts[:-1])
-    xy = getattr(pts, "xy", None)
-    return out.with_array(xy[:-1]) if xy is not None else out
+    return pts[:-1] if isinstance(pts, ArrayPoints) else type(pts)(pts[:-1])
 
 
 def links_within(features: Sequence[MapFeature], *, neighbours: bool) -> list[MapFeature]:
