@@ -55,6 +55,7 @@ from synth.road.roadmap import (
     MapError,
     MapFeature,
     MapRepairs,
+    Points,
     RoadMap,
     links_within,
     open_ring,
@@ -481,7 +482,7 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
         except MapError as exc:
             repairs.broken(DROPPED_BROKEN, str(exc))
             continue
-        if kind in (LANE, ROAD_LINE) and len(set(line[:3])) < 2 and len(set(line)) < 2:
+        if kind in (LANE, ROAD_LINE) and _one_point(line):
             repairs.repaired(ONE_POINT)
             if kind == LANE:
                 dropped.add(fid)
@@ -527,6 +528,17 @@ def scenario_map(map_id: str, map_features: Any, dataset: str, repairs: MapRepai
     if not any_neighbour:  # the geometric rule, on the validated map and its packed coordinates
         road = road.with_features(neighbours(road.lanes, road.packed("line", LANE), road.packed("polygon", LANE)))
     return road
+
+
+def _one_point(line: Points) -> bool:
+    """Whether a line has fewer than two distinct points (as a set of its pairs counts them: NaN is distinct)."""
+    xy = getattr(line, "xy", None)
+    if xy is not None:  # without making its pairs: almost every line has two distinct points among its first three
+        first = xy[:3].tolist()
+        if any(p != first[0] for p in first[1:]):  # lists compare as the pairs do (NaN unequal to itself)
+            return False
+        return len(xy) < 2 or not (xy[1:] != xy[0]).any()
+    return len(set(line[:3])) < 2 and len(set(line)) < 2
 
 
 XY = itemgetter(0, 1)  # a point's x and y, of [x, y] or (x, y, z)
