@@ -327,13 +327,13 @@ def main() -> None:
                   "0.2 s). Of what 70% allows, widening alone (the offset rings, the GEOS buffers of the lanes whose "
                   f"ring is refused, and the rings as points) takes {100 * st['stages']['widening'] / allowed:.0f}%, "
                   "the rest of the map path (reading, RoadMap.of, indexing, the facts, the rows) "
-                  f"{100 * (cost - st['stages']['widening']) / allowed:.0f}%. The points read from arrays keep "
-                  "them (roadmap.ArrayPairs: RoadMap.of and the widening pack by concatenation), the widths are read "
-                  "in one pass; what is left is mostly making the points themselves (one Python tuple a point, "
-                  "~10^5 a map: the readers' lines and the widened rings, about 0.06 s of the 12 scenarios), "
-                  "per-feature reading, and the nearest centre-line segment of points in several lanes (about "
-                  "0.02 s): the target needs the maps' points kept as arrays end to end (MapFeature's points, the "
-                  "maps' columns from RoadMap's packed arrays), not a faster widening alone."]
+                  f"{100 * (cost - st['stages']['widening']) / allowed:.0f}%. The points read from arrays and the "
+                  "widened rings stay arrays (roadmap.ArrayPoints: RoadMap.of, the widening and the index pack them "
+                  "by concatenation, the maps' columns are read from them, and no Python pair is made unless a "
+                  "consumer asks: before, one tuple a point, ~10^5 a map, about 0.06 s of the 12 scenarios); the "
+                  "widths are read in one pass. What is left is numpy's and GEOS's work on the points (offset rings, "
+                  "the simplicity of each ring, the point-in-polygon tests, the nearest centre-line segment of "
+                  "points in several lanes) and per-feature reading."]
     lines += ["", "## 3. Width of the nuScenes lanes that have a polygon", "",
               f"{w['lanes']} lanes of the six nuScenes-mini scenarios: median {w['median_m']:.2f} m (10th / 90th "
               f"percentile {w['p10_m']:.2f} / {w['p90_m']:.2f} m): the default width of a lane given without "
