@@ -123,6 +123,11 @@ class ArrayPoints(Sequence):
     def __reduce__(self):
         return type(self).owning, (self.xy,)
 
+    def __array__(self, dtype=None, copy=None):
+        # numpy (and shapely through it) reads the array, not the pairs one by one; a copy of its own, writable,
+        # as np.asarray of the tuple gives (of no points: shape (0,), as of the empty tuple)
+        return np.array(self.xy if len(self.xy) else (), dtype=dtype)
+
 
 class ShellRing(ArrayPoints):
     """The outer ring of a lane's widened centre line (synth.road.lane_geometry.lane_polygons: a buffer, which GEOS

@@ -74,6 +74,10 @@ def test_array_points_are_their_tuple_and_keep_a_frozen_copy(a, i, j, step):
         assert pts + plain[:1] == plain + plain[:1] and plain[:1] + pts == plain[:1] + plain
         assert repr(pts) == repr(plain)
         assert json.dumps(list(pts)) == json.dumps(list(plain))
+        as_array = np.asarray(pts, dtype=float)  # numpy reads the array: the tuple's values, writable, a copy
+        assert as_array.shape == np.asarray(plain, dtype=float).shape
+        assert as_array.tobytes() == np.asarray(plain, dtype=float).tobytes()
+        assert as_array.flags.writeable and not np.shares_memory(as_array, pts.xy)
         back = pickle.loads(pickle.dumps(pts))
         assert type(back) is ArrayPoints and back == plain and not back.xy.flags.writeable
     assert pts != plain + ((1.5, 2.5),)
