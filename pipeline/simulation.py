@@ -200,6 +200,31 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
     where = str(program)
     clip_program, bounds, doc = read_program_json(read_text_file(where, "program"), where)
     recorded = [read_scene(str(p)) for p in scenes]
+    clip, boundaries = check_program(clip_program, bounds, doc, recorded, config, where)
+    base = clip.scenes[0].world.scene or clip.scenes[0].frame_id.rsplit("/", 1)[0]
+    with staged_directory(out, _owns, "r2s simulate's frames, maps and summary") as stage:
+        (stage / MAPS_DIR).mkdir()
+
+        def road_maps(world_road) -> Path:  # the clip's road is the map of its variants, written beside them
+            with maps_writer(stage / MAPS_DIR / FRAMES_FILE) as maps:
+                maps.add(world_road)
+            return maps_dir(stage)
+
+        # each written variant's rows go to the file as it passes (K up to MAX_VARIANTS clips must not sit in
+        # memory); with none written the staged folder is dropped whole
+        with frames_writer(stage / FRAMES_FILE) as w:
+            result = simulate_clip(clip_program, clip, boundaries, str(scenes[0]), base, road_maps, n, seed,
+                                   time_limit, config, report, w.write_frame)
+        if not result.written:
+            raise NoVariantWritten(result)
+        (stage / SUMMARY_FILE).write_text(json.dumps(result.to_json_dict(), indent=1) + "\n", encoding="utf-8")
+    return result
+
+
+def check_program(clip_program: ClipProgram, bounds: Mapping[str, list[int]], doc: Mapping, recorded: list[Scene],
+                  config: SynthConfig, where: str) -> tuple[Clip, list[tuple[int, ...]]]:
+    """The clip of the recorded frames and each track's boundaries, once the program is checked to be theirs (its
+    frames, the checker, its boundaries) and the first frame to have a road and a world pose; else a UserError."""
     clip = read_clip(recorded)
     if [s.frame_id for s in (recorded[0], recorded[-1])] != [doc.get("first_frame"), doc.get("last_frame")] \
             or len(recorded) != doc["frames"]:
@@ -213,36 +238,36 @@ def simulate(program: str | os.PathLike, scenes: Sequence[str | os.PathLike], ou
     if recorded[0].road is None or recorded[0].world is None:
         raise UserError(f"the clip's first frame {recorded[0].frame_id!r} has no road or no world pose: a simulation "
                         "runs on the recorded road (extract a source with maps)")
+    return clip, boundaries
+
+
+def simulate_clip(clip_program: ClipProgram, clip: Clip, boundaries: list[tuple[int, ...]], first_scene: str,
+                  base: str, road_maps: Callable[[Any], Path], n: int, seed: int, time_limit: float | None,
+                  config: SynthConfig, report: Callable[[Variant, int], None] | None,
+                  write: Callable[[list[dict]], None]) -> SimulateResult:
+    """K = n variants of a checked clip (check_program), scenes `{base}-simNNN`: the road of `first_scene` (the
+    clip's first frame as scene JSON) as OpenDRIVE, each written variant's frames passed to `write`. `road_maps(road)`
+    says where the maps of the written rows are (each variant is read back from them): given the clip's road in the
+    world, it writes it as the variants' map, or names maps that hold the recording's."""
     timer = StageTimer()
+    first = clip.scenes[0]
     with tempfile.TemporaryDirectory(prefix="r2s-simulate-") as scratch:
         with timer.stage("road"):
             xodr = str(Path(scratch) / "road.xodr")
-            export_road(str(scenes[0]), None, xodr)
-        sim = variant_scenic(f"variants of {doc.get('first_frame')} to {doc.get('last_frame')}",
+            export_road(first_scene, None, xodr)
+        sim = variant_scenic(f"variants of {first.frame_id} to {clip.scenes[-1].frame_id}",
                              [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config,
                              (header_frame(xodr) or (0.0, 0.0))[:2])
         with timer.stage("compile"):
             scenario = _compile(sim.text)
         kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
-        world_road = road_in_world(recorded[0].world, window_road(recorded))
-        with staged_directory(out, _owns, "r2s simulate's frames, maps and summary") as stage:
-            (stage / MAPS_DIR).mkdir()
-            with timer.stage("write"), maps_writer(stage / MAPS_DIR / FRAMES_FILE) as maps:
-                maps.add(world_road)
-            # each written variant's rows go to the file as it passes (K up to MAX_VARIANTS clips must not sit in
-            # memory); with none written the staged folder is dropped whole
-            with frames_writer(stage / FRAMES_FILE) as w:
-                variants = _variants(scenario, sim, clip, kept, world_road, maps_dir(stage), n, seed, time_limit,
-                                     config, timer, report, w.write_frame)
-            result = SimulateResult(n, seed, tuple(variants), sim.placed,
-                                    tuple(t.id for t in clip.tracks if not t.from_start), len(clip.scenes),
-                                    dict(timer.seconds))
-            if not result.written:
-                raise NoVariantWritten(result)
-            with timer.stage("write"):
-                (stage / SUMMARY_FILE).write_text(json.dumps(result.to_json_dict(), indent=1) + "\n",
-                                                  encoding="utf-8")
-    return result
+        world_road = road_in_world(first.world, window_road(clip.scenes))
+        with timer.stage("write"):
+            maps = road_maps(world_road)
+        variants = _variants(scenario, sim, clip, kept, world_road, maps, base, n, seed, time_limit, config, timer,
+                             report, write)
+    return SimulateResult(n, seed, tuple(variants), sim.placed, tuple(t.id for t in clip.tracks if not t.from_start),
+                          len(clip.scenes), dict(timer.seconds))
 
 
 def _compile(text: str):
@@ -251,14 +276,13 @@ def _compile(text: str):
     return scenic.scenarioFromString(text, mode2D=True)
 
 
-def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_road, maps: Path, n: int, seed: int,
-              time_limit: float | None, config: SynthConfig, timer: StageTimer, report,
+def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_road, maps: Path, base: str, n: int,
+              seed: int, time_limit: float | None, config: SynthConfig, timer: StageTimer, report,
               write: Callable[[list[dict]], None]) -> list[Variant]:
     """Simulate, write as rows and check each variant in turn, each frame of a variant the checker accepts passed to
     `write`; every Variant."""
     from scenic.core.distributions import RejectionException
 
-    base = clip.scenes[0].world.scene or clip.scenes[0].frame_id.rsplit("/", 1)[0]
     index, roads = RoadIndex(world_road), FrameRoads(maps)
     simulator = scenario.getSimulator()
     variants = []

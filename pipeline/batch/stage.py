@@ -127,7 +127,7 @@ class _Run:
     unit = "frames"  # what a row is of (log lines, the summary)
 
     def go(self) -> Summary:
-        store = RunStore(self.out, self.schema)
+        store = self._store()
         store.check_writable()
         dataset = FramesDataset.open(self.frames)  # bad input is refused before even the lock file is made
         n_units, index, contents, config_hash = self._units(dataset)
@@ -142,6 +142,10 @@ class _Run:
     @property
     def schema(self):
         return PROGRAMS_SCHEMA
+
+    def _store(self) -> RunStore:
+        """Where the rows go (a run of another kind keeps them beside its own files: pipeline.batch.simulations)."""
+        return RunStore(self.out, self.schema)
 
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         """Check the input (streaming) and say what rows the run makes: how many, the index of their keys (frame
@@ -205,7 +209,11 @@ class _Run:
         if self.options.backend == "dask":
             return dask_pool(self.options.scheduler, self.options.jobs)
         jobs = min(self.options.jobs or os.cpu_count() or 1, todo)
-        return nullcontext(LokyPool(jobs, wall_guard_s(self.config.time_limit)))
+        return nullcontext(LokyPool(jobs, self._wall_guard_s()))
+
+    def _wall_guard_s(self) -> float | None:
+        """Seconds after which a unit is taken for hung and its worker killed (pool.wall_guard_s)."""
+        return wall_guard_s(self.config.time_limit)
 
     def _maps(self, dataset) -> str | None:
         """With lanes each frame gets its road from the maps beside the frames, as r2s scene gives it (local only):
@@ -320,6 +328,11 @@ class _WindowRun(_Run):
     def schema(self):
         return WINDOW_SCHEMA
 
+    @property
+    def spec(self):
+        """How the units tile the scenes and what their config hash covers (a WindowSpec)."""
+        return self.options.window
+
     def _task_type(self):
         from pipeline.batch.window_task import WindowTask
 
@@ -328,7 +341,7 @@ class _WindowRun(_Run):
     def _units(self, dataset) -> tuple[int, Any, Any, str]:
         from pipeline.batch.windows import plan_windows
 
-        spec = self.options.window
+        spec = self.spec
         hasher = FrameHasher(keep_lanes=True, coverage=self._coverage(dataset))
         # Refuses bad input (every value the workers will read); the hasher keeps each frame's hash
         dataset.check(hasher, road=self._maps(dataset) is not None)
@@ -341,7 +354,7 @@ class _WindowRun(_Run):
 
     def _tasks(self, dataset, done, todo: int, pool, progress_dir: str | None) -> Iterator:
         task = self._task_type()
-        spec = self.options.window
+        spec = self.spec
         maps = self._maps(dataset)
         parts = tuple((p.path, p.read_columns(maps is not None)) for p in dataset.parts)
         windows = self._windows
