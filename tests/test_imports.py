@@ -98,6 +98,7 @@ LAZY: dict[tuple[str, str], str] = {
     ('pipeline.cli.scene', 'pipeline.scenes'): VERB,
     ('pipeline.cli.simulate', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.simulate', 'pipeline.simulation'): VERB,
+    ('pipeline.cli.simulate', 'pipeline.batch.simulations'): VERB,
     ('pipeline.cli.synth', 'pipeline.cli.inputs'): VERB,
     ('pipeline.cli.synth', 'synth.behaviour.synthesize'): VERB,
     ('pipeline.cli.synth', 'synth.window.program'): VERB,

@@ -38,7 +38,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from frames.dataset import FramesDataset
 from frames.frame_hash import FrameHasher, frame_keys, from_hex
 from frames.maps import maps_dir
 from frames.writer import frames_writer
@@ -66,7 +65,7 @@ SIMULATION_FIELDS = (("program_hash", pa.string()), ("seed", pa.int64()), ("vari
                      ("rejected_by_checker", pa.int32()), ("variants", pa.string()),
                      ("not_simulated", pa.list_(pa.string())), ("frames_file", pa.string()))
 SIMULATION_SCHEMA = pa.schema(list(CLIP_SCHEMA) + [pa.field(n, t) for n, t in SIMULATION_FIELDS])
-# The run output's columns a clip's task needs (the rest of its row is carried as read).
+# What a bad RUN_OUTPUT's line says to give instead.
 HOW = "r2s run FRAMES --clip S --lanes --out RUN_OUTPUT writes one"
 
 
