@@ -158,6 +158,10 @@ class SimulationTask(ClipTask):
     def sim(self) -> SimulationSpec:
         return self.spec
 
+    def run(self) -> pa.Table:
+        _import_scenic()
+        return super().run()
+
     def synthesize(self, scenes: list, unit: ClipUnit, digest: str) -> dict:
         """The clip's row with its simulation: its variants written to DIR/sim-<key>.parquet (none: no file)."""
         started = time.perf_counter()
@@ -210,6 +214,15 @@ class SimulationTask(ClipTask):
         keep = {c: unit.row.get(c) for c in ("program", "boundaries", "cost", "lower_bound", "duration_s",
                                               "relational_cost", "behaviours_s")}
         return {**row, **keep, **self._simulation_fields(unit.row), "written": 0}
+
+
+def _import_scenic() -> None:
+    """Scenic and what its scenarios load (the Newtonian simulator, the driving domain, OpenCV), imported once per
+    worker before its first clip: as pipeline.batch.task's module imports, paid outside a clip's memory cap (under it
+    a shared object that cannot be mapped is an ImportError, not the clip's memout)."""
+    import scenic.core.sensors  # noqa: F401
+    import scenic.domains.driving.roads  # noqa: F401
+    import scenic.simulators.newtonian  # noqa: F401
 
 
 class SimulationStore(RunStore):
