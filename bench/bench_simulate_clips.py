@@ -25,10 +25,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from common import machine, write_results  # noqa: E402
-
 import pandas as pd  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
+from common import machine, write_results  # noqa: E402
 
 from frames.maps import maps_dir  # noqa: E402
 from frames.rows import write_frames  # noqa: E402
