@@ -74,12 +74,14 @@ def simulate_run(run_output: str | os.PathLike, frames: str | os.PathLike, out: 
                  time_limit: float | None = None, jobs: int | None = None, backend: str = "loky",
                  scheduler: str | None = None, part_rows: int = DEFAULT_PART_ROWS,
                  log: Callable[[str], None] | None = None, log_every_s: float = 30.0,
-                 terminal: bool | None = None) -> Summary:
+                 terminal: bool | None = None, simulator: Callable | None = None) -> Summary:
     """K = n simulated variants of every clip program of `run_output` (an `r2s run FRAMES --clip S --lanes` output)
     on the clips' frames in `frames` (those the run was made from, with their maps), written to the folder `out` (the
     module docstring; docs/cli.md, `r2s simulate`). `config`: the configuration the clips were synthesized with (the
     checker's; lanes is always on); its memory_limit caps each clip's worker. `time_limit`: wall seconds per
-    simulation (a variant past it is "timed out"). The other keywords are RunOptions' (pipeline.batch.options).
+    simulation (a variant past it is "timed out"). `simulator`: what each clip runs instead of
+    pipeline.simulation.simulate_clip (its signature; a module-level function or a partial of one, carried to the
+    workers by reference: tests.support.faults). The other keywords are RunOptions' (pipeline.batch.options).
     Returns the stage's summary (one row per clip); raises UserError on bad input (one line, nothing written)."""
     config = as_config(config).with_(lanes=True)
     if not 1 <= n <= MAX_VARIANTS:
@@ -97,7 +99,7 @@ def simulate_run(run_output: str | os.PathLike, frames: str | os.PathLike, out: 
     out = Path(out)
     check_apart(out, [("input frames", frames), ("run output", run_output)], directory=True)
     spec = SimulationSpec(1.0, n=n, seed=seed, time_limit=time_limit)
-    return _SimulationRun(str(frames), out, config, options, log or _log, Path(run_output), spec).go()
+    return _SimulationRun(str(frames), out, config, options, log or _log, Path(run_output), spec, simulator).go()
 
 
 def _log(line: str) -> None:
@@ -151,6 +153,7 @@ class SimulationTask(ClipTask):
     """Clips to simulate in one go (one, as the run plans them): a clip task whose synthesis is K simulations."""
 
     out: str = ""  # DIR: where the variants' frames files go
+    simulator: Callable | None = None  # None: pipeline.simulation.simulate_clip
 
     schema = SIMULATION_SCHEMA
 
@@ -184,7 +187,7 @@ class SimulationTask(ClipTask):
             first = Path(scratch) / "first.json"
             first.write_text(scenes[0].to_json(), encoding="utf-8")
             with frames_writer(path) as w:  # atomic: the file is whole, or absent
-                result = simulate_clip(program, clip, boundaries, str(first), unit.name,
+                result = (self.simulator or simulate_clip)(program, clip, boundaries, str(first), unit.name,
                                        lambda road: Path(self.maps), self.sim.n, self.sim.seed, limit, self.config,
                                        None, w.write_frame)
         if not result.written:
@@ -284,9 +287,10 @@ class _SimulationRun(_WindowRun):
     unit = "clips"
 
     def __init__(self, frames: str, out: Path, config: SynthConfig, options: RunOptions,
-                 log: Callable[[str], None], run_output: Path, spec: SimulationSpec) -> None:
+                 log: Callable[[str], None], run_output: Path, spec: SimulationSpec,
+                 simulator: Callable | None = None) -> None:
         super().__init__(frames, out, config, options, log)
-        self.run_output, self._spec = run_output, spec
+        self.run_output, self._spec, self._simulator = run_output, spec, simulator
 
     @property
     def schema(self):
@@ -303,7 +307,7 @@ class _SimulationRun(_WindowRun):
         return maps_dir(self.frames)
 
     def _task_type(self):
-        return functools.partial(SimulationTask, out=str(self.out))
+        return functools.partial(SimulationTask, out=str(self.out), simulator=self._simulator)
 
     def _wall_guard_s(self) -> float | None:
         # A clip is K simulations (each under --time-limit) and a compile: no guard without a limit.

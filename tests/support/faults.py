@@ -1,4 +1,6 @@
-"""Faults injected into `r2s run`'s workers from the tests: each frame runs `fault(SPEC)` instead of synthesize.
+"""Faults injected into `r2s run`'s workers from the tests: each frame runs `fault(SPEC)` instead of synthesize
+(and each clip of `r2s simulate RUN_OUTPUT --frames FRAMES` `simulation_fault(SPEC)` instead of simulate_clip, FRAME_ID
+the clip's first frame).
 
 SPEC is ACTION[=ARG]@FRAME_ID (FRAME_ID "*": every frame). Actions: kill (the worker sends itself SIGKILL, as the
 kernel's OOM killer would), exit (os._exit(3)), alloc=MB (touch MB of memory, under the frame's hard cap), raise,
@@ -23,12 +25,25 @@ import sys
 import time
 
 from synth.smt.dreal_backend import load_dreal
+from pipeline.simulation import simulate_clip
 from synth.synthesize import synthesize
 
 
 def faulty_synthesize(spec: str, scene, config):
+    _inject(spec, scene.frame_id)
+    return synthesize(scene, config)
+
+
+def faulty_simulate(spec: str, program, clip, *args):
+    """pipeline.simulation.simulate_clip with SPEC injected into the clip whose first frame is FRAME_ID (`r2s simulate
+    RUN_OUTPUT --frames FRAMES`'s workers: pipeline.batch.simulations)."""
+    _inject(spec, clip.scenes[0].frame_id)
+    return simulate_clip(program, clip, *args)
+
+
+def _inject(spec: str, frame_id: str) -> None:
     action, _, target = spec.partition("@")
-    if target in ("*", scene.frame_id):
+    if target in ("*", frame_id):
         name, _, arg = action.partition("=")
         if name == "kill":
             os.kill(os.getpid(), signal.SIGKILL)
@@ -38,7 +53,7 @@ def faulty_synthesize(spec: str, scene, config):
             blocks = [bytearray(2**20) for _ in range(int(arg))]  # touched pages: RSS, not only address space
             del blocks
         elif name == "raise":
-            raise RuntimeError(f"fault injected in frame {scene.frame_id}")
+            raise RuntimeError(f"fault injected in frame {frame_id}")
         elif name == "sleep":
             time.sleep(float(arg))
         elif name == "hang":
@@ -47,7 +62,6 @@ def faulty_synthesize(spec: str, scene, config):
             _break_dreal(name)
         else:
             raise ValueError(f"unknown fault {spec!r}")
-    return synthesize(scene, config)
 
 
 def _hang():
@@ -67,6 +81,11 @@ def _break_dreal(how: str) -> None:
 def fault(spec: str):
     """The synthesizer that injects SPEC (picklable: a partial of a function of this module)."""
     return functools.partial(faulty_synthesize, spec)
+
+
+def simulation_fault(spec: str):
+    """The clip simulator that injects SPEC (a partial of a function of this module)."""
+    return functools.partial(faulty_simulate, spec)
 
 
 def r2s_with_fault(spec: str, *args: str) -> list[str]:
@@ -95,12 +114,15 @@ def small_filesystem(path, size_kb: int = 64, read_only: bool = False):
 
 
 def main(argv: list[str]) -> int:
+    import pipeline.batch.simulations
     import pipeline.batch.stage
     from pipeline.cli import main as r2s
 
     spec, *args = argv
-    # the verb imports run_frames when it runs: it gets this one
+    # the verb imports run_frames (simulate_run) when it runs: it gets this one
     pipeline.batch.stage.run_frames = functools.partial(pipeline.batch.stage.run_frames, synthesizer=fault(spec))
+    pipeline.batch.simulations.simulate_run = functools.partial(pipeline.batch.simulations.simulate_run,
+                                                                simulator=simulation_fault(spec))
     return r2s(args)
 
 

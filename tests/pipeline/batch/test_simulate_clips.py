@@ -25,6 +25,7 @@ from pipeline.errors import UserError
 from pipeline.scenes import scene
 from synth.behaviour.program import ClipProgram, parse_clip_program
 from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support.faults import r2s_with_fault
 
 pytest.importorskip("scenic")
 
@@ -193,6 +194,20 @@ def test_a_changed_program_or_recording_redoes_its_clip_only(made, log, tmp_path
     assert after[last]["written"] == 1 and after[last]["frame_hash"] != before[last]["frame_hash"]
     files = _sim_files(out2)
     assert set(files) == {after[last]["frames_file"]}  # nothing stale survives: the old variants are gone
+
+
+def test_a_clip_past_its_memory_limit_is_a_memout_row_and_the_other_clip_is_simulated(made, tmp_path):
+    frames, clips, out, _, _ = made
+    first = min(_rows(out).values(), key=lambda r: r["first_timestamp_us"])["frame_id"]
+    target = tmp_path / "sims"
+    proc = subprocess.run(r2s_with_fault(f"alloc=1500@{first}", "simulate", str(clips), "--frames", str(frames),
+                                         *FLAGS, "--n", "1", "--jobs", "2", "--memory-limit", "200", "--out",
+                                         str(target)), cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    rows = _rows(target)
+    assert rows[first]["status"] == "memout" and rows[first]["frames_file"] is None, rows[first]
+    [other] = [r for f, r in rows.items() if f != first]
+    assert other["written"] == 1 and set(_sim_files(target)) == {other["frames_file"]}
 
 
 def test_bad_input_is_one_line(made, log, tmp_path):
