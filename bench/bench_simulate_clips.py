@@ -14,6 +14,7 @@ one run, not rates across runs.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import subprocess
 import sys
@@ -60,13 +61,15 @@ def main(argv: list[str] | None = None) -> int:
         runs = []
         for jobs in (1, 2):
             out = root / f"sims-{jobs}"
+            load = os.getloadavg()[0]
             wall, log = r2s("simulate", str(clips), "--frames", str(frames), "--motion", "--n", str(args.n),
                             "--seed", "0", "--jobs", str(jobs), "--out", str(out))
             rows = pq.read_table(out / "_simulations").to_pylist()
             written = sum(r["written"] or 0 for r in rows)
             runs.append({"jobs": jobs, "clips": len(rows), "wall_s": round(wall, 2),
                          "clips_per_min": round(len(rows) / wall * 60, 2), "variants_written": written,
-                         "variants_asked": args.n * len(rows), "summary": log.strip().splitlines()[-1]})
+                         "variants_asked": args.n * len(rows), "load_before": round(load, 2),
+                         "load_after": round(os.getloadavg()[0], 2), "summary": log.strip().splitlines()[-1]})
             print(f"--jobs {jobs}: {len(rows)} clips in {wall:.1f} s, {len(rows) / wall * 60:.1f} clips/min, "
                   f"{written} of {args.n * len(rows)} variants written")
     speedup = runs[0]["wall_s"] / runs[1]["wall_s"]
@@ -79,9 +82,10 @@ def main(argv: list[str] | None = None) -> int:
         f"simulate` of them with --n {args.n} as a process, wall seconds of the whole command. "
         f"{payload['machine']['note']} ({payload['machine']['cpu']}, {payload['machine']['cores']} cores, "
         f"commit {payload['machine']['commit']}, {payload['machine']['date']}).", "",
-        "| --jobs | clips | wall s | clips per minute | variants written |", "|---|---|---|---|---|",
+        "| --jobs | clips | wall s | clips per minute | variants written | load (1 min) before, after |",
+        "|---|---|---|---|---|---|",
         *(f"| {r['jobs']} | {r['clips']} | {r['wall_s']:.1f} | {r['clips_per_min']:.1f} | {r['variants_written']} of "
-          f"{r['variants_asked']} |" for r in runs), "",
+          f"{r['variants_asked']} | {r['load_before']:.1f}, {r['load_after']:.1f} |" for r in runs), "",
         f"--jobs 2 is x{speedup:.2f} the rate of --jobs 1.", "",
     ]
     write_results("simulate_clips", payload, "\n".join(lines))

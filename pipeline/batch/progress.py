@@ -26,14 +26,14 @@ def duration(seconds: float) -> str:
 
 class Progress:
     def __init__(self, total: int, emit: Callable[[str], None], every_s: float = 30.0,
-                 terminal: bool | None = None, started: float | None = None) -> None:
-        self.total, self.every_s, self._emit = total, every_s, emit
+                 terminal: bool | None = None, started: float | None = None, unit: str = "frames") -> None:
+        self.total, self.every_s, self._emit, self.unit = total, every_s, emit, unit  # unit: what is counted
         self.done = 0
         self.counts: Counter = Counter()
         self.started = time.monotonic() if started is None else started
         self._last_line = time.monotonic()
         terminal = sys.stderr.isatty() if terminal is None else terminal
-        self._bar = tqdm(total=total, desc="r2s run", unit=" frames", file=sys.stderr, dynamic_ncols=True,
+        self._bar = tqdm(total=total, desc="r2s run", unit=f" {unit}", file=sys.stderr, dynamic_ncols=True,
                          disable=not terminal) if terminal else None
 
     @property
@@ -60,7 +60,7 @@ class Progress:
         left = self.total - self.done
         eta = duration(left / rate) if rate > 0 else "unknown"
         pct = 100.0 * self.done / self.total if self.total else 100.0
-        return (f"{self.done:,} of {self.total:,} frames ({pct:.1f}%), {rate:.1f} frames/s, ETA {eta}"
+        return (f"{self.done:,} of {self.total:,} {self.unit} ({pct:.1f}%), {rate:.1f} {self.unit}/s, ETA {eta}"
                 + (f"; {status_line(self.counts)}" if self.counts else ""))
 
     def write(self, message: str) -> None:

@@ -242,7 +242,8 @@ class _Run:
         progress_dir = (str(temp_directory(Path(tempfile.gettempdir()) / "r2s-run-progress"))
                         if pool.own_processes else None)
         buffer = PartBuffer(self.options.part_rows, PART_MAX_AGE_S)
-        self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started)
+        self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started,
+                                  self.unit)
         computed = 0
         stopped, refused = True, False
         try:

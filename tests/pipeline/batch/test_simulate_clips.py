@@ -75,7 +75,7 @@ def made(log, tmp_path_factory):
     try:
         for line in stop.stderr:  # the progress line after the first clip's row is buffered (--log-every 0)
             lines.append(line.rstrip("\n"))
-            if " 1 of 2 frames (" in line:
+            if " 1 of 2 clips (" in line:
                 stop.send_signal(signal.SIGTERM)
                 break
         lines += stop.communicate(timeout=120)[1].splitlines()
@@ -91,6 +91,7 @@ def made(log, tmp_path_factory):
 def test_a_stop_keeps_the_finished_clip_and_the_resume_simulates_the_other(made):
     frames, clips, out, (code, lines, files, rows), resumed = made
     assert code == 128 + signal.SIGTERM, lines
+    assert any(ln.startswith("r2s simulate: 1 of 2 clips (50.0%), ") and "clips/s, ETA" in ln for ln in lines), lines
     assert f"r2s simulate: stopped: 1 of 2 clips are saved in {out}; run the same command again to resume" in lines
     assert len(rows) == 1 and len(files) == 1
     assert resumed.returncode == 0, resumed.stderr
