@@ -24,8 +24,8 @@ import signal
 import sys
 import time
 
-from synth.smt.dreal_backend import load_dreal
 from pipeline.simulation import simulate_clip
+from synth.smt.dreal_backend import load_dreal
 from synth.synthesize import synthesize
 
 
