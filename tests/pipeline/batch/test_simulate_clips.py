@@ -222,6 +222,12 @@ def test_bad_input_is_one_line(made, log, tmp_path):
     assert_one_line_error(run_r2s("simulate", str(clips), "--frames", str(frames), "--n", "0", "--out",
                                   str(target)), 2, "--n")
     assert not target.exists()
+    target.mkdir()
+    (target / "notes.txt").write_text("mine")
+    assert_one_line_error(run_r2s("simulate", str(clips), "--frames", str(frames), "--out", str(target)), 2,
+                          "not r2s simulate's (notes.txt)")
+    assert [p.name for p in target.iterdir()] == ["notes.txt"]
+    target = tmp_path / "new"
     with pytest.raises(UserError, match="--n must be"):
         simulate_run(clips, frames, target, n=0)
     assert not target.exists()
