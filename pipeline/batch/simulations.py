@@ -55,6 +55,7 @@ from pipeline.simulation import MAX_VARIANTS, check_program, read_program_json, 
 from storage.atomic import atomic_path
 from storage.frame_index import FrameIndex, frame_hashes
 from synth.config import SynthConfig, as_config
+from synth.search.budget import peak_rss_mb
 from synth.version import ROWS_VERSION
 
 STATUS_DIR = "_simulations"  # the per-clip rows (the stage's parts), hidden from frames readers by its "_"
@@ -193,7 +194,7 @@ class SimulationTask(ClipTask):
         if not result.written:
             path.unlink(missing_ok=True)
         row.update(frame_hash=key, config_hash=self.config_hash, version=ROWS_VERSION, error=None,
-                   runtime_s=time.perf_counter() - started, **self._simulation_fields(row),
+                   runtime_s=time.perf_counter() - started, peak_rss_mb=peak_rss_mb(), **self._simulation_fields(row),
                    written=result.written, rejected_by_scenic=result.count("rejected by Scenic"),
                    timed_out=result.count("timed out"), rejected_by_checker=result.count("rejected by the checker"),
                    variants=json.dumps([v.to_json_dict() for v in result.variants]),
