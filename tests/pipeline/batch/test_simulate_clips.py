@@ -133,20 +133,37 @@ def test_each_written_variant_is_the_clips_frames_and_passes_the_checker(made, l
         assert ok.returncode == 0, ok.stdout + ok.stderr
 
 
-def test_every_verb_reads_the_output(made, log, tmp_path):
-    frames, clips, out, _, _ = made
-    rows = _rows(out)
-    names = sorted(json.loads(r["variants"])[0]["scene"] for r in rows.values())
+def _variant_scenes(out: Path) -> list[str]:
+    return sorted(json.loads(r["variants"])[0]["scene"] for r in _rows(out).values())
+
+
+def test_query_reads_the_output(made, tmp_path):
+    out = made[2]
     query = run_r2s("query", str(out), str(ROOT / "data" / "patterns" / "queue-of-three.dsl"), "--out",
                     str(tmp_path / "m.parquet"))
+    # every frame of both clips' variants (11 and 9)
     assert query.returncode == 0 and f"{N_FRAMES} frames scanned" in query.stdout, query.stdout + query.stderr
+
+
+def test_run_reads_the_output(made, tmp_path):
+    out = made[2]
     again = run_r2s("run", str(out), "--clip", "1", "--lanes", *FLAGS, "--jobs", "2", "--out", str(tmp_path / "c"))
     assert again.returncode == 0, again.stderr
-    assert {r["scene"] for r in pq.read_table(tmp_path / "c").to_pylist() if r["program"]} == set(names)
-    export = run_r2s("export", str(out), "--scene", names[0], "--to", "scenarionet", "--out", str(tmp_path / "x"))
-    assert export.returncode == 0 and names[0] in export.stdout, export.stdout + export.stderr
-    # the recorded clip with every variant of the output overlaid (the variants of both clips: the same entities)
-    first = min(rows.values(), key=lambda r: r["first_timestamp_us"])
+    assert {r["scene"] for r in pq.read_table(tmp_path / "c").to_pylist() if r["program"]} == set(_variant_scenes(out))
+
+
+def test_export_scene_reads_the_output(made, tmp_path):
+    out = made[2]
+    name = _variant_scenes(out)[0]
+    export = run_r2s("export", str(out), "--scene", name, "--to", "scenarionet", "--out", str(tmp_path / "x"))
+    assert export.returncode == 0 and name in export.stdout, export.stdout + export.stderr
+
+
+def test_render_reads_the_output(made, log, tmp_path):
+    """The recorded first clip with every variant of the output overlaid (the variants of both clips: the same
+    entities)."""
+    frames, _, out, _, _ = made
+    first = min(_rows(out).values(), key=lambda r: r["first_timestamp_us"])
     heads = log.drop_duplicates("frame_id").sort_values("frame_index").frame_id.tolist()
     shots = []
     for k, fid in enumerate(heads[heads.index(first["frame_id"]):][:first["n_frames"]]):
