@@ -19,8 +19,10 @@ when the run starts, so nothing stale survives.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
+import io
 import json
 import math
 import os
@@ -184,7 +186,9 @@ class SimulationTask(ClipTask):
             return self._failure(unit, "error", str(exc), len(scenes[0].others), digest)
         path = Path(self.out) / f"{FRAMES_PREFIX}{key}{FRAMES_SUFFIX}"
         limit = self.sim.time_limit if threading.current_thread() is threading.main_thread() else None
-        with tempfile.TemporaryDirectory(prefix="r2s-simulate-") as scratch:
+        # A worker's stdout is its run's: a library's print there (scenariogeneration warns of the object ids an
+        # earlier clip's road used in this process, and renumbers them: the road's geometry is the same) is dropped
+        with tempfile.TemporaryDirectory(prefix="r2s-simulate-") as scratch, contextlib.redirect_stdout(io.StringIO()):
             first = Path(scratch) / "first.json"
             first.write_text(scenes[0].to_json(), encoding="utf-8")
             with frames_writer(path) as w:  # atomic: the file is whole, or absent

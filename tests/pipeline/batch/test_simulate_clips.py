@@ -137,6 +137,28 @@ def _variant_scenes(out: Path) -> list[str]:
     return sorted(json.loads(r["variants"])[0]["scene"] for r in _rows(out).values())
 
 
+def test_a_clips_variant_is_what_r2s_simulate_writes_from_its_scene_files(made, log, tmp_path):
+    """Cross-check: the second clip's program and frames given to `r2s simulate PROGRAM.json SCENE...` (frames read
+    whole as scene JSON, the program as JSON: another path in) write the same rows, but for the scene's name."""
+    frames, _, out, _, _ = made
+    row = max(_rows(out).values(), key=lambda r: r["first_timestamp_us"])
+    heads = log.drop_duplicates("frame_id").sort_values("frame_index").frame_id.tolist()
+    paths = []
+    for k, fid in enumerate(heads[heads.index(row["frame_id"]):][:row["n_frames"]]):
+        paths.append(tmp_path / f"f{k}.json")
+        paths[-1].write_text(scene(str(frames), fid).to_json())
+    program = tmp_path / "clip.json"
+    program.write_text(json.dumps({"program": row["program"], "boundaries": json.loads(row["boundaries"]),
+                                   "frames": row["n_frames"], "first_frame": row["frame_id"],
+                                   "last_frame": row["last_frame"]}))
+    proc = run_r2s("simulate", str(program), *map(str, paths), *FLAGS, "--lanes", "--n", "1", "--seed", "3", "--out",
+                   str(tmp_path / "one"))
+    assert proc.returncode == 0, proc.stderr
+    names = ["scene", "frame_id", "source"]
+    one = pq.read_table(tmp_path / "one" / "part-000000.parquet").drop(names)
+    assert pq.read_table(out / row["frames_file"]).drop(names).equals(one)
+
+
 def test_query_reads_the_output(made, tmp_path):
     out = made[2]
     query = run_r2s("query", str(out), str(ROOT / "data" / "patterns" / "queue-of-three.dsl"), "--out",
