@@ -117,7 +117,13 @@ def opendrive(net: Network, name: str, frame: tuple[float, float, float] | None 
     """The XML element of a network (module docstring); `frame`: the header offset, the world pose (x, y, hdg)
     of the file's origin (default: the network's recentring offset, hdg 0)."""
     from scenariogeneration import xodr
+    from scenariogeneration.xodr.signals_objects import _SignalObjectBase
 
+    # scenariogeneration files every object's and signal's id in registries of the whole process, renumbering an
+    # id met before (and printing a warning on stdout): each file's ids are its own, so the same road is the same
+    # file whatever was exported before it in this process
+    _SignalObjectBase._usedIDs.clear()
+    _SignalObjectBase._IDCounter.clear()
     odr = xodr.OpenDrive(xml_text(name), revMinor="7")  # 1.7: the newest every ASAM check applies to
     types = {"road": xodr.ElementType.road, "junction": xodr.ElementType.junction}
     contact = {"start": xodr.ContactPoint.start, "end": xodr.ContactPoint.end, None: None}

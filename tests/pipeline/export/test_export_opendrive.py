@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from frames.maps import read_maps
+from pipeline.export.opendrive import export_road
 from tests.support import SHARED, assert_one_line_error, run_r2s
 from tests.support.extract import EXCERPT
 
@@ -165,3 +166,14 @@ def test_what_opendrive_cannot_be_made_from_is_one_line_and_nothing_is_written(s
                        ([str(AV2_MAPS), "--map", "nope"], "holds no map 'nope'")):
         assert_one_line_error(run_r2s("export", *args, "--to", "opendrive", "--out", str(out)), contains=says)
         assert not out.exists()
+
+
+def test_a_road_exported_again_in_one_process_is_the_same_file(av2, tmp_path):
+    """scenariogeneration numbers objects (crosswalks) in a registry shared by the whole process: a second road
+    exported in one process (the API, a batch worker) had its crosswalk ids renumbered, and a warning printed on
+    stdout. Each file's ids are its own: in process, twice, the bytes of a fresh process's file."""
+    first, again = tmp_path / "a.xodr", tmp_path / "b.xodr"
+    export_road(str(AV2_MAPS), None, str(first))
+    export_road(str(AV2_MAPS), None, str(again))
+    assert b"crosswalk" in av2.read_bytes()
+    assert first.read_bytes() == av2.read_bytes() and again.read_bytes() == av2.read_bytes()
