@@ -21,10 +21,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from synth.behaviour.kinds import Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
-from synth.behaviour.kinds import Heading as HeadingPath
 from synth.behaviour.program import Behaviour
 from synth.behaviour.scenic import speed_bound
-from synth.behaviour.scenic_common import ALONG, STEER, num, placed, track_points
+from synth.behaviour.scenic_common import num, placed, track_points
 from synth.behaviour.track import Clip, Track
 from synth.config import SynthConfig
 from synth.patterns.temporal import turn_of
@@ -148,17 +147,62 @@ def feasible(recorded: Sequence[float], lo: Sequence[float], hi: Sequence[float]
     return [x + f * t * y for x, y in zip(r, d)]
 
 
-def turns(boundaries: Sequence[int], track: Track) -> list[float]:
-    """Each segment's summed signed turn (radians CCW) between its boundary samples."""
+def along(u: float, m: float, w: float, duration: float, tau: float, length: float) -> tuple[float, float]:
+    """(speed, length covered along the recorded path) at time tau in [0, duration] of a segment of recorded length
+    `length`: the speed is the profile's (u -> m -> w), the place its distance scaled to the segment's length (so
+    the segment ends where the recorded one ended, whatever the draw). Where the plan keeps the segment's mean
+    speed the scale is 1 (the place is the speed's integral); where the recorded speeds disagree with the recorded
+    places it is the ratio of the two, as in the recording; a profile that covers nothing moves at a steady rate."""
+    speed, covered = profile(u, m, w, duration, tau)
+    area = profile(u, m, w, duration, duration)[1]
+    if area > 1e-9:
+        return speed, length * covered / area
+    return speed, length * (tau / duration if duration > 0 else 1.0)
+
+
+def pose_at(points: Sequence[tuple[float, float]], arcs: Sequence[float], headings: Sequence[float], lo: int,
+            hi: int, s: float) -> tuple[float, float, float]:
+    """(x, y, heading) at arc length s along the recorded places points[lo .. hi] (arcs: each place's arc length
+    along the whole path; headings: each sample's, unwrapped), both linear between two samples; s at or past
+    arcs[hi] is sample hi. Within one segment's samples, so its headings are the segment's."""
+    if s >= arcs[hi]:
+        return points[hi][0], points[hi][1], headings[hi]
+    for i in range(lo, hi):
+        if s < arcs[i + 1]:
+            share = max(0.0, s - arcs[i]) / (arcs[i + 1] - arcs[i])
+            (x0, y0), (x1, y1) = points[i], points[i + 1]
+            return (x0 + (x1 - x0) * share, y0 + (y1 - y0) * share,
+                    headings[i] + (headings[i + 1] - headings[i]) * share)
+    return points[hi][0], points[hi][1], headings[hi]
+
+
+def arc_lengths(points: Sequence[tuple[float, float]]) -> list[float]:
+    """Each place's arc length along the polyline of the places."""
+    out = [0.0]
+    for (x0, y0), (x1, y1) in zip(points, points[1:]):
+        out.append(out[-1] + math.hypot(x1 - x0, y1 - y0))
+    return out
+
+
+def scenic_headings(track: Track) -> list[float]:
+    """Each sample's heading in Scenic's frame (radians, 0 along +y), unwrapped by the signed turn of each step (so
+    a heading between two samples turns the way the recording did)."""
     s = track.samples
-    return [math.radians(sum(turn_of(s[k].heading, s[k + 1].heading) for k in range(a, b)))
-            for a, b in zip(boundaries, boundaries[1:])]
+    out = [math.radians(s[0].heading - 90.0)]
+    for a, b in zip(s, s[1:]):
+        out.append(out[-1] + math.radians(turn_of(a.heading, b.heading)))
+    return out
 
 
 # The behaviour of a variant's moving entity: its boundary speeds drawn (feasible), then per segment the speed
-# linear from one boundary's to the next's and the heading turning at a steady rate, at the boundaries' steps.
-PRELUDE = STEER + '''
-from synth.behaviour.variants import feasible, knot, profile
+# through its knot and the place along the recorded path (`along`), the pose set each step by R2sPose: the
+# entity moves along its recorded places and headings (`pose_at`) at the drawn speeds, within what the recording
+# did, rather than steering (a Newtonian car turns at most ~3.8 deg per 0.1 s step at 3 m/s; recorded headings
+# turn faster).
+PRELUDE = '''
+import math
+from scenic.core.dynamics.actions import Action
+from synth.behaviour.variants import along, feasible, knot, pose_at
 
 def r2s__states(objects):
     """Each object's place, heading (its walking direction for a walker), speed: what r2s simulate writes."""
@@ -168,36 +212,45 @@ def r2s__states(objects):
         heading = control.get("heading")
         out.append((o.position.x, o.position.y, o.heading if heading is None else heading, o.velocity.norm()))
     return out
-''' + ALONG + '''
-behavior R2sVariant(ends, turns, recorded, lo, hi, rows, means, q, f, walks, path):
+
+class R2sPose(Action):
+    """At the step's end the entity stands at (x, y), facing heading (a walker: walking that way) at speed: its
+    velocity set along the heading and its place set one step back along it, which the step then integrates."""
+
+    def __init__(self, x, y, heading, speed):
+        self.x, self.y, self.heading, self.speed = x, y, heading, speed
+
+    def applyTo(self, obj, sim):
+        velocity = Vector(0, self.speed).rotatedBy(self.heading)
+        obj.heading = self.heading
+        obj.position = Vector(self.x, self.y) - velocity * sim.timestep
+        obj.velocity = velocity
+        if getattr(obj, "control", None) is not None:
+            obj.control = {"heading": self.heading, "speed": self.speed}
+        else:
+            obj.steer, obj.throttle, obj.brake = 0, 0, 0
+
+behavior R2sVariant(ends, recorded, lo, hi, rows, means, q, f, path, arcs, headings, samples):
     speeds = feasible(recorded, lo, hi, rows, q, f)
-    heading = self.heading
-    done = 0  # the path's length at the segment's start
     dt = simulation().timestep
-    for j in range(len(turns)):
-        start, a, b = heading, ends[j], ends[j + 1]
+    for j in range(len(ends) - 1):
+        a, b = ends[j], ends[j + 1]
+        first, last = samples[j], samples[j + 1]
         duration = (b - a) * dt
+        length = arcs[last] - arcs[first]
         middle = knot(speeds[j], speeds[j + 1], means[j])
         for k in range(a, b):
-            share = (k + 1 - a) / (b - a)
-            speed, covered = profile(speeds[j], middle, speeds[j + 1], duration, (k + 1 - a) * dt)
-            heading = start + turns[j] * share
-            if path is not None:
-                # along the recorded path: where this step ends (the car moves on its present heading), aim at the
-                # path's point one more step on past where the profile has it at the step's end
-                ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
-                tx, ty = r2s__along(path, done + covered + speed * dt)
-                if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
-                    heading = math.atan2(-(tx - ahead.x), ty - ahead.y)
-            if walks:
-                take SetWalkingDirectionAction(heading), SetWalkingSpeedAction(speed)
-            else:
-                error = (heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-                take SetSpeedAction(speed), SetSteerAction(r2s__steer(self, speed, error / dt))
-        done += profile(speeds[j], middle, speeds[j + 1], duration, duration)[1]
+            speed, covered = along(speeds[j], middle, speeds[j + 1], duration, (k + 1 - a) * dt, length)
+            x, y, heading = pose_at(path, arcs, headings, first, last, arcs[first] + covered)
+            take R2sPose(x, y, heading, speed)
+    x, y, heading = pose_at(path, arcs, headings, samples[-1], samples[-1], arcs[samples[-1]])
     while True:
-        take SetSpeedAction(0) if not walks else SetWalkingSpeedAction(0)
+        take R2sPose(x, y, heading, 0)
 '''
+
+
+def listed(values: Sequence[float]) -> str:
+    return "[" + ", ".join(num(v) for v in values) + "]"
 
 
 @dataclass(frozen=True)
@@ -220,18 +273,9 @@ def segment_means(points: Sequence[tuple[float, float]], boundaries: Sequence[in
                   ends: Sequence[int], dt: float) -> list[float]:
     """Each segment's mean speed in the simulation: its recorded length along the path (the polyline through the
     points, as R2sVariant measures it) over its simulated duration (its steps times dt)."""
-    piece = [math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(points, points[1:])]
-    return [sum(piece[a:b]) / max((e1 - e0) * dt, dt)
+    arcs = arc_lengths(points)
+    return [(arcs[b] - arcs[a]) / max((e1 - e0) * dt, dt)
             for a, b, e0, e1 in zip(boundaries, boundaries[1:], ends, ends[1:])]
-
-
-def path_of(behaviour: Behaviour, track: Track, points: Sequence[tuple[float, float]]) -> str:
-    """The recorded path a moving vehicle follows by arc length (its places, Scenic text), so that a variant at
-    other speeds keeps the recording's lanes; `None` (heading by time, the recorded turns) where some segment is a
-    `heading` Range, which only the recorded arc of headings keeps, and for a walker."""
-    if track.type == "Pedestrian" or any(isinstance(s.path, HeadingPath) for s in behaviour.segments):
-        return "None"
-    return "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]"
 
 
 def simulation_step(times: Sequence[float], most: float = 0.1) -> float:
@@ -267,12 +311,12 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             plan = speed_plan(behaviour, bounds, track, config, segment_means(points, bounds, ends, dt))
             means = plan.means or [None] * (len(bounds) - 1)
             draws = ", ".join(num(lo) if lo == hi else f"Range({num(lo)}, {num(hi)})" for lo, hi in zip(plan.lo, plan.hi))
-            args = [repr(ends), "[" + ", ".join(num(t) for t in turns(bounds, track)) + "]",
-                    *("[" + ", ".join(num(v) for v in vs) + "]" for vs in (plan.recorded, plan.lo, plan.hi)),
+            args = [repr(ends), *(listed(vs) for vs in (plan.recorded, plan.lo, plan.hi)),
                     "[" + ", ".join(f"({i}, {num(a)}, {j}, {num(b)}, {num(c)})" for i, a, j, b, c in plan.rows) + "]",
                     "[" + ", ".join("None" if m is None else num(m) for m in means) + "]",
-                    f"[{draws}]", "Range(0, 1)", "True" if cls == "Pedestrian" else "False",
-                    path_of(behaviour, track, points)]
+                    f"[{draws}]", "Range(0, 1)",
+                    "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]",
+                    listed(arc_lengths(points)), listed(scenic_headings(track)), repr(list(bounds))]
             where += f", with speed {num(plan.recorded[0])}, with behavior R2sVariant({', '.join(args)})"
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
