@@ -49,7 +49,7 @@ from pipeline.errors import UserError  # noqa: E402
 from pipeline.export.opendrive import header_frame  # noqa: E402
 from pipeline.query.mining import query  # noqa: E402
 from pipeline.scenes import scene as frame_scene  # noqa: E402
-from pipeline.simulation import NoVariantWritten, simulate  # noqa: E402
+from pipeline.simulation import ATTEMPTS, NoVariantWritten, simulate  # noqa: E402
 from synth import SynthConfig  # noqa: E402
 from synth.behaviour.check import check_clip  # noqa: E402
 from synth.behaviour.scenic import clip_scenic  # noqa: E402
@@ -150,6 +150,7 @@ def variants(result, scenes, frames: Path, work: Path) -> dict:
     accepted = VARIANTS - counts["rejected_by_scenic"] - counts["timed_out"]
     row = {"variants": {"asked": VARIANTS, "scenic_accepts": accepted, "checker_accepts": counts["written"],
                         "written": counts["written"], "seconds": dict(done.seconds),
+                        "attempts": [v["attempts"] for v in counts["variants"]],
                         "reasons": [v["reason"] for v in counts["variants"] if v["outcome"] != "written"][:3]}}
     if frames.name == "frames.parquet" and frames.parent.name == "argoverse2-log-excerpt" and out is not None:
         row["retention"] = retention(frames, scenes, done, out)
@@ -247,14 +248,18 @@ def variant_lines(rows: list[dict]) -> list[str]:
     """The Variants section: per clip, simulations Scenic accepts and variants the checker accepts; retention."""
     done = [r for r in rows if r.get("variants")]
     lines = ["## Variants (r2s simulate)", "",
-             f"{VARIANTS} variants per clip, seed 0, --time-limit {TIME_LIMIT_S:g} s; the checker reads each variant back "
+             f"{VARIANTS} variants per clip, seed 0, --time-limit {TIME_LIMIT_S:g} s; Scenic draws another scene when a "
+             f"simulation breaks a requirement (up to {ATTEMPTS} per variant); the checker reads each variant back "
              "from the frames written. Clips without a road are not simulated.", "",
-             "| clip | Scenic accepts | checker accepts (of those) | first reason not written | seconds (compile, simulate, check) |",
-             "|---|---|---|---|---|"]
+             "| clip | Scenic accepts | simulations drawn (most for one variant) | checker accepts (of those) | "
+             "first reason not written | seconds (compile, simulate, check) |",
+             "|---|---|---|---|---|---|"]
     for r in done:
         v = r["variants"]
         sec = v["seconds"]
-        lines.append(f"| {r['clip']} | {v['scenic_accepts']} of {v['asked']} | {v['checker_accepts']} of "
+        tries = v.get("attempts") or [1]
+        lines.append(f"| {r['clip']} | {v['scenic_accepts']} of {v['asked']} | {sum(tries)} ({max(tries)}) | "
+                     f"{v['checker_accepts']} of "
                      f"{v['scenic_accepts']} | {(v['reasons'] or [''])[0][:160]} | {sec.get('compile', 0):.1f}, "
                      f"{sec.get('simulate', 0):.1f}, {sec.get('check', 0):.1f} |")
     asked = sum(r["variants"]["asked"] for r in done)

@@ -57,6 +57,7 @@ from synth.world import WorldPose, road_in_world
 FRAMES_FILE = "part-000000.parquet"
 SUMMARY_FILE = "summary.json"
 MAX_VARIANTS = 10_000
+ATTEMPTS = 5  # simulations per variant: Scenic draws another scene when one breaks a requirement
 OUTCOMES = ("written", "rejected by Scenic", "timed out", "rejected by the checker")
 
 
@@ -76,10 +77,11 @@ class Variant:
     scene: str
     outcome: str
     reason: str = ""
+    attempts: int = 1  # simulations drawn (up to ATTEMPTS: one more each time a requirement failed)
 
     def to_json_dict(self) -> dict:
         return {"variant": self.index, "seed": self.seed, "scene": self.scene, "outcome": self.outcome,
-                **({"reason": self.reason} if self.reason else {})}
+                "attempts": self.attempts, **({"reason": self.reason} if self.reason else {})}
 
 
 @dataclass(frozen=True)
@@ -290,11 +292,15 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
         name, s = f"{base}-sim{k:03d}", variant_seed(seed, k)
         random.seed(s)
         np.random.seed(s)
-        outcome, reason = "rejected by Scenic", ""
+        outcome, reason, attempts = "rejected by Scenic", "", 0
         try:
             with timer.stage("simulate"), _deadline(time_limit):
-                scene, _ = scenario.generate(maxIterations=100)
-                run = simulator.simulate(scene, maxSteps=sim.steps, maxIterations=1, timestep=sim.timestep)
+                # a simulation that breaks a requirement is drawn again (a new scene: its draws are the scene's)
+                run = None
+                while run is None and attempts < ATTEMPTS:
+                    attempts += 1
+                    scene, _ = scenario.generate(maxIterations=100)
+                    run = simulator.simulate(scene, maxSteps=sim.steps, maxIterations=1, timestep=sim.timestep)
         except RejectionException as exc:
             run, reason = None, f"no scene: {str(exc)[:200]}"
         except _TimedOut:
@@ -314,8 +320,8 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
                 outcome = "rejected by the checker"
                 reason = f"{len(verdict.violations)} violations, the first {first}"
         elif not reason:
-            reason = "a requirement failed during the simulation"
-        variant = Variant(k, s, name, outcome, reason)
+            reason = f"a requirement failed during each of {attempts} simulations"
+        variant = Variant(k, s, name, outcome, reason, attempts)
         variants.append(variant)
         if report is not None:
             report(variant, n)

@@ -20,7 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from synth.behaviour.kinds import Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
+from synth.behaviour.kinds import EPS, Cruising, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
 from synth.behaviour.program import Behaviour
 from synth.behaviour.scenic import speed_bound
 from synth.behaviour.scenic_common import num, placed, track_points
@@ -202,7 +202,8 @@ def scenic_headings(track: Track) -> list[float]:
 PRELUDE = '''
 import math
 from scenic.core.dynamics.actions import Action
-from synth.behaviour.variants import along, feasible, knot, pose_at
+from scenic.syntax.veneer import simulationInProgress
+from synth.behaviour.variants import along, feasible, knot, pose_at, within_paces
 
 def r2s__states(objects):
     """Each object's place, heading (its walking direction for a walker), speed: what r2s simulate writes."""
@@ -212,6 +213,10 @@ def r2s__states(objects):
         heading = control.get("heading")
         out.append((o.position.x, o.position.y, o.heading if heading is None else heading, o.velocity.norm()))
     return out
+
+def r2s__now():
+    """The simulation's step (0 while Scenic checks the requirements on the scene it drew, before simulating)."""
+    return simulation().currentTime if simulationInProgress() else 0
 
 class R2sPose(Action):
     """At the step's end the entity stands at (x, y), facing heading (a walker: walking that way) at speed: its
@@ -247,6 +252,26 @@ behavior R2sVariant(ends, recorded, lo, hi, rows, means, q, f, path, arcs, headi
     while True:
         take R2sPose(x, y, heading, 0)
 '''
+
+
+def pace_bounds(behaviour: Behaviour, track: Track, config: SynthConfig) -> list[tuple[float, float]]:
+    """Each segment's speed bounds over its whole time (m/s): its Range (cruising, speeding up, slowing down), up
+    to V_STOP where stopped, up to its first sample's speed where it slows to a stop (it never rises)."""
+    out = []
+    for seg in behaviour.segments:
+        if isinstance(seg.pace, Cruising):
+            out.append((seg.pace.range.lo, seg.pace.range.hi))
+        elif isinstance(seg.pace, Stopped):
+            out.append((0.0, config.v_stop))
+        else:
+            out.append((0.0, math.inf))
+    return out
+
+
+def within_paces(step: int, speed: float, ends: Sequence[int], bounds: Sequence[tuple[float, float]]) -> bool:
+    """Is `speed` at simulation step `step` within the bounds of every segment whose steps hold it (both at a
+    boundary; none after the last), within the checker's EPS? What Scenic requires always of a moving entity."""
+    return all(lo - EPS <= speed <= hi + EPS for a, b, (lo, hi) in zip(ends, ends[1:], bounds) if a <= step <= b)
 
 
 def listed(values: Sequence[float]) -> str:
@@ -320,6 +345,12 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             where += f", with speed {num(plan.recorded[0])}, with behavior R2sVariant({', '.join(args)})"
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
+        if not behaviour.parked and cls != "Object":
+            # the speed the checker reads (the velocity's norm, as recorded) at every step, not only the frames'
+            paces = ", ".join(f"({num(lo)}, {'math.inf' if math.isinf(hi) else num(hi)})"
+                              for lo, hi in pace_bounds(behaviour, track, config))
+            lines.append(f"require always within_paces(r2s__now(), {track.id}.velocity.norm(), "
+                         f"{ends!r}, [{paces}])  # each segment's pace")
         if cls != "Object":
             top = speed_bound(behaviour, track, config.v_stop)
             lines.append(f"require always {track.id}.speed <= {num(top + 0.01)}  # its paces")
