@@ -1,7 +1,7 @@
 """Every checker violation of every simulated variant, per clip and seed (issue 38: why a variant Scenic accepts
 is refused). For each clip of bench_behaviours (the shipped AV2 log's 8 s clips; the shared Waymo clips where
 present), the clip program is synthesized, its variant scenario (synth.behaviour.variants) compiled once and
-simulated for each seed as `r2s simulate` does (pipeline.simulation: rows read back as `r2s scene` reads them,
+simulated for each seed (one simulation each: no second draw) as `r2s simulate` does (pipeline.simulation: rows read back as `r2s scene` reads them,
 then `r2s check`'s verdict); each violation is printed, and for a behaviour that does not hold, each of its
 segments on the recorded boundaries: which of duration, path, pace fails, with the simulated speeds, headings and
 lanes of its samples.
@@ -35,6 +35,7 @@ from synth.behaviour.kinds import EPS  # noqa: E402
 from synth.behaviour.program import ClipProgram  # noqa: E402
 from synth.behaviour.synthesize import synthesize_behaviours  # noqa: E402
 from synth.behaviour.track import read_clip  # noqa: E402
+from synth.behaviour.variant_lanes import LaneWatch  # noqa: E402
 from synth.behaviour.variants import variant_scenic  # noqa: E402
 from synth.road.lane_facts import RoadIndex  # noqa: E402
 from synth.window.road import window_road  # noqa: E402
@@ -90,9 +91,10 @@ def diagnose(name: str, frames: Path, ids: list[str], work: Path, seeds: int) ->
     sim = variant_scenic(name, [result.program.behaviour(t.id) for t in clip.tracks],
                          [bounds[t.id] for t in clip.tracks], clip, xodr, CONFIG,
                          (header_frame(xodr) or (0.0, 0.0))[:2])
-    scenario = _compile(sim.text)
-    kept = ClipProgram(result.program.program, tuple(result.program.behaviour(i) for i in sim.placed))
     world_road = road_in_world(scenes[0].world, window_road(scenes))
+    watch = LaneWatch(RoadIndex(world_road), clip.graph, sim.offset, sim.frame_steps, sim.lane_rules)
+    scenario = _compile(sim.text, {"r2s_lanes": watch})
+    kept = ClipProgram(result.program.program, tuple(result.program.behaviour(i) for i in sim.placed))
     maps = work / "maps"
     (maps / MAPS_DIR).mkdir(parents=True, exist_ok=True)
     with maps_writer(maps / MAPS_DIR / "part-000000.parquet") as w:
@@ -108,7 +110,7 @@ def diagnose(name: str, frames: Path, ids: list[str], work: Path, seeds: int) ->
         scene, _ = scenario.generate(maxIterations=100)
         run = simulator.simulate(scene, maxSteps=sim.steps, maxIterations=1, timestep=sim.timestep)
         if run is None:
-            print(f"{name} seed {k}: rejected by Scenic", flush=True)
+            print(f"{name} seed {k}: rejected by Scenic {watch.failure}", flush=True)
             continue
         accepted += 1
         rows = variant_rows(f"v{k}", sim, clip, run.result.records["r2s_states"], index)

@@ -42,6 +42,7 @@ from pipeline.outputs import staged_directory
 from synth.behaviour.check import check_clip, segment_holds
 from synth.behaviour.program import ClipProgram, parse_clip_program
 from synth.behaviour.track import Clip, read_clip
+from synth.behaviour.variant_lanes import LaneWatch, world_states
 from synth.behaviour.variants import Simulated, variant_scenic
 from synth.config import SynthConfig, as_config
 from synth.driver import StageTimer
@@ -260,10 +261,11 @@ def simulate_clip(clip_program: ClipProgram, clip: Clip, boundaries: list[tuple[
         sim = variant_scenic(f"variants of {first.frame_id} to {clip.scenes[-1].frame_id}",
                              [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config,
                              (header_frame(xodr) or (0.0, 0.0))[:2])
-        with timer.stage("compile"):
-            scenario = _compile(sim.text)
-        kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
         world_road = road_in_world(first.world, window_road(clip.scenes))
+        watch = LaneWatch(RoadIndex(world_road), clip.graph, sim.offset, sim.frame_steps, sim.lane_rules)
+        with timer.stage("compile"):
+            scenario = _compile(sim.text, {"r2s_lanes": watch})
+        kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
         with timer.stage("write"):
             maps = road_maps(world_road)
         variants = _variants(scenario, sim, clip, kept, world_road, maps, base, n, seed, time_limit, config, timer,
@@ -272,10 +274,11 @@ def simulate_clip(clip_program: ClipProgram, clip: Clip, boundaries: list[tuple[
                           len(clip.scenes), dict(timer.seconds))
 
 
-def _compile(text: str):
+def _compile(text: str, params: Mapping[str, Any] | None = None):
+    """The scenario; `params` its global parameters (a variant scenario's r2s_lanes: its LaneWatch)."""
     import scenic
 
-    return scenic.scenarioFromString(text, mode2D=True)
+    return scenic.scenarioFromString(text, params=dict(params or {}), mode2D=True)
 
 
 def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_road, maps: Path, base: str, n: int,
@@ -320,7 +323,9 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
                 outcome = "rejected by the checker"
                 reason = f"{len(verdict.violations)} violations, the first {first}"
         elif not reason:
-            reason = f"a requirement failed during each of {attempts} simulations"
+            watch = scenario.params.get("r2s_lanes")
+            lanes = f" (the last: {watch.failure})" if getattr(watch, "failure", "") else ""
+            reason = f"a requirement failed during each of {attempts} simulations{lanes}"
         variant = Variant(k, s, name, outcome, reason, attempts)
         variants.append(variant)
         if report is not None:
@@ -361,9 +366,7 @@ def variant_rows(name: str, sim: Simulated, clip: Clip, records, index: RoadInde
     out = []
     for k, (scene, step) in enumerate(zip(clip.scenes, sim.frame_steps)):
         now = states[min(step, max(states))]
-        xs = [s[0] + sim.offset[0] for s in now]  # Scenic's place on the road file, back in the world
-        ys = [s[1] + sim.offset[1] for s in now]
-        hs = [normalize(math.degrees(s[2]) + 90.0) for s in now]  # Scenic's 0 is +y; the world's yaw from +x
+        xs, ys, hs = world_states(now, sim.offset)  # as the lane rules Scenic requires read them
         facts = index.facts(xs, ys, hs)
         ego = WorldPose(xs[0], ys[0], hs[0])
         rows = []

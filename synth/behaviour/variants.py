@@ -25,6 +25,7 @@ from synth.behaviour.program import Behaviour
 from synth.behaviour.scenic import speed_bound
 from synth.behaviour.scenic_common import num, placed, track_points
 from synth.behaviour.track import Clip, Track
+from synth.behaviour.variant_lanes import LaneRule, lane_rule
 from synth.config import SynthConfig
 from synth.patterns.temporal import turn_of
 
@@ -235,6 +236,14 @@ class R2sPose(Action):
         else:
             obj.steer, obj.throttle, obj.brake = 0, 0, 0
 
+def r2s__lanes(states):
+    """The lane rules (synth.behaviour.variant_lanes.LaneWatch, the parameter r2s_lanes) at this step."""
+    return not simulationInProgress() or globalParameters.r2s_lanes.holds(simulation().currentTime, states)
+
+behavior R2sStill(x, y, heading):
+    while True:
+        take R2sPose(x, y, heading, 0)
+
 behavior R2sVariant(ends, recorded, lo, hi, rows, means, q, f, path, arcs, headings, samples):
     speeds = feasible(recorded, lo, hi, rows, q, f)
     dt = simulation().timestep
@@ -288,6 +297,7 @@ class Simulated:
     timestep: float
     frame_steps: tuple[int, ...]
     offset: tuple[float, float] = (0.0, 0.0)  # the road file's origin in the world: Scenic's (0, 0)
+    lane_rules: tuple[LaneRule, ...] = ()  # what Scenic requires of lanes (the parameter r2s_lanes: a LaneWatch)
 
     @property
     def steps(self) -> int:
@@ -323,8 +333,9 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
              "# Simulated variants (r2s simulate; docs/scenic.md): every entity of the first frame at its recorded pose "
              "in the world, each moving one's boundary speeds drawn within its paces.",
              f"param map = {xodr!r}", "param render = False",
+             "param r2s_lanes = None",
              "model scenic.simulators.newtonian.driving_model", "", PRELUDE]
-    by_id, names = first.by_id(), []
+    by_id, names, rules = first.by_id(), [], []
     for behaviour, bounds, track in zip(behaviours, boundaries, clip.tracks):
         if not track.from_start:
             continue
@@ -343,6 +354,14 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
                     "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]",
                     listed(arc_lengths(points)), listed(scenic_headings(track)), repr(list(bounds))]
             where += f", with speed {num(plan.recorded[0])}, with behavior R2sVariant({', '.join(args)})"
+            rule = lane_rule(track.id, len(names), [clip.times.index(x.t) for x in track.samples], bounds,
+                             [seg.path for seg in behaviour.segments])
+            rules += [rule] if rule is not None else []
+        elif cls != "Object":
+            # still at its place, at its recorded first speed in the first frame (the relational program reads it)
+            x, y = track_points(track, clip, offset)[0]
+            where += (f", with speed {num(track.samples[0].speed)}, with behavior R2sStill({num(x)}, {num(y)}, "
+                      f"{num(scenic_headings(track)[0])})")
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
         if not behaviour.parked and cls != "Object":
@@ -355,5 +374,7 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             top = speed_bound(behaviour, track, config.v_stop)
             lines.append(f"require always {track.id}.speed <= {num(top + 0.01)}  # its paces")
     lines.append(f"record r2s__states([{', '.join(names)}]) as r2s_states")
+    if rules:
+        lines.append(f"require always r2s__lanes(r2s__states([{', '.join(names)}]))  # each segment's lanes")
     lines.append(f"terminate after {num(frame_steps[-1] * dt)} seconds")
-    return Simulated("\n".join(lines) + "\n", tuple(names), dt, frame_steps, offset)
+    return Simulated("\n".join(lines) + "\n", tuple(names), dt, frame_steps, offset, tuple(rules))

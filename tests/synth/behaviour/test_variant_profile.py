@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from shapely.geometry import LineString
 
 from synth.behaviour.kinds import Cruising, FollowingLane, SlowingDown, SlowingToAStop, SpeedingUp, Stopped
 from synth.behaviour.program import Behaviour, Segment
 from synth.behaviour.track import Sample, Steps, Track
-from synth.behaviour.variants import feasible, knot, profile, speed_plan
+from synth.behaviour.variants import along, arc_lengths, feasible, knot, pose_at, profile, speed_plan
 from synth.config import as_config
 from synth.syntax import Range
 
@@ -106,3 +107,52 @@ def test_a_recording_whose_speeds_obey_the_plan_keeps_every_length():
     assert speed_plan(Behaviour("car1", segs), [0, 1, 2], track, CONFIG, [5.2, 5.8]).means == (5.2, 5.8)
     # a mean its Range cannot reach with the recorded boundary speeds: the plan falls back to lengths that vary
     assert speed_plan(Behaviour("car1", segs), [0, 1, 2], track, CONFIG, [9.0, 5.8]).means == ()
+
+
+@settings(max_examples=300, deadline=None)
+@given(plans(), st.lists(st.floats(0, 50), min_size=4, max_size=4))
+def test_the_place_along_the_path_covers_each_segments_recorded_length_at_its_pace(case, lengths):
+    """`along`: whatever the draw, and whether or not the plan keeps the recorded mean speed, a segment covers its
+    recorded length exactly by its end, never goes back, and its speed is the profile's (so its pace holds, as
+    above); where the plan keeps the mean speed, the place is the speed's own integral (brute force: a trapezoid
+    sum of the speeds)."""
+    segs, plan, means, durations, q, f = case
+    u = feasible(plan.recorded, plan.lo, plan.hi, plan.rows, q, f)
+    kept = bool(plan.means)
+    for j, (mean, duration) in enumerate(zip(means, durations)):
+        length = mean * duration if kept else lengths[j]
+        middle = knot(u[j], u[j + 1], plan.means[j] if kept else None)
+        n = 400
+        taus = [duration * k / n for k in range(n + 1)]
+        places = [along(u[j], middle, u[j + 1], duration, t, length) for t in taus]
+        assert places[0][1] == 0.0 and abs(places[-1][1] - length) <= 1e-9 * (1 + length)
+        assert all(b[1] >= a[1] - 1e-12 for a, b in zip(places, places[1:]))
+        assert [p[0] for p in places] == [profile(u[j], middle, u[j + 1], duration, t)[0] for t in taus]
+        if kept:
+            speeds = [p[0] for p in places]
+            area = 0.0
+            for k in range(1, n + 1, 40):
+                area = sum((a + b) / 2 for a, b in zip(speeds[:k], speeds[1:k + 1])) * duration / n
+                assert abs(places[k][1] - area) <= 1e-3 * (1 + length)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=8),
+       st.lists(st.floats(-3, 3), min_size=8, max_size=8), st.data())
+def test_the_pose_at_an_arc_length_lies_on_the_segments_recorded_places(points, turns, data):
+    """`pose_at` against shapely: the point at arc length s of the segment's places (samples lo .. hi) is the
+    polyline's point at that distance from its start, and its heading lies between its piece's two samples'."""
+    points = [points[0], *(p for a, p in zip(points, points[1:]) if data.draw(st.booleans()) or p != a)]
+    arcs = arc_lengths(points)
+    headings = [sum(turns[:k]) for k in range(len(points))]
+    lo = data.draw(st.integers(0, len(points) - 1))
+    hi = data.draw(st.integers(lo, len(points) - 1))
+    s = arcs[lo] + data.draw(st.floats(0, 1.2)) * (arcs[hi] - arcs[lo])
+    x, y, h = pose_at(points, arcs, headings, lo, hi, s)
+    if hi == lo or s >= arcs[hi]:
+        assert (x, y, h) == (*points[hi], headings[hi])
+        return
+    expected = LineString(points[lo:hi + 1]).interpolate(s - arcs[lo])
+    assert abs(x - expected.x) <= 1e-6 and abs(y - expected.y) <= 1e-6
+    i = max(k for k in range(lo, hi) if arcs[k] <= s and arcs[k + 1] > s)
+    assert min(headings[i], headings[i + 1]) - 1e-9 <= h <= max(headings[i], headings[i + 1]) + 1e-9
