@@ -9,9 +9,14 @@ the Ranges, stops and V_STOP of the segments on either side of it, and the rises
 entity whose recorded speeds do not obey them), a convex set that holds the recorded boundary speeds r.
 Scenic draws a point q of the boxes and a fraction f uniformly; the variant's speeds are r + f * t * (q - r), t the
 largest step in [0, 1] toward q that keeps every constraint (`feasible`), so every draw obeys the plan and the
-draws cover the segment from r toward every point of the boxes. u_0 is the recorded speed (the first frame's
-relational program may bound it). Durations and turns are the recorded ones (the boundary samples' times and the
-summed signed turn of each segment's steps). Values in, text out; the Scenic text imports `feasible`, `knot` and `profile` from here.
+draws cover the segment from r toward every point of the boxes.
+u_0 is the recorded speed (the first frame's relational program may bound it). Durations are the recorded ones (the
+boundary samples' times); each moving entity's place is the point of its recorded places at the arc length its
+segment has covered (`along`, `pose_at`), its heading the recorded one there, set each step (R2sPose), so paths,
+turns and `heading` Ranges hold as recorded; what this construction does not decide (the lanes between two
+recorded places) Scenic requires (synth.behaviour.variant_lanes), with the pace bounds at every step
+(`within_paces`). Values in, text out; the Scenic text imports `along`, `feasible`, `knot`, `pose_at` and
+`within_paces` from here.
 """
 
 from __future__ import annotations
