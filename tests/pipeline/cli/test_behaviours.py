@@ -11,26 +11,17 @@ import re
 import pytest
 
 from pipeline.export.opendrive import header_frame
-from pipeline.scenes import scene as frame_scene
 from synth.scene import scene_from_json
 from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support.clips import scene_files
 
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
 LOG = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
 
 
-def _write_clip(frames, ids, out):
-    paths = []
-    for k, fid in enumerate(ids):
-        path = out / f"f{k:03d}.json"
-        path.write_text(frame_scene(str(frames), fid).to_json())
-        paths.append(str(path))
-    return paths
-
-
 @pytest.fixture(scope="module")
 def av2_clip(tmp_path_factory):
-    return _write_clip(AV2, [f"{LOG}/{k}" for k in range(100, 112)], tmp_path_factory.mktemp("clip"))
+    return scene_files(AV2, [f"{LOG}/{k}" for k in range(100, 112)], tmp_path_factory.mktemp("clip"))
 
 
 def test_synth_behaviours_then_check_on_the_clip(av2_clip, tmp_path):
@@ -73,7 +64,7 @@ def test_a_clip_without_times_is_one_line(av2_clip, tmp_path):
 
 def test_nuscenes_keyframes_get_a_behaviour_program(excerpt_frames, tmp_path):
     ids = [f"scene-0103/{k}" for k in range(4)]  # the excerpt's longest scene: 4 keyframes at 2 Hz
-    clip = _write_clip(excerpt_frames, ids, tmp_path)
+    clip = scene_files(excerpt_frames, ids, tmp_path)
     program = tmp_path / "clip.dsl"
     proc = run_r2s("synth", *clip, "--behaviours", "--motion", "--lanes", "--out", str(program))
     assert proc.returncode == 0, proc.stderr

@@ -22,6 +22,7 @@ from synth.behaviour.track import read_clip
 from synth.behaviour.variants import SpeedPlan, feasible, variant_scenic
 from synth.config import as_config
 from tests.support import ROOT, SHARED, assert_one_line_error, run_r2s
+from tests.support.clips import scene_files
 
 AV2 = ROOT / "data" / "argoverse2-log-excerpt" / "frames.parquet"
 LOG = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
@@ -129,16 +130,6 @@ def test_bad_input_is_one_line(clip, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def scene_files(frames, ids, out) -> list[str]:
-    """Each frame as `r2s scene` writes it, a scene JSON file in `out`."""
-    paths = []
-    for k, fid in enumerate(ids):
-        path = out / f"f{k:04d}.json"
-        path.write_text(frame_scene(str(frames), fid).to_json())
-        paths.append(str(path))
-    return paths
-
-
 def recheck(sims, program, n_frames: int) -> list[str]:
     """Every written variant read back from the frames written (as `r2s scene` reads them) and checked here, in
     this process, against the clip program less the entities not simulated: each one's violations (none: [])."""
@@ -177,8 +168,9 @@ def test_every_variant_scenic_accepts_passes_the_checker_on_a_clip_that_turns_fa
 
 
 def test_every_variant_scenic_accepts_passes_the_checker_on_a_shared_waymo_clip(tmp_path):
-    """The smallest shared Waymo scenario's first 2 s (skipped without ../shared), through the Python API: its
-    ego cruises below 1.5 m/s and stops, which steering could not keep within its pace."""
+    """The smallest shared Waymo scenario's first second (skipped without ../shared), through the Python API: its
+    first frame's program has pedestrian2 `moving like` car5, a parked car at 0.4 m/s (the variants that started
+    parked entities at 0 m/s were refused there), and a car at walking pace following its lane."""
     from pipeline import simulate
 
     if not WAYMO.exists():
@@ -190,9 +182,10 @@ def test_every_variant_scenic_accepts_passes_the_checker_on_a_shared_waymo_clip(
                    str(extracted)).returncode == 0
     ids = sorted(pq.read_table(extracted, columns=["frame_id", "frame_index"]).to_pylist(),
                  key=lambda r: r["frame_index"])
-    ids = list(dict.fromkeys(r["frame_id"] for r in ids))[:21]
+    ids = list(dict.fromkeys(r["frame_id"] for r in ids))[:11]
     frames = scene_files(extracted, ids, tmp_path)
     result = synthesize_behaviours(read_clip([json.loads(open(f).read()) for f in frames]), CONFIG)
+    assert "moving like" in str(result.program.program) and "parked" in str(result.program)
     program = tmp_path / "clip.json"
     program.write_text(json.dumps(result.to_json_dict()))
     sims = tmp_path / "sims"
