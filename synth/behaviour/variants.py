@@ -328,9 +328,10 @@ def simulation_step(times: Sequence[float], most: float = 0.1) -> float:
 def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Sequence[Sequence[int]], clip: Clip,
                    xodr: str, config: SynthConfig, offset: tuple[float, float] = (0.0, 0.0)) -> Simulated:
     """The dynamic Scenic scenario of a clip program's variants (module docstring): every entity of the clip's first
-    frame at its recorded pose in the world (as synth.behaviour.scenic places it), each moving one (not parked, a
-    car or a pedestrian) running R2sVariant with its plan and its draws, `require always` its speed bound,
-    `terminate after` the clip's length. `behaviours` and `boundaries`: one each per track of the clip, in order."""
+    frame at its recorded pose in the world (as synth.behaviour.scenic places it), each moving one (not parked)
+    running R2sVariant with its plan and its draws, each parked one R2sStill; `require always` its speed bound, its
+    segments' pace bounds and their lane rules (the LaneWatch of `lane_rules`), `terminate after` the clip's
+    length. `behaviours` and `boundaries`: one each per track of the clip, in order."""
     first = clip.scenes[0]
     dt = simulation_step(clip.times)
     frame_steps = tuple(round(t / dt) for t in clip.times)
@@ -345,8 +346,8 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
         if not track.from_start:
             continue
         e = first.ego if track.id == "ego" else by_id[track.id]
-        cls, where = placed(e, first.world, offset)
-        if not behaviour.parked and cls != "Object":
+        _, where = placed(e, first.world, offset)
+        if not behaviour.parked:
             ends = [frame_steps[clip.times.index(track.samples[b].t)] for b in bounds]
             points = track_points(track, clip, offset)
             plan = speed_plan(behaviour, bounds, track, config, segment_means(points, bounds, ends, dt))
@@ -362,22 +363,21 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
             rule = lane_rule(track.id, len(names), [clip.times.index(x.t) for x in track.samples], bounds,
                              [seg.path for seg in behaviour.segments])
             rules += [rule] if rule is not None else []
-        elif cls != "Object":
+        else:
             # still at its place, at its recorded first speed in the first frame (the relational program reads it)
             x, y = track_points(track, clip, offset)[0]
             where += (f", with speed {num(track.samples[0].speed)}, with behavior R2sStill({num(x)}, {num(y)}, "
                       f"{num(scenic_headings(track)[0])})")
         lines.append(f"{track.id} = {where}")
         names.append(track.id)
-        if not behaviour.parked and cls != "Object":
+        if not behaviour.parked:
             # the speed the checker reads (the velocity's norm, as recorded) at every step, not only the frames'
             paces = ", ".join(f"({num(lo)}, {'math.inf' if math.isinf(hi) else num(hi)})"
                               for lo, hi in pace_bounds(behaviour, track, config))
             lines.append(f"require always within_paces(r2s__now(), {track.id}.velocity.norm(), "
                          f"{ends!r}, [{paces}])  # each segment's pace")
-        if cls != "Object":
-            top = speed_bound(behaviour, track, config.v_stop)
-            lines.append(f"require always {track.id}.speed <= {num(top + 0.01)}  # its paces")
+        top = speed_bound(behaviour, track, config.v_stop)
+        lines.append(f"require always {track.id}.speed <= {num(top + 0.01)}  # its paces")
     lines.append(f"record r2s__states([{', '.join(names)}]) as r2s_states")
     if rules:
         lines.append(f"require always r2s__lanes(r2s__states([{', '.join(names)}]))  # each segment's lanes")
