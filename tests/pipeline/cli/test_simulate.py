@@ -5,6 +5,7 @@ lanes."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pyarrow.parquet as pq
@@ -115,6 +116,28 @@ def test_no_variant_within_the_time_limit_writes_nothing_and_exits_4(clip, tmp_p
     progress, error = proc.stderr.strip().splitlines()  # one progress line, then the one line of the failure
     assert "timed out" in progress and error.startswith("r2s simulate: no variant written: 1 asked")
     assert not out.exists()
+
+
+def test_a_simulation_that_breaks_a_requirement_is_drawn_again_up_to_its_attempts(clip, tmp_path, monkeypatch):
+    """A requirement every simulation breaks (at its third step; the drawn scene itself obeys it): each variant is
+    simulated ATTEMPTS times, then rejected by Scenic with that said, and nothing is written."""
+    from pipeline import simulation
+
+    frames, program, _, _ = clip
+    real = simulation.variant_scenic
+
+    def broken(*args, **kwargs):
+        sim = real(*args, **kwargs)
+        return dataclasses.replace(sim, text=sim.text + "require always r2s__now() < 3\n")
+
+    monkeypatch.setattr(simulation, "variant_scenic", broken)
+    with pytest.raises(simulation.NoVariantWritten) as raised:
+        simulation.simulate(program, frames, tmp_path / "none", n=1, seed=7, config=CONFIG)
+    (variant,) = raised.value.result.variants
+    assert (variant.outcome, variant.attempts) == ("rejected by Scenic", ATTEMPTS)
+    assert variant.reason == f"a requirement failed during each of {ATTEMPTS} simulations"
+    assert str(raised.value).startswith("no variant written: 1 asked, 1 rejected by Scenic")
+    assert not (tmp_path / "none").exists()
 
 
 def test_bad_input_is_one_line(clip, tmp_path):
