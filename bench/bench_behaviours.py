@@ -265,8 +265,10 @@ def variant_lines(rows: list[dict]) -> list[str]:
     asked = sum(r["variants"]["asked"] for r in done)
     scenic_ok = sum(r["variants"]["scenic_accepts"] for r in done)
     checker_ok = sum(r["variants"]["checker_accepts"] for r in done)
-    lines += ["", f"Over {len(done)} clips: Scenic accepts {scenic_ok} of {asked} simulations "
-              f"({100 * scenic_ok / max(asked, 1):.0f}%); the checker accepts {checker_ok} of those "
+    drawn = sum(sum(r["variants"].get("attempts") or [1]) for r in done)
+    lines += ["", f"Over {len(done)} clips: Scenic accepts a simulation of {scenic_ok} of {asked} variants "
+              f"({100 * scenic_ok / max(asked, 1):.0f}%), {scenic_ok} of the {drawn} simulations drawn "
+              f"({100 * scenic_ok / max(drawn, 1):.0f}%); the checker accepts {checker_ok} of those "
               f"({100 * checker_ok / max(scenic_ok, 1):.0f}%, target 100%).", ""]
     events = [e for r in done for e in r.get("retention", [])]
     if events:
