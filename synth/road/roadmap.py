@@ -525,14 +525,33 @@ def points(xs: Iterable[float], ys: Iterable[float]) -> Points:
 
 def packed(seqs: Sequence[Points]) -> tuple[np.ndarray, np.ndarray]:
     """Many point sequences as one (N, 2) float array and their lengths: one pass over all coordinates (numpy's
-    conversion of each small tuple on its own costs more than the work done on it). Every point must be a pair."""
+    conversion of each small tuple on its own costs more than the work done on it). Every point must be a pair.
+    Points that keep their array (ArrayPoints) give it as it is, never their pairs: a map mixes them with plain
+    tuples (nuScenes' lanes read from lists, its connectors widened into arrays)."""
     counts = np.fromiter(map(len, seqs), dtype=np.int64, count=len(seqs))
-    total = int(counts.sum())
-    arrays = [getattr(s, "xy", None) for s in seqs if len(s)]
-    if arrays and all(a is not None for a in arrays):  # all ArrayPoints: their arrays hold the same floats
-        return np.concatenate(arrays), counts
-    flat = np.fromiter(chain.from_iterable(chain.from_iterable(seqs)), dtype=float, count=2 * total)
-    return flat.reshape(total, 2), counts
+    parts: list[np.ndarray] = []
+    plain: list[Points] = []  # a run of sequences without an array, converted in one pass
+
+    def flush() -> None:
+        if plain:
+            total = sum(map(len, plain))
+            flat = np.fromiter(chain.from_iterable(chain.from_iterable(plain)), dtype=float, count=2 * total)
+            parts.append(flat.reshape(total, 2))
+            plain.clear()
+
+    for s in seqs:
+        xy = getattr(s, "xy", None)
+        if xy is None:
+            if len(s):
+                plain.append(s)
+        else:
+            flush()
+            parts.append(xy)
+    flush()
+    if not parts:
+        return np.empty((0, 2)), counts
+    # a fresh array of its own, as ever (concatenate copies; never a kept array itself, which is read-only)
+    return (parts[0] if len(parts) == 1 and parts[0].flags.writeable else np.concatenate(parts)), counts
 
 
 def packed_subset(seqs: tuple[np.ndarray, np.ndarray], mine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

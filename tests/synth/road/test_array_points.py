@@ -40,6 +40,8 @@ def make(a: np.ndarray, how: str):
 def test_packed_equals_packing_the_tuples(items):
     seqs = [make(a, how) for a, how in items]
     xy, counts = packed(seqs)
+    assert all(s._pairs is None for s in seqs if isinstance(s, ArrayPoints))  # packed from arrays, no pair made
+    assert xy.flags.writeable and not any(np.shares_memory(xy, s.xy) for s in seqs if isinstance(s, ArrayPoints))
     want_xy, want_counts = brute(seqs)
     assert counts.tolist() == want_counts.tolist()
     # bit for bit (NaN where NaN, -0.0 where -0.0)
