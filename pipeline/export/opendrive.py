@@ -17,7 +17,7 @@ from pipeline.cli.inputs import read_scene
 from pipeline.errors import UserError
 from pipeline.outputs import writing
 from storage.atomic import atomic_path
-from synth.road.opendrive import MAP_SUFFIX, Crosswalk, Network, Road, network, straight_runs
+from synth.road.opendrive import MAP_SUFFIX, Crosswalk, Network, Road, TooManyGeometries, network, straight_runs
 from synth.road.roadmap import RoadMap
 from synth.scene import Scene
 from synth.world import WorldPose, road_in_world
@@ -231,15 +231,17 @@ def linked(road: RoadMap, what: str, recentre: bool = True) -> Network:
         import scenariogeneration  # noqa: F401 (pinned in requirements.lock; optional for a pip install)
     except ImportError:
         raise UserError("OpenDRIVE needs scenariogeneration (pip install scenariogeneration==0.16.7)") from None
-    try:
-        net = network(road, recentre)
+    try:  # the bound is checked before the costly marks, grouping and XML
+        net = network(road, recentre, MAX_GEOMETRIES)
+        geometries = sum(len(straight_runs(r.points)) for r in net.roads)  # the file's: grouping may cut roads
+        if geometries > MAX_GEOMETRIES:
+            raise TooManyGeometries(geometries)
+    except TooManyGeometries as exc:
+        raise UserError(f"the road of {what} would be {exc.count:,} OpenDRIVE line geometries, more than "
+                        f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
+                        "(r2s scene --radius)") from None
     except ValueError as exc:  # too many paths through junctions
         raise UserError(f"the road of {what}: {exc}") from None
-    geometries = sum(len(straight_runs(r.points)) for r in net.roads)  # counted before the costly XML is built
-    if geometries > MAX_GEOMETRIES:
-        raise UserError(f"the road of {what} would be {geometries:,} OpenDRIVE line geometries, more than "
-                        f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
-                        "(r2s scene --radius)")
     if not net.roads:
         raise UserError(f"{what} has no lane with a centre line: OpenDRIVE needs a road")
     return net

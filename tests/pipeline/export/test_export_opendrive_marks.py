@@ -104,3 +104,29 @@ def test_road_marks_are_the_recorded_road_lines_along_each_lane_edge(nuscenes):
                        and np.mean(shapely.distance(samples, shapely.LineString(f.line)) < 0.8) >= 0.5
                        for f in lines), (r.get("name"), side, written)
     assert {("broken", "white", "both"), ("solid", "white", "none")} <= seen
+
+
+def test_a_long_lane_takes_the_marks_along_its_edges_and_the_bound_is_checked_before_them():
+    """A lane of 20,000 vertices (a 0.01 m zigzag) between a solid line 1.5 m to its left and a broken one 1.5 m
+    to its right: its road's marks are those lines (sampled by one pass along each edge); a bound below its line
+    geometries refuses it with their count (TooManyGeometries, before the marks are sought)."""
+    from synth.road.opendrive import TooManyGeometries, network, straight_runs
+    from synth.road.roadmap import MapFeature, RoadMap
+
+    n = 20_000
+    length = 0.01 * (n - 1)
+    lane = MapFeature("m", "L", "lane", line=tuple((0.01 * i, 0.01 * (i % 2)) for i in range(n)),
+                      polygon=((0, -1.5), (length, -1.5), (length, 1.5), (0, 1.5)))
+    left = MapFeature("m", "A", "road_line", line=((0, 1.5), (length, 1.5)),
+                      source_type="ROAD_LINE_SOLID_SINGLE_WHITE")
+    right = MapFeature("m", "B", "road_line", line=((0, -1.5), (length, -1.5)),
+                       source_type="ROAD_LINE_BROKEN_SINGLE_WHITE")
+    road = RoadMap.of("m", [lane, left, right])
+    (r,) = network(road).roads
+    assert r.marks == (EXPECTED["ROAD_LINE_SOLID_SINGLE_WHITE"], EXPECTED["ROAD_LINE_BROKEN_SINGLE_WHITE"])
+    runs = len(straight_runs(r.points))
+    assert runs > n / 2
+    with pytest.raises(TooManyGeometries) as refused:
+        network(road, max_geometries=runs - 1)
+    assert refused.value.count == runs
+    assert network(road, max_geometries=runs).roads == (r,)
