@@ -60,15 +60,18 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     car faces its recorded lane's heading and follows the Scenic lane of its own recorded lane there
     (FollowLaneBehavior's laneToFollow); it drove on when at some step it is inside a Scenic lane of a recorded
     lane within three links after its own and no longer inside its own (every lane holding the point, not the
-    one Scenic's laneAt picks)."""
+    one Scenic's laneAt picks), having run more than its lane's rest and MIN_PIECE (a lane's last metres may be put
+    before its successor, synth.road.opendrive: a Scenic lane of both)."""
+    import numpy as np
     import shapely
 
     from synth.road.opendrive import lane_graph
+    from synth.road.opendrive_group import MIN_PIECE
     from tests.support.opendrive import recorded
 
     lanes = {f.feature_id: f for f in road.lanes}
     succ, _ = lane_graph(lanes)
-    starts, lines = [], []
+    starts, lines, left = [], [], []  # left: metres from each car's start to its lane's end
     for k in sorted(lanes):
         if not succ[k]:
             continue
@@ -79,6 +82,7 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
             p, q = line.interpolate(at - 0.5), p
         heading = math.atan2(q.y - p.y, q.x - p.x) - math.pi / 2  # Scenic's headings start at the y axis
         starts.append(k)
+        left.append(line.length - at)
         lines.append(f"c{len(starts)} = new Car at ({p.x!r}, {p.y!r}), facing {heading!r}, with behavior "
                      f"FollowLaneBehavior(target_speed=6, laneToFollow=lane_of({k!r}, {p.x!r}, {p.y!r})), "
                      "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
@@ -88,17 +92,21 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     network = scene.workspace.network
     names = [set(recorded(lane)) for lane in network.lanes]
     tree = shapely.STRtree([lane.polygon for lane in network.lanes])
-    inside = [[set() for _ in starts] for _ in trajectory]  # step -> car -> the recorded lanes holding it
+    # step -> car -> the recorded lanes of each Scenic lane holding it (a lane's piece put before its successor,
+    # synth.road.opendrive's trims, is a lane of both)
+    inside = [[[] for _ in starts] for _ in trajectory]
     points = shapely.points([tuple(step[i])[:2] for step in trajectory for i in range(len(starts))])
     for where, lane in zip(*tree.query(points, predicate="intersects")):
-        inside[where // len(starts)][where % len(starts)] |= names[lane]
+        inside[where // len(starts)][where % len(starts)].append(names[lane])
     ok, failed = 0, []
     for i, k in enumerate(starts):
         after, frontier = set(), {k}
         for _ in range(3):
             frontier = {s for f in frontier for s in succ[f]} - after
             after |= frontier
-        reached = any(step[i] & after and k not in step[i] for step in inside)
+        run = np.concatenate([[0.0], np.cumsum([(b[i] - a[i]).norm() for a, b in zip(trajectory, trajectory[1:])])])
+        reached = any(any(held & after for held in step[i]) and {k} not in step[i] and run[t] > left[i] + MIN_PIECE
+                      for t, step in enumerate(inside))
         ok += reached
         if not reached:
             end = network.laneAt(trajectory[-1][i])

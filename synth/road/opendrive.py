@@ -40,7 +40,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from synth.road.opendrive_group import cuts, grouped
+from synth.road.opendrive_group import ALIGN, MIN_PIECE, cuts, grouped
 from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
@@ -223,7 +223,45 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
     # lanes with recorded same-direction neighbours cut where a neighbour starts or ends beside them, so that
     # pieces side by side begin and end across from each other: lanes of one road (synth.road.opendrive_group)
     joints = []  # (piece, the piece after it) of each such cut: put back together where not grouped
-    for k, at in cuts({k: shape[key][0] for k, key in rest.items()}, lanes).items():
+    cut_at, trim = cuts({k: shape[key][0] for k, key in rest.items()}, lanes)
+    # a neighbour's end less than MIN_PIECE from a lane's end (AV2's lanes end on slanted stop lines): the lane's
+    # piece beyond it goes to the lanes linked there, where it is all of their link at that end (put before each
+    # successor; appended to each predecessor that is a junction lane: an ordinary one's neighbours were
+    # measured against where it ends), so that the lane's end is across from the neighbour's; with nothing
+    # linked there, the piece is a road of its own
+    moved: dict[str, float] = defaultdict(float)  # recorded lane -> metres put before its line
+    touched: set[str] = set()
+    lane_of = {v: k for k, v in rest.items()}
+    for k, (head, tail) in sorted(trim.items()):
+        key = rest[k]
+        length = _length(shape[key][0])
+        if key in touched or length - head - tail < MIN_PIECE:
+            continue
+        if head > 0 and not pred[key]:  # nothing linked there: the piece is a road of its own
+            cut_at.setdefault(k, []).insert(0, head)
+        elif head > 0 and all(p in junction and succ[p] == [key] and p not in touched for p in pred[key]):
+            first, shape[key] = _halves(*shape[key], head)
+            for p in pred[key]:
+                shape[p] = _joined(shape[p], first)
+                recorded[p] = recorded[p] + recorded[key]
+            moved[k] -= head
+            touched.update(pred[key])
+            touched.add(key)
+            length -= head
+        if tail > 0 and not succ[key]:
+            cut_at.setdefault(k, []).append(length - tail - moved[k])
+        elif tail > 0 and succ[key] and all(pred[s] == [key] and s not in touched for s in succ[key]):
+            shape[key], second = _halves(*shape[key], length - tail)
+            for s in succ[key]:
+                shape[s] = _joined(second, shape[s])
+                recorded[s] = recorded[key] + recorded[s]
+                moved[lane_of.get(s, s)] += tail
+            touched.update(succ[key])
+            touched.add(key)
+    for k, at in cut_at.items():
+        at = [s + moved[k] for s in at]
+        end = _length(shape[rest[k]][0])
+        at = [s for s in at if ALIGN <= s <= end - ALIGN]
         piece, done = rest[k], 0.0
         for n, s in enumerate(at):
             before, piece, done = piece, split(piece, f"{PART}{n}", s - done), s
@@ -232,9 +270,11 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
     # that every path through a junction is one junction lane from an ordinary road to an ordinary road (paths
     # through chains of them multiply: 10^5 and more on a Waymo map; Scenic gives a path without an outgoing
     # road no maneuver)
+    halved = set()  # the recorded lanes so cut: a junction's lanes, whose second halves are roads
     for k in sorted(junction):
         if not succ[k] or any(s in junction for s in succ[k]):
             split(k, TAIL)
+            halved.update(recorded[k])
     ordinary = [k for k in sorted(recorded) if k not in junction]
     paths = _paths(ordinary, junction, succ)
     # an ordinary road with both ends at one junction (Scenic's parser refuses it) is cut in two, linked
@@ -338,7 +378,7 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
             raise TooManyGeometries(geometries)
     roads = _marked(roads, road, offset)
     roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes,
-                                         [(rid[a], rid[b]) for a, b in joints if a in rid and b in rid])
+                                         [(rid[a], rid[b]) for a, b in joints if a in rid and b in rid], halved)
     return Network(tuple(roads), tuple(joined), offset, tuple(notes) + group_notes, _crosswalks(roads, road, offset))
 
 
@@ -459,6 +499,16 @@ def _halves(line: list, widths: list, at: float | None = None) -> tuple[tuple[li
     first = [tuple(x) for x in line[:i + 1]] + ([p] if t > 0 else [])
     second = [p] + [tuple(x) for x in line[i + 1:]]
     return (first, list(widths[:i + 1]) + ([w] if t > 0 else [])), (second, [w] + list(widths[i + 1:]))
+
+
+def _length(line) -> float:
+    return float(np.hypot(*np.diff(np.asarray(line, dtype=float), axis=0).T).sum())
+
+
+def _joined(a: tuple[list, list], b: tuple[list, list]) -> tuple[list, list]:
+    """Two centre lines with their widths as one, b after a (b's first point left out where it is a's last)."""
+    skip = 1 if math.dist(a[0][-1], b[0][0]) <= MIN_SEGMENT else 0
+    return list(a[0]) + list(b[0][skip:]), list(a[1]) + list(b[1][skip:])
 
 
 def _pinned(line, ws, start, end):

@@ -34,6 +34,7 @@ ALIGN = 0.05  # metres: the ends of lanes side by side are this near the perpend
 STEP = 1.0  # metres: a group's reference line has a point at least this often (its lanes' centres are fitted there)
 TOLERANCE = 0.05  # metres: a grouped lane's centre from its recorded centre line at most (issue 37 allows 0.10)
 NECK = 1.0  # metres: a road's piece that becomes a connecting road where a group's lanes lead to different roads
+MIN_NECK = 0.5  # metres: a shorter road's piece (a quarter of it: the rest stays a road) is that piece at least
 POSE_TOLERANCE = 0.005  # metres: two grouped lane ends that meet are this near (ASAM allows 0.01)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a grouped lane's fitted width
 SAME_DIRECTION = math.cos(math.radians(30))  # lanes side by side run at most 30 degrees apart
@@ -111,11 +112,13 @@ def right_neighbours(lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
     return rights
 
 
-def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list[float]]:
+def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> tuple[dict[str, list[float]], dict[str, tuple]]:
     """Where to cut each lane of `lines` (distances along its line, increasing) so that its pieces begin and end
     across from where its recorded same-direction neighbours (either side) begin, end or are cut: the foot on it
     of each such point, at least MIN_PIECE from its ends and its other cuts, ROUNDS times over (a cut passes on
-    to the next neighbour)."""
+    to the next neighbour); and where a foot is nearer an end than that but farther than ALIGN, how much of the
+    lane to trim at its start and at its end (the most such a foot asks: (head, tail) metres; the trimmed
+    piece goes to the lanes linked there, synth.road.opendrive)."""
     near: dict[str, set[str]] = {}
     for a, bs in right_neighbours(lanes).items():
         for b in bs:
@@ -124,6 +127,7 @@ def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list
                 near.setdefault(b, set()).add(a)
     geo = {k: shapely.LineString(lines[k]) for k in near}
     at: dict[str, list[float]] = {k: [] for k in near}
+    trim: dict[str, tuple[float, float]] = {}
     points = {k: [tuple(lines[k][0]), tuple(lines[k][-1])] for k in near}
     for _ in range(ROUNDS):
         new = False
@@ -132,7 +136,14 @@ def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list
                 for p in list(points[b]):
                     point = shapely.Point(p)
                     s = geo[a].project(point)
-                    if not MIN_PIECE <= s <= geo[a].length - MIN_PIECE or geo[a].distance(point) > 2 * MAX_WIDTH:
+                    if geo[a].distance(point) > 2 * MAX_WIDTH:
+                        continue
+                    length = geo[a].length
+                    if ALIGN < min(s, length - s) < MIN_PIECE:
+                        head, tail = trim.get(a, (0.0, 0.0))
+                        trim[a] = (max(head, s), tail) if s < length / 2 else (head, max(tail, length - s))
+                        continue
+                    if not MIN_PIECE <= s <= length - MIN_PIECE:
                         continue
                     if any(abs(s - x) < MIN_PIECE for x in at[a]):
                         continue
@@ -141,7 +152,7 @@ def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, list
                     new = True
         if not new:
             break
-    return {k: sorted(v) for k, v in at.items() if v}
+    return {k: sorted(v) for k, v in at.items() if v}, trim
 
 
 def _same_direction(a, b) -> bool:
@@ -163,12 +174,14 @@ def _tangent(line, s: float) -> np.ndarray:
 
 
 def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
-    """Each single-lane ordinary road's right partner: the road of its lane's recorded right neighbour (or of a
-    lane naming it as its left neighbour) in the same direction with its ends across (ALIGN), nearest."""
+    """Each single-lane ordinary road's right partner: the road of a recorded right neighbour of a lane it
+    follows (or of a lane naming it as its left neighbour) in the same direction with its ends across (ALIGN),
+    nearest."""
     by_lane: dict[str, list] = {}
-    for r in roads:
-        if r.junction == -1 and len(r.lanes) == 1 and len(r.points) >= 2 and not r.side:
-            by_lane.setdefault(r.lanes[0], []).append(r)
+    for r in roads:  # a road may follow a lane's piece put before (after) another's (synth.road.opendrive)
+        if r.junction == -1 and len(r.points) >= 2 and not r.side:
+            for lane in r.lanes:
+                by_lane.setdefault(lane, []).append(r)
     rights = right_neighbours(lanes)
     out: dict[int, int] = {}
     taken: set[int] = set()
@@ -259,23 +272,29 @@ def repinned(points, widths, end: int, pose) -> tuple[tuple, tuple]:
 
 
 def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFeature],
-            joints: list[tuple[int, int]] = ()) -> tuple[list[Road], list[Junction], tuple[str, ...]]:
+            joints: list[tuple[int, int]] = (), halved: set[str] = frozenset()
+            ) -> tuple[list[Road], list[Junction], tuple[str, ...]]:
     """The roads with recorded same-direction neighbours side by side grouped into roads of several lanes, the
     junctions' connections from their lanes, and a note on the neighbours left roads of their own (module
     docstring). `joints`: (road, the road after it) where a lane was cut for a neighbour (synth.road.opendrive's
-    cuts): one road again where neither piece is grouped."""
+    cuts): one road again where neither piece is grouped; `halved`: the recorded lanes that are a junction's though
+    their second halves are roads (synth.road.opendrive: a junction lane followed by another or by none)."""
     by_id = {r.id: r for r in roads}
     fits = {}
     by_lanes = {r.id: r.lanes for r in roads}
+    chained, fitted = set(), set()  # the recorded lanes of chains, and of chains fitted (why lanes stay apart)
     for chain in chains(roads, lanes):
         ref, offsets, widths = fit(chain, by_id)
+        chained.update(lane for rid in chain for lane in by_lanes[rid])
         if len(offsets) >= 2:
             fits[chain[0]] = (chain[:len(offsets)], ref, offsets, widths)
+            fitted.update(lane for rid in chain[:len(offsets)] for lane in by_lanes[rid])
     while True:  # undo groups whose ends cannot be linked until none is left
         owner = {rid: (g, -k - 1) for g, (chain, *_) in fits.items() for k, rid in enumerate(chain)}
         root = _joined(fits, by_id)
         bad = [g for g in sorted(fits) if not _linkable(g, fits, by_id, owner, root)]
         bad += _both_ends(roads, fits, by_id, owner, root)
+        bad += _necked_twice(fits, by_id, owner, root)
         if not bad:
             break
         del fits[bad[0]]
@@ -298,13 +317,13 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
             for rid, x in necks:
                 road = by_id[x]
                 if end:  # the road after lane rid: its first NECK metres lead from the lane into it
-                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, NECK)
+                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, _neck(road))
                     neck = Road(next_road, road.lanes, p0, w0, j, Link("road", rid, "end"), Link("road", x, "start"))
                     by_id[x] = replace(road, points=p1, widths=w1, predecessor=Link("junction", j))
                     by_id[rid] = replace(by_id[rid], successor=Link("junction", j))
                     extra.setdefault(j, []).append((rid, next_road, -1))
                 else:  # the road before lane rid: its last NECK metres lead from it into the lane
-                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, _length(road.points) - NECK)
+                    (p0, w0), (p1, w1) = _cut(road.points, road.widths, _length(road.points) - _neck(road))
                     neck = Road(next_road, road.lanes, p1, w1, j, Link("road", x, "end"), Link("road", rid, "start"))
                     by_id[x] = replace(road, points=p0, widths=w0, successor=Link("junction", j))
                     by_id[rid] = replace(by_id[rid], predecessor=Link("junction", j))
@@ -363,13 +382,64 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
             (owner.get(inc, (inc, lane))[0], conn, owner.get(inc, (inc, lane))[1]) for inc, conn, lane in j.connections)
     moved = [Junction(j, tuple(c)) for j, c in sorted(connections.items())]
     kept = {lane for chain, *_ in fits.values() for rid in chain for lane in by_lanes[rid]}
-    beside = {x for a, bs in right_neighbours(lanes).items() for b in bs for x in (a, b)
-              if _same_direction(lanes[a].line, lanes[b].line)}
-    apart = sorted(beside - kept)
-    notes = ((f"{len(apart)} of {len(beside)} lane(s) with a recorded same-direction neighbour are a lane of no "
-              "road with it (their ends not across, a junction's lane, or their links or fitted widths not kept in "
-              "one road; e.g. " + ", ".join(map(repr, apart[:3])) + ")",) if apart else ())
-    return out, moved, notes
+    return out, moved, _apart(roads, lanes, kept, chained, fitted, halved)
+
+
+APART = ("a junction's lane", "beside junction lanes only", "ends not across", "fitted width or centre off",
+         "links not kept in one road")  # why a lane with a recorded same-direction neighbour is a road of its own
+
+
+def apart_reasons(roads, lanes: dict[str, MapFeature], kept: set, chained: set, fitted: set, halved: set
+                  ) -> dict[str, str]:
+    """Each recorded lane with a same-direction neighbour that is a lane of no road with one -> why (APART): it
+    is a connecting road's (a junction's lane: a fork's, a merge's, an intersection's; `halved`: one whose second
+    half is a road), its neighbours are
+    (beside junction lanes only), no piece of it is across from a neighbour's piece (ends not across), a chain
+    with it was cut short by the fit (fitted width or centre off), or its group was undone (links)."""
+    ordinary = {lane for r in roads if r.junction == -1 for lane in r.lanes} - halved
+    near: dict[str, set[str]] = {}
+    for a, bs in right_neighbours(lanes).items():
+        for b in bs:
+            if _same_direction(lanes[a].line, lanes[b].line):
+                near.setdefault(a, set()).add(b)
+                near.setdefault(b, set()).add(a)
+    out = {}
+    for k in sorted(set(near) - kept):
+        if k not in ordinary:
+            out[k] = APART[0]
+        elif not near[k] & ordinary:
+            out[k] = APART[1]
+        elif k in fitted:
+            out[k] = APART[4]
+        elif k in chained:
+            out[k] = APART[3]
+        else:
+            out[k] = APART[2]
+    return out
+
+
+def _apart(roads, lanes, kept, chained, fitted, halved) -> tuple[str, ...]:
+    """The note on the lanes with a recorded same-direction neighbour left roads of their own, by reason."""
+    why = apart_reasons(roads, lanes, kept, chained, fitted, halved)
+    if not why:
+        return ()
+    beside = len(why) + len(kept & {x for a, bs in right_neighbours(lanes).items() for x in (a, *bs)})
+    counts = ", ".join(f"{sum(v == r for v in why.values())} {r}" for r in APART if r in why.values())
+    return (f"{len(why)} of {beside} lane(s) with a recorded same-direction neighbour are a lane of no road with it "
+            f"({counts}; e.g. " + ", ".join(map(repr, sorted(why)[:3])) + ")",)
+
+
+def _necked_twice(fits, by_id, owner, root) -> list[int]:
+    """The groups one of whose ends would cut a connecting road off a road another group end cuts one off too
+    (the second cut would find the road changed: shorter, or its other end at a junction)."""
+    seen: dict[int, int] = {}
+    out = []
+    for g in sorted(fits):
+        for end in (0, 1):
+            for _, x in _necks(g, end, fits, by_id, owner, root) or ():
+                if seen.setdefault(x, g) != g:
+                    out.append(g)
+    return out
 
 
 def _joined(fits, by_id) -> dict[int, int]:
@@ -437,6 +507,11 @@ def _cut(points, widths, at: float) -> tuple[tuple[tuple, tuple], tuple[tuple, t
     return first, second
 
 
+def _neck(road: Road) -> float:
+    """How much of a road led to from a group's lane becomes a connecting road: NECK, at most a quarter of it."""
+    return min(NECK, _length(road.points) / 4)
+
+
 def _necks(g, end: int, fits, by_id, owner, root) -> list[tuple[int, int]] | None:
     """A group end whose lanes lead to different roads, as (lane's road, road) pairs whose roads' first (last)
     NECK metres become connecting roads of one junction at that end; [] where the end needs none; None where it
@@ -459,7 +534,7 @@ def _necks(g, end: int, fits, by_id, owner, root) -> list[tuple[int, int]] | Non
             continue
         x = by_id[link.id]
         far = _link(x, end)
-        if link.id in owner or x.junction != -1 or _length(x.points) < 4 * NECK or len(x.points) < 4 or (
+        if link.id in owner or x.junction != -1 or _length(x.points) < 4 * MIN_NECK or len(x.points) < 4 or (
                 far is not None and far.kind == "junction" and root.get(far.id, far.id) in joined):
             return None
         out.append((rid, link.id))
