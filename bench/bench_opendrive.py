@@ -60,8 +60,9 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
     car faces its recorded lane's heading and follows the Scenic lane of its own recorded lane there
     (FollowLaneBehavior's laneToFollow); it drove on when at some step it is inside a Scenic lane of a recorded
     lane within three links after its own and no longer inside its own (every lane holding the point, not the
-    one Scenic's laneAt picks), having run more than its lane's rest and MIN_PIECE (a lane's last metres may be put
-    before its successor, synth.road.opendrive: a Scenic lane of both)."""
+    one Scenic's laneAt picks), or, having run more than its lane's rest and MIN_PIECE, inside such a lane and in
+    no Scenic lane of its own lane alone (a lane's last metres may be put before its successor,
+    synth.road.opendrive: a Scenic lane of both)."""
     import numpy as np
     import shapely
 
@@ -105,8 +106,9 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
             frontier = {s for f in frontier for s in succ[f]} - after
             after |= frontier
         run = np.concatenate([[0.0], np.cumsum([(b[i] - a[i]).norm() for a, b in zip(trajectory, trajectory[1:])])])
-        reached = any(any(held & after for held in step[i]) and {k} not in step[i] and run[t] > left[i] + MIN_PIECE
-                      for t, step in enumerate(inside))
+        reached = any(set().union(*step[i]) & after and k not in set().union(*step[i]) for step in inside) or any(
+            any(held & after for held in step[i]) and {k} not in step[i] and run[t] > left[i] + MIN_PIECE
+            for t, step in enumerate(inside))
         ok += reached
         if not reached:
             end = network.laneAt(trajectory[-1][i])
@@ -118,9 +120,9 @@ def drive(xodr: Path, road, shift) -> tuple[int, int, list[str]]:
 def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES) -> tuple[int, int, list[str]]:
     """Cars that moved into the neighbour lane, cars started, and the pairs where they did not: for the first
     `sample` recorded neighbour pairs Scenic sees as adjacent, one car each (cars do not see each other) set at a
-    third of its lane's Scenic centre line, facing along it, with LaneChangeBehavior into the neighbour's lane
-    section there at 6 m/s for 4 s; it moved over when at some step it is inside the neighbour's Scenic lane and
-    no longer inside its own."""
+    third of its lane's Scenic centre line (the one adjacent to the neighbour's), facing along it, with
+    LaneChangeBehavior into the neighbour's lane section there at 6 m/s for 4 s; it moved over when at some step
+    it is inside the neighbour's Scenic lane and no longer inside its own."""
 
     from tests.support.opendrive import recorded
 
@@ -129,12 +131,16 @@ def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES)
         return 0, 0, []
     lines = []
     for i, (a, b) in enumerate(chosen):
-        lines.append(f"c{i} = new Car on lane_named({a!r}).centerline.pointAlongBy(lane_named({a!r}).centerline.length "
-                     f"/ 3), facing roadDirection, with behavior LaneChangeBehavior(lane_named({b!r}).sections[0], "
-                     "target_speed=6), with allowCollisions True, with requireVisible False, with regionContainedIn "
-                     "everywhere")
-    scene, trajectory = simulate(xodr, f"def lane_named(name):\n    return [l for l in network.lanes if name in {NAMES}][0]\n",
-                                 lines, CHANGE_STEPS)
+        pair = f"adjacent_pair({a!r}, {b!r})"
+        lines.append(f"c{i} = new Car on {pair}[0].centerline.pointAlongBy({pair}[0].centerline.length / 3), facing "
+                     f"{pair}[0].orientation, with behavior LaneChangeBehavior({pair}[1].sections[0], target_speed=6), "
+                     "with allowCollisions True, with requireVisible False, with regionContainedIn everywhere")
+    # the Scenic lanes of the pair that are adjacent (a recorded lane may have pieces on several roads), the car
+    # facing its own lane's direction (roadDirection there may be an overlapping lane's: AV2's lanes overlap)
+    helpers = ("def adjacent_pair(a, b):\n    for l in network.lanes:\n        if a in " + NAMES + ":\n"
+               "            mine = l\n            for l in mine.adjacentLanes:\n                if b in " + NAMES
+               + ":\n                    return mine, l\n")
+    scene, trajectory = simulate(xodr, helpers, lines, CHANGE_STEPS)
     network = scene.workspace.network
     by_name = {}
     for lane in network.lanes:
