@@ -385,7 +385,7 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
     return out, moved, _apart(roads, lanes, kept, chained, fitted, halved)
 
 
-APART = ("a junction's lane", "beside junction lanes only", "ends not across", "fitted width or centre off",
+APART = ("a junction's lane", "beside junction lanes only", "ends not across", "fitted ends, width or centre off",
          "links not kept in one road")  # why a lane with a recorded same-direction neighbour is a road of its own
 
 
@@ -395,7 +395,7 @@ def apart_reasons(roads, lanes: dict[str, MapFeature], kept: set, chained: set, 
     is a connecting road's (a junction's lane: a fork's, a merge's, an intersection's; `halved`: one whose second
     half is a road), its neighbours are
     (beside junction lanes only), no piece of it is across from a neighbour's piece (ends not across), a chain
-    with it was cut short by the fit (fitted width or centre off), or its group was undone (links)."""
+    with it was cut short by the fit (fitted ends, width or centre off), or its group was undone (links)."""
     ordinary = {lane for r in roads if r.junction == -1 for lane in r.lanes} - halved
     near: dict[str, set[str]] = {}
     for a, bs in right_neighbours(lanes).items():
