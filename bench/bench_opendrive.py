@@ -158,8 +158,14 @@ def lane_change(xodr: Path, pairs: list[tuple[str, str]], sample: int = CHANGES)
 
 def measure(maps: Path, map_id: str, work: Path) -> dict:
     from frames.maps import read_maps
-    from tests.pipeline.export.test_export_openscenario import asam_issues
-    from tests.support.opendrive import adjacent_pairs, centre_line_gaps, kept_links, offset, scenic_network
+    from tests.support.opendrive import (
+        adjacent_pairs,
+        asam_issues,
+        centre_line_gaps,
+        kept_links,
+        offset,
+        scenic_network,
+    )
 
     road = next(m for m in read_maps(maps) if m.map_id == map_id)
     xodr = work / f"{map_id}.xodr"

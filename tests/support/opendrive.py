@@ -4,11 +4,13 @@ successor links Scenic's network keeps (as a successor or a junction maneuver)."
 
 from __future__ import annotations
 
+import logging
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import pytest
 import shapely
 
 from synth.road.roadmap import RoadMap
@@ -113,3 +115,33 @@ def reference_pose(road, s: float) -> tuple[np.ndarray, np.ndarray]:
     h = float(g.get("hdg"))
     d = np.array([math.cos(h), math.sin(h)])
     return np.array([float(g.get("x")), float(g.get("y"))]) + (s - float(g.get("s"))) * d, d
+
+
+def asam_issues(path: Path) -> list[tuple[str, str, str]]:
+    """Every issue ASAM's checker bundle for the file's format raises (checker, level, what), run in process as
+    its command (qc_opendrive / qc_openscenario -c CONFIG) runs it; and the checkers that did not complete."""
+    pytest.importorskip("qc_baselib")
+    from qc_baselib import Configuration, Result, StatusType
+
+    if path.suffix == ".xosc":
+        import qc_openscenario.main as bundle
+        name = "xoscBundle"
+    else:
+        import qc_opendrive.main as bundle
+        name = "xodrBundle"
+    logging.disable(logging.INFO)
+    config = Configuration()
+    config.set_config_param("InputFile", str(path))
+    config.register_checker_bundle(name)
+    result = Result()
+    result.register_checker_bundle(name=name, description="", version="", summary="")
+    bundle.run_checks(config, result)
+    logging.disable(logging.NOTSET)
+    out = []
+    for checker in result.get_checker_results(name):
+        out += [(checker.checker_id, str(i.level), " ".join(loc.description for loc in i.locations))
+                for i in checker.issues]
+        # a checker skipped for want of a precondition would hide issues; skipped by version is fine (1.8 only)
+        if checker.status != StatusType.COMPLETED and "Version" not in (checker.summary or ""):
+            out.append((checker.checker_id, str(checker.status), checker.summary))
+    return out

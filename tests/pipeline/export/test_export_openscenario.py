@@ -7,7 +7,6 @@ reference lines run through the recorded centre lines."""
 from __future__ import annotations
 
 import json
-import logging
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -21,7 +20,7 @@ from pipeline.export.opendrive import linked, straight_runs
 from synth.scene import scene_from_json
 from synth.world import road_in_world
 from tests.support import assert_one_line_error, run_r2s
-from tests.support.opendrive import reference_pose
+from tests.support.opendrive import asam_issues, reference_pose
 
 from .conftest import FRAMES
 
@@ -40,36 +39,6 @@ def _export(scene: Path, variants: Path | None, out: Path):
                   "--out", str(out), "--program", str(scene.with_name("scene.scenic")))
     assert res.returncode == 0, res.stderr
     return res
-
-
-def asam_issues(path: Path) -> list[tuple[str, str, str]]:
-    """Every issue ASAM's checker bundle for the file's format raises (checker, level, what), run in process as
-    its command (qc_opendrive / qc_openscenario -c CONFIG) runs it; and the checkers that did not complete."""
-    pytest.importorskip("qc_baselib")
-    from qc_baselib import Configuration, Result, StatusType
-
-    if path.suffix == ".xosc":
-        import qc_openscenario.main as bundle
-        name = "xoscBundle"
-    else:
-        import qc_opendrive.main as bundle
-        name = "xodrBundle"
-    logging.disable(logging.INFO)
-    config = Configuration()
-    config.set_config_param("InputFile", str(path))
-    config.register_checker_bundle(name)
-    result = Result()
-    result.register_checker_bundle(name=name, description="", version="", summary="")
-    bundle.run_checks(config, result)
-    logging.disable(logging.NOTSET)
-    out = []
-    for checker in result.get_checker_results(name):
-        out += [(checker.checker_id, str(i.level), " ".join(loc.description for loc in i.locations))
-                for i in checker.issues]
-        # a checker skipped for want of a precondition would hide issues; skipped by version is fine (1.8 only)
-        if checker.status != StatusType.COMPLETED and "Version" not in (checker.summary or ""):
-            out.append((checker.checker_id, str(checker.status), checker.summary))
-    return out
 
 
 @pytest.mark.parametrize("fid", FRAMES)

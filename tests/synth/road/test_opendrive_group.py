@@ -19,8 +19,14 @@ from hypothesis import strategies as st
 from pipeline.export.opendrive import opendrive, write_xml
 from synth.road.opendrive import network
 from synth.road.roadmap import LANE, MapFeature, RoadMap
-from tests.pipeline.export.test_export_openscenario import asam_issues
-from tests.support.opendrive import adjacent_pairs, centre_line_gaps, kept_links, reference_pose, scenic_network
+from tests.support.opendrive import (
+    adjacent_pairs,
+    asam_issues,
+    centre_line_gaps,
+    kept_links,
+    reference_pose,
+    scenic_network,
+)
 
 TOLERANCE = 0.10  # metres (issue 37)
 
@@ -37,12 +43,17 @@ def _centre(curvature: float, start: float, length: float, offset: float, step: 
     return [(float((r - offset) * math.sin(a)), float(r - (r - offset) * math.cos(a))) for a in h]
 
 
-@st.composite
-def side_by_side(draw):
+def _parts(draw) -> tuple[int, list[float], float, tuple[float, float]]:
+    """Two parts of lanes side by side: how many lanes, their widths, the arc's curvature, each part's length."""
     n = draw(st.integers(2, 3))
     widths = draw(st.lists(st.floats(3.0, 4.0), min_size=n, max_size=n))
     curvature = draw(st.sampled_from([0.0, 1 / 60, -1 / 80, 1 / 300]))
-    lengths = (draw(st.floats(15.0, 40.0)), draw(st.floats(15.0, 40.0)))
+    return n, widths, curvature, (draw(st.floats(15.0, 40.0)), draw(st.floats(15.0, 40.0)))
+
+
+@st.composite
+def side_by_side(draw):
+    n, widths, curvature, lengths = _parts(draw)
     shift = draw(st.sampled_from([0.0, 3.0]))  # the last lane of the first part starts 3 m later than the others
     feats = []
     offsets = [-(sum(widths[:i]) + widths[i] / 2 - widths[0] / 2) for i in range(n)]
@@ -160,10 +171,7 @@ def staggered_map(n: int, widths, curvature: float, lengths, stagger: float, whe
 
 @st.composite
 def staggered(draw):
-    n = draw(st.integers(2, 3))
-    widths = draw(st.lists(st.floats(3.0, 4.0), min_size=n, max_size=n))
-    curvature = draw(st.sampled_from([0.0, 1 / 60, -1 / 80, 1 / 300]))
-    lengths = (draw(st.floats(15.0, 40.0)), draw(st.floats(15.0, 40.0)))
+    n, widths, curvature, lengths = _parts(draw)
     where = draw(st.sampled_from(["between", "far end"]))
     return staggered_map(n, widths, curvature, lengths, draw(st.floats(0.1, 0.9)), where), n, where
 
