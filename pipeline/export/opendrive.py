@@ -237,7 +237,8 @@ def linked(road: RoadMap, what: str, recentre: bool = True) -> Network:
         if geometries > MAX_GEOMETRIES:
             raise TooManyGeometries(geometries)
     except TooManyGeometries as exc:
-        raise UserError(f"the road of {what} would be {exc.count:,} OpenDRIVE line geometries, more than "
+        raise UserError(f"the road of {what} would be {'' if exc.exact else 'at least '}{exc.count:,} OpenDRIVE "
+                        f"line geometries, more than "
                         f"{MAX_GEOMETRIES:,} (a real scene's road has about 1,000): export a smaller road "
                         "(r2s scene --radius)") from None
     except ValueError as exc:  # too many paths through junctions

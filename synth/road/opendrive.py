@@ -40,7 +40,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from synth.road.opendrive_group import ALIGN, MIN_PIECE, cuts, grouped
+from synth.road.opendrive_group import ALIGN, MIN_PIECE, cuts, grouped, neighbours
 from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
 
@@ -49,7 +49,7 @@ MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a width outside these is a degenerat
 MIN_SEGMENT = 1e-6  # metres: shorter centre-line segments (repeated points) are skipped
 ENDING = 0.05  # metres: the straight piece at a road's end in its node's heading (at most a quarter of the road)
 MAX_PATHS = 100_000  # connecting roads in one network at most (paths through junction lanes multiply)
-CUT_RUNS = 4  # line geometries a lane's cut for a neighbour may add at most (its pieces' ends pinned)
+END_RUNS = 4  # line geometries fewer a road may be written with, its ends moved onto a grouped lane's
 MAX_PATH_LANES = 64  # junction lanes in one path at most
 # the keys of a split lane's second half (no feature id holds a control character): a junction lane's, an
 # ordinary lane's
@@ -166,18 +166,17 @@ def roles(lanes: dict[str, MapFeature], succ: dict[str, list[str]], pred: dict[s
 
 
 class TooManyGeometries(ValueError):
-    """A network would be more line geometries than its bound (`count` of them)."""
+    """A network would be more line geometries than its bound: `count` of them (at least, unless `exact`)."""
 
-    def __init__(self, count: int) -> None:
-        super().__init__(f"{count:,} line geometries")
-        self.count = count
+    def __init__(self, count: int, exact: bool = True) -> None:
+        super().__init__(f"{'' if exact else 'at least '}{count:,} line geometries")
+        self.count, self.exact = count, exact
 
 
 def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = None) -> Network:
     """The linked network of a road's lanes (in its frame, recentred unless `recentre` is false: then the
-    offset is (0, 0); module docstring); TooManyGeometries where its roads before marks and grouping (which
-    cost time per point) are more line geometries than `max_geometries` and CUT_RUNS per cut lane piece (what
-    putting pieces back or grouping them can take away)."""
+    offset is (0, 0); module docstring); TooManyGeometries where the roads it surely writes (before marks and
+    grouping, which cost time per point) are more line geometries than `max_geometries`."""
     lanes = {f.feature_id: f for f in road.lanes if len(_clean(f.line)) >= 2}
     succ, pred = lane_graph(lanes)
     junction = roles(lanes, succ, pred)
@@ -371,11 +370,14 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
     for n, (inc, _, _) in enumerate(paths):
         junctions[path_junction[n]].append((rid[inc], n_ord + n + 1, -1))
     if max_geometries is not None:  # before the marks and the grouping, which cost time per point
-        geometries = sum(len(straight_runs(r.points)) for r in roads)
-        # a lane cut for a neighbour is a run or two more (its pieces' pinned ends) than it is put back together
-        # or grouped: so many are allowed over the bound here, the file's own count is the caller's to check
-        if geometries > max_geometries + CUT_RUNS * len(joints):
-            raise TooManyGeometries(geometries)
+        # the roads written whatever is grouped: connecting roads and the roads of lanes without a neighbour
+        # their way (each end may be moved onto a grouped lane's: END_RUNS fewer runs at most); the file's own
+        # count is the caller's to check
+        sure = neighbours({k: f.line for k, f in lanes.items()}, lanes).keys()
+        geometries = sum(len(straight_runs(r.points)) - END_RUNS for r in roads
+                         if r.junction != -1 or not set(r.lanes) & sure)
+        if geometries > max_geometries:
+            raise TooManyGeometries(geometries, exact=False)
     roads = _marked(roads, road, offset)
     roads, joined, group_notes = grouped(roads, [Junction(j, tuple(c)) for j, c in sorted(junctions.items())], lanes,
                                          [(rid[a], rid[b]) for a, b in joints if a in rid and b in rid], halved)

@@ -112,6 +112,18 @@ def right_neighbours(lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
     return rights
 
 
+def neighbours(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
+    """Each lane of `lines` -> its recorded neighbours (either side) among them that run its way (lines: each
+    lane's centre line)."""
+    near: dict[str, set[str]] = {}
+    for a, bs in right_neighbours(lanes).items():
+        for b in bs:
+            if a in lines and b in lines and _same_direction(lines[a], lines[b]):
+                near.setdefault(a, set()).add(b)
+                near.setdefault(b, set()).add(a)
+    return near
+
+
 def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> tuple[dict[str, list[float]], dict[str, tuple]]:
     """Where to cut each lane of `lines` (distances along its line, increasing) so that its pieces begin and end
     across from where its recorded same-direction neighbours (either side) begin, end or are cut: the foot on it
@@ -119,12 +131,7 @@ def cuts(lines: dict[str, list], lanes: dict[str, MapFeature]) -> tuple[dict[str
     to the next neighbour); and where a foot is nearer an end than that but farther than ALIGN, how much of the
     lane to trim at its start and at its end (the most such a foot asks: (head, tail) metres; the trimmed
     piece goes to the lanes linked there, synth.road.opendrive)."""
-    near: dict[str, set[str]] = {}
-    for a, bs in right_neighbours(lanes).items():
-        for b in bs:
-            if a in lines and b in lines and _same_direction(lines[a], lines[b]):
-                near.setdefault(a, set()).add(b)
-                near.setdefault(b, set()).add(a)
+    near = neighbours(lines, lanes)
     geo = {k: shapely.LineString(lines[k]) for k in near}
     at: dict[str, list[float]] = {k: [] for k in near}
     trim: dict[str, tuple[float, float]] = {}
@@ -397,12 +404,7 @@ def apart_reasons(roads, lanes: dict[str, MapFeature], kept: set, chained: set, 
     (beside junction lanes only), no piece of it is across from a neighbour's piece (ends not across), a chain
     with it was cut short by the fit (fitted ends, width or centre off), or its group was undone (links)."""
     ordinary = {lane for r in roads if r.junction == -1 for lane in r.lanes} - halved
-    near: dict[str, set[str]] = {}
-    for a, bs in right_neighbours(lanes).items():
-        for b in bs:
-            if _same_direction(lanes[a].line, lanes[b].line):
-                near.setdefault(a, set()).add(b)
-                near.setdefault(b, set()).add(a)
+    near = neighbours({k: f.line for k, f in lanes.items()}, lanes)
     out = {}
     for k in sorted(set(near) - kept):
         if k not in ordinary:
