@@ -98,7 +98,8 @@ def synthesis(name: str, scenes: list) -> dict:
 
 
 def replicate(log: Path, n_frames: int, out: Path, parts: int) -> tuple[int, int]:
-    """n_frames frames: copies of the log's frames, each copy a scene of its own naming the same map."""
+    """n_frames frames: copies of the log's frames (a frames file or dataset), each copy a scene of its own naming
+    the same map: every column kept (lane facts, speed, world pose), the maps copied beside them."""
     import duckdb
 
     from frames.maps import maps_dir
@@ -106,7 +107,7 @@ def replicate(log: Path, n_frames: int, out: Path, parts: int) -> tuple[int, int
     con = duckdb.connect(config={"threads": os.cpu_count() or 1})
     con.execute("SET enable_progress_bar = false")
     con.execute(f"CREATE TEMP TABLE base AS SELECT *, file_index * 1099511627776 + file_row_number AS rn "
-                f"FROM read_parquet('{log}/*.parquet', file_row_number = true)")
+                f"FROM read_parquet('{log if log.is_file() else log / '*.parquet'}', file_row_number = true)")
     per = con.execute("SELECT count(DISTINCT frame_id) FROM base").fetchall()[0][0]
     copies = max(1, n_frames // per)
     cols = [c for (c,) in con.execute("SELECT column_name FROM (DESCRIBE base)").fetchall()
