@@ -24,6 +24,9 @@ from synth.road.lane_relations import SIDES, LaneGraph
 from synth.road.roadmap import RoadMap
 
 LANE_SETS = "r2s_lane_sets"
+# (map_id, from_lane, to_lane): to_lane is in the lane left or right of from_lane (rel_left, rel_right): what
+# `changing lanes` looks up (pipeline.query.temporal), one row per pair, so a row's test is a join on its own lane.
+SIDE_PAIRS = "r2s_side_pairs"
 # The frames' road columns a lane pattern reads (frames.schema.ROAD_COLUMNS), and the relation lists.
 FACT_COLUMNS = ("map_id", "lane", "lanes", "in_intersection", "on_crosswalk", "off_road")
 RELATION_COLUMNS = tuple(f"rel_{side}" for side in SIDES)
@@ -53,6 +56,12 @@ def lane_sets(roads: Iterable[RoadMap]) -> pa.Table:
     ids = pa.list_(pa.string())
     return pa.table({"map_id": pa.array(cols["map_id"], pa.string()), "lane": pa.array(cols["lane"], pa.string()),
                      **{c: pa.array(cols[c], ids) for c in RELATION_COLUMNS}})
+
+
+def side_pairs_sql() -> str:
+    """The statement that makes SIDE_PAIRS from LANE_SETS."""
+    return (f"CREATE TEMP TABLE {SIDE_PAIRS} AS SELECT DISTINCT map_id, lane AS from_lane, "
+            f"unnest(list_concat(coalesce(rel_left, []), coalesce(rel_right, []))) AS to_lane FROM {LANE_SETS}")
 
 
 def _text(value: str) -> str:

