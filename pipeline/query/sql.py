@@ -362,16 +362,31 @@ def matches_select(all_bindings: bool) -> str:
 # ego's row per frame, with frame_pos: consecutive frames of a scene have consecutive positions (what events are
 # runs of).
 def ego_select(with_lanes: bool = False) -> str:
-    """The rows of the CTE `ego`; with_lanes: with the lane facts and relation lists of its row
-    (pipeline.query.lanes)."""
+    """ego's row per frame (EGO_TABLE's rows); with_lanes: with the lane facts of its row (pipeline.query.lanes),
+    not yet the relation lists (ego_rows)."""
+    facts = "".join(f", {c}" for c in lanes.FACT_COLUMNS) if with_lanes else ""
     return (f"SELECT fk, frame_id, ord AS frame_ord, row_number() OVER (PARTITION BY scene ORDER BY "
-            f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild"
-            f"{_lane_columns('') if with_lanes else ''} FROM {ROWS} WHERE is_ego")
+            f"frame_index, ord) AS frame_pos, scene, timestamp_us, x, y, heading, speed, c, s, wild{facts} "
+            f"FROM {ROWS} WHERE is_ego")
 
 
-def ego_cte(with_lanes: bool = False) -> str:
-    """The CTE `ego` (ego_select)."""
-    return f"ego AS ({ego_select(with_lanes)})"
+def ego_rows(select: str, with_lanes: bool) -> str:
+    """The rows of the CTE `ego` from `select` (ego_select's rows); with_lanes: joined to the relation lists of
+    their lane, as the rows view joins them (pipeline.query.mining). Joined where the CTE is read, after the window
+    and the sort of EGO_TABLE: ego's rows carrying the lists through those took 17 of a lane pattern's 60 s at
+    10^6 frames (the sort moves every list)."""
+    if not with_lanes:
+        return select
+    rels = ", ".join(f"ls.{c}" for c in lanes.RELATION_COLUMNS)
+    return (f"SELECT e.*, {rels} FROM ({select}) e LEFT JOIN {lanes.LANE_SETS} ls ON ls.map_id = e.map_id "
+            "AND ls.lane = e.lane")
+
+
+def ego_cte(with_lanes: bool = False, chunk: Chunk | None = None) -> str:
+    """The CTE `ego` (ego_rows); with a chunk, its frames' rows of EGO_TABLE (made by frame_chunks)."""
+    select = (ego_select(with_lanes) if chunk is None else
+              f"SELECT * FROM {EGO_TABLE} WHERE frame_ord BETWEEN {chunk.lo} AND {chunk.hi}")
+    return f"ego AS ({ego_rows(select, with_lanes)})"
 
 
 def _lane_columns(prefix: str) -> str:
@@ -477,8 +492,7 @@ def bindings_query(pattern: Pattern, config: SynthConfig, chunk: Chunk | None = 
     name. With a chunk, over its frames alone (EGO_TABLE made by frame_chunks)."""
     names = pattern.names
     alias = {name: _alias(k) for k, name in enumerate(names)} | {EGO_ID: "g"}
-    ego = (ego_cte(pattern.uses_lanes) if chunk is None else
-           f"ego AS (SELECT * FROM {EGO_TABLE} WHERE frame_ord BETWEEN {chunk.lo} AND {chunk.hi})")
+    ego = ego_cte(pattern.uses_lanes, chunk)
     name_ctes = _name_ctes(pattern, config, alias, chunk)
     ctes = [ego, *name_ctes]
     pairs = _shared_pairs(pattern, config, alias, name_ctes)
@@ -625,7 +639,7 @@ def estimate_query(pattern: Pattern, config: SynthConfig, fanout: bool, per_fram
     else:  # the frames whose ego row is the chunk's (the two at its ends, read in part, have none between)
         frames = (f"r2s_frames AS (SELECT fk, frame_id, any_value(scene) AS scene, count(*) - 1 AS rows FROM {ROWS} f "
                   f"WHERE {' AND '.join(chunk.rows('f'))} GROUP BY fk, frame_id HAVING bool_or(is_ego))")
-        ctes = [f"ego AS (SELECT * FROM {EGO_TABLE} WHERE frame_ord BETWEEN {chunk.lo} AND {chunk.hi})", frames,
+        ctes = [ego_cte(pattern.uses_lanes, chunk), frames,
                 *estimate_ctes(pattern, config, fanout, chunk=chunk)]
     return "WITH " + ",\n".join(ctes) + "\n" + estimate_select("p", "0", per_frame)
 
