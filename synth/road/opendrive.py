@@ -40,6 +40,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from synth.errors import InputError
 from synth.road.opendrive_group import ALIGN, MIN_PIECE, cuts, grouped, neighbours
 from synth.road.opendrive_model import NO_MARK, Crosswalk, Junction, Link, Network, Road
 from synth.road.roadmap import CROSSWALK, ROAD_LINE, MapFeature, RoadMap
@@ -165,8 +166,9 @@ def roles(lanes: dict[str, MapFeature], succ: dict[str, list[str]], pred: dict[s
     return junction
 
 
-class TooManyGeometries(ValueError):
-    """A network would be more line geometries than its bound: `count` of them (at least, unless `exact`)."""
+class TooManyGeometries(InputError, ValueError):
+    """A network would be more line geometries than its bound: `count` of them (at least, unless `exact`). An input
+    too large: the exporter says it in one line (pipeline.export.opendrive.linked)."""
 
     def __init__(self, count: int, exact: bool = True) -> None:
         super().__init__(f"{'' if exact else 'at least '}{count:,} line geometries")
