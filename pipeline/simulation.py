@@ -262,13 +262,14 @@ def simulate_clip(clip_program: ClipProgram, clip: Clip, boundaries: list[tuple[
                              [clip_program.behaviour(t.id) for t in clip.tracks], boundaries, clip, xodr, config,
                              (header_frame(xodr) or (0.0, 0.0))[:2])
         world_road = road_in_world(first.world, window_road(clip.scenes))
-        watch = LaneWatch(RoadIndex(world_road), clip.graph, sim.offset, sim.frame_steps, sim.lane_rules)
+        index = RoadIndex(world_road)  # the lane facts Scenic's lane rules and the written rows both read
+        watch = LaneWatch(index, clip.graph, sim.offset, sim.frame_steps, sim.lane_rules)
         with timer.stage("compile"):
             scenario = _compile(sim.text, {"r2s_lanes": watch})
         kept = ClipProgram(clip_program.program, tuple(clip_program.behaviour(i) for i in sim.placed))
         with timer.stage("write"):
             maps = road_maps(world_road)
-        variants = _variants(scenario, sim, clip, kept, world_road, maps, base, n, seed, time_limit, config, timer,
+        variants = _variants(scenario, watch, sim, clip, kept, index, maps, base, n, seed, time_limit, config, timer,
                              report, write)
     return SimulateResult(n, seed, tuple(variants), sim.placed, tuple(t.id for t in clip.tracks if not t.from_start),
                           len(clip.scenes), dict(timer.seconds))
@@ -281,14 +282,14 @@ def _compile(text: str, params: Mapping[str, Any] | None = None):
     return scenic.scenarioFromString(text, params=dict(params or {}), mode2D=True)
 
 
-def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_road, maps: Path, base: str, n: int,
-              seed: int, time_limit: float | None, config: SynthConfig, timer: StageTimer, report,
-              write: Callable[[list[dict]], None]) -> list[Variant]:
+def _variants(scenario, watch: LaneWatch, sim: Simulated, clip: Clip, kept: ClipProgram, index: RoadIndex,
+              maps: Path, base: str, n: int, seed: int, time_limit: float | None, config: SynthConfig,
+              timer: StageTimer, report, write: Callable[[list[dict]], None]) -> list[Variant]:
     """Simulate, write as rows and check each variant in turn, each frame of a variant the checker accepts passed to
-    `write`; every Variant."""
+    `write`; every Variant. `watch`: the scenario's lane rules (its r2s_lanes), which say the last one broken."""
     from scenic.core.distributions import RejectionException
 
-    index, roads = RoadIndex(world_road), FrameRoads(maps)
+    roads = FrameRoads(maps)
     simulator = scenario.getSimulator()
     variants = []
     for k in range(n):
@@ -323,8 +324,7 @@ def _variants(scenario, sim: Simulated, clip: Clip, kept: ClipProgram, world_roa
                 outcome = "rejected by the checker"
                 reason = f"{len(verdict.violations)} violations, the first {first}"
         elif not reason:
-            watch = scenario.params.get("r2s_lanes")
-            lanes = f" (the last: {watch.failure})" if getattr(watch, "failure", "") else ""
+            lanes = f" (the last: {watch.failure})" if watch.failure else ""
             reason = f"a requirement failed during each of {attempts} simulations{lanes}"
         variant = Variant(k, s, name, outcome, reason, attempts)
         variants.append(variant)

@@ -20,6 +20,7 @@ when the run starts, so nothing stale survives.
 from __future__ import annotations
 
 import contextlib
+import filecmp
 import functools
 import hashlib
 import io
@@ -186,8 +187,9 @@ class SimulationTask(ClipTask):
             return self._failure(unit, "error", str(exc), len(scenes[0].others), digest)
         path = Path(self.out) / f"{FRAMES_PREFIX}{key}{FRAMES_SUFFIX}"
         limit = self.sim.time_limit if threading.current_thread() is threading.main_thread() else None
-        # A worker's stdout is its run's: a library's print there (scenariogeneration warns of the object ids an
-        # earlier clip's road used in this process, and renumbers them: the road's geometry is the same) is dropped
+        # A worker's stdout is its run's: a library's print there is dropped (scenariogeneration printed the object
+        # ids an earlier clip's road had used in the process, before pipeline.export.opendrive cleared its registries
+        # per file)
         with tempfile.TemporaryDirectory(prefix="r2s-simulate-") as scratch, contextlib.redirect_stdout(io.StringIO()):
             first = Path(scratch) / "first.json"
             first.write_text(scenes[0].to_json(), encoding="utf-8")
@@ -271,9 +273,10 @@ class SimulationStore(RunStore):
         for p in target.iterdir():
             if p.name not in sources:
                 p.unlink() if p.is_file() else shutil.rmtree(p)
+        filecmp.clear_cache()  # compared as they are now, not as an earlier run in this process saw them
         for name, source in sources.items():
             copy = target / name
-            if not copy.exists() or copy.read_bytes() != source.read_bytes():
+            if not copy.exists() or not filecmp.cmp(source, copy, shallow=False):  # compared in chunks
                 with atomic_path(copy) as tmp:
                     shutil.copyfile(source, tmp)
 

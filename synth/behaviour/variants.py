@@ -268,9 +268,10 @@ behavior R2sVariant(ends, recorded, lo, hi, rows, means, q, f, path, arcs, headi
 '''
 
 
-def pace_bounds(behaviour: Behaviour, track: Track, config: SynthConfig) -> list[tuple[float, float]]:
+def pace_bounds(behaviour: Behaviour, config: SynthConfig) -> list[tuple[float, float]]:
     """Each segment's speed bounds over its whole time (m/s): its Range (cruising, speeding up, slowing down), up
-    to V_STOP where stopped, up to its first sample's speed where it slows to a stop (it never rises)."""
+    to V_STOP where stopped, none where it slows to a stop (its fall is the profile's by construction; the entity's
+    top speed is required apart: speed_bound)."""
     out = []
     for seg in behaviour.segments:
         if isinstance(seg.pace, Cruising):
@@ -373,7 +374,7 @@ def variant_scenic(header: str, behaviours: Sequence[Behaviour], boundaries: Seq
         if not behaviour.parked:
             # the speed the checker reads (the velocity's norm, as recorded) at every step, not only the frames'
             paces = ", ".join(f"({num(lo)}, {'math.inf' if math.isinf(hi) else num(hi)})"
-                              for lo, hi in pace_bounds(behaviour, track, config))
+                              for lo, hi in pace_bounds(behaviour, config))
             lines.append(f"require always within_paces(r2s__now(), {track.id}.velocity.norm(), "
                          f"{ends!r}, [{paces}])  # each segment's pace")
         top = speed_bound(behaviour, track, config.v_stop)

@@ -63,10 +63,6 @@ class ArrayPoints(Sequence):
         self._keep(np.array(xy, dtype=float))
 
     @classmethod
-    def of(cls, xy: np.ndarray) -> ArrayPoints:
-        return cls(xy)
-
-    @classmethod
     def owning(cls, xy: np.ndarray) -> ArrayPoints:
         """The points of an (N, 2) float64 array nobody else writes to (the caller's promise): no copy."""
         out = cls.__new__(cls)
@@ -382,8 +378,8 @@ def _plain_finite(lines: Sequence[Points], polygons: Sequence[Points]):
     """`packed` lines and polygons, if every point of every sequence is a pair of finite Python floats or ints
     (what `points` and the readers make): then check_feature need not look at the coordinates one feature at a
     time. None for anything else, which check_feature then judges (and names) feature by feature."""
+    # the others are float pairs, or an array's (their finiteness is checked on the packed arrays below)
     seqs = [pts for pts in chain(lines, polygons) if not isinstance(pts, (FloatPairs, ArrayPoints))]
-    # the others are float pairs
     try:
         if not set(map(len, chain.from_iterable(seqs))) <= {2}:
             return None
