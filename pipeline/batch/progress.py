@@ -26,14 +26,15 @@ def duration(seconds: float) -> str:
 
 class Progress:
     def __init__(self, total: int, emit: Callable[[str], None], every_s: float = 30.0,
-                 terminal: bool | None = None, started: float | None = None, unit: str = "frames") -> None:
+                 terminal: bool | None = None, started: float | None = None, unit: str = "frames",
+                 label: str = "r2s run") -> None:
         self.total, self.every_s, self._emit, self.unit = total, every_s, emit, unit  # unit: what is counted
         self.done = 0
         self.counts: Counter = Counter()
         self.started = time.monotonic() if started is None else started
         self._last_line = time.monotonic()
         terminal = sys.stderr.isatty() if terminal is None else terminal
-        self._bar = tqdm(total=total, desc="r2s run", unit=f" {unit}", file=sys.stderr, dynamic_ncols=True,
+        self._bar = tqdm(total=total, desc=label, unit=f" {unit}", file=sys.stderr, dynamic_ncols=True,
                          disable=not terminal) if terminal else None
 
     @property

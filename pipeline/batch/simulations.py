@@ -293,6 +293,7 @@ class _SimulationRun(_WindowRun):
     """The stage's run whose units are the run output's clips, each simulated by a SimulationTask."""
 
     unit = "clips"
+    verb = "r2s simulate"
 
     def __init__(self, frames: str, out: Path, config: SynthConfig, options: RunOptions,
                  log: Callable[[str], None], run_output: Path, spec: SimulationSpec,

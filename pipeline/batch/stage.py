@@ -125,6 +125,7 @@ class _Run:
             self._log(message)
 
     unit = "frames"  # what a row is of (log lines, the summary)
+    verb = "r2s run"  # the progress bar's label: the command the user typed
 
     def go(self) -> Summary:
         store = self._store()
@@ -243,7 +244,7 @@ class _Run:
                         if pool.own_processes else None)
         buffer = PartBuffer(self.options.part_rows, PART_MAX_AGE_S)
         self._progress = Progress(todo, self._log, self.options.log_every_s, self.options.terminal, self.started,
-                                  self.unit)
+                                  self.unit, self.verb)
         computed = 0
         stopped, refused = True, False
         try:

@@ -4,10 +4,16 @@ helpers (independent brute forces, golden pins, crowd scenes, log and database w
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import pty
+import select
+import struct
 import subprocess
 import sys
+import termios
+import time
 from pathlib import Path
 
 from synth.scene import Scene, scene_from_dict
@@ -75,10 +81,38 @@ def run_r2s(*args: str, input: str | None = None, cwd: Path | None = None, timeo
     )
 
 
+def run_r2s_on_terminal(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run `r2s` with its stderr on a pseudo-terminal, as in a user's shell (a progress bar is drawn there, not log
+    lines); returns CompletedProcess with what the terminal showed as `stderr` (carriage returns and all)."""
+    leader, follower = pty.openpty()
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))  # a terminal has a width
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *args], cwd=ROOT, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=follower)
+    os.close(follower)
+    shown, deadline = bytearray(), time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([leader], [], [], 0.2)
+            if ready:
+                try:
+                    chunk = os.read(leader, 65536)
+                except OSError:  # EIO: the child closed its end
+                    chunk = b""
+                if not chunk:
+                    break
+                shown += chunk
+            elif proc.poll() is not None:
+                break
+        stdout = proc.communicate(timeout=max(1.0, deadline - time.monotonic()))[0]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(leader)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout.decode(), shown.decode(errors="replace"))
+
+
 def wait_for_file(path: Path, timeout: float = 60) -> bool:
     """Whether `path` exists within `timeout` seconds (a process started in the background made it)."""
-    import time
-
     deadline = time.monotonic() + timeout
     while not path.exists() and time.monotonic() < deadline:
         time.sleep(0.2)

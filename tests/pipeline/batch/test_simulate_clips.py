@@ -24,7 +24,7 @@ from pipeline import simulate_run
 from pipeline.errors import UserError
 from pipeline.scenes import scene
 from synth.behaviour.program import ClipProgram, parse_clip_program
-from tests.support import ROOT, assert_one_line_error, run_r2s
+from tests.support import ROOT, assert_one_line_error, run_r2s, run_r2s_on_terminal
 from tests.support.faults import r2s_with_fault
 
 pytest.importorskip("scenic")
@@ -83,8 +83,8 @@ def made(log, tmp_path_factory):
         if stop.poll() is None:
             stop.kill()
     stopped = (stop.returncode, lines, _sim_files(out), _rows(out))
-    resumed = run_r2s("simulate", str(clips), "--frames", str(frames), *FLAGS, "--n", "1", "--seed", "3", "--jobs",
-                      "2", "--out", str(out))
+    resumed = run_r2s_on_terminal("simulate", str(clips), "--frames", str(frames), *FLAGS, "--n", "1", "--seed",
+                                  "3", "--jobs", "2", "--out", str(out))
     return frames, clips, out, stopped, resumed
 
 
@@ -96,6 +96,7 @@ def test_a_stop_keeps_the_finished_clip_and_the_resume_simulates_the_other(made)
     assert len(rows) == 1 and len(files) == 1
     assert resumed.returncode == 0, resumed.stderr
     assert "resuming: 1 of 2 clips already done" in resumed.stderr
+    assert "r2s simulate: 100%" in resumed.stderr and "r2s run" not in resumed.stderr  # the bar names the verb
     assert "2 clips (1 computed, 1 kept)" in resumed.stderr
     now = _sim_files(out)
     assert all(now[name] == data for name, data in files.items())  # the finished clip's variants are untouched
