@@ -70,7 +70,11 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                 + ("r2s synth f100.json f101.json f102.json f103.json f104.json f105.json --behaviours --motion --lanes "
                    "--format json --out clip.json",
                    "r2s simulate clip.json f100.json f101.json f102.json f103.json f104.json f105.json --motion --lanes "
-                   "--n 2 --seed 0 --out simulated"),
+                   "--n 2 --seed 0 --out simulated",
+                   # every clip program of a run (about 20 s on 2 cores: four 4 s clips)
+                   "r2s run data/argoverse2-log-excerpt/frames.parquet --clip 4 --lanes --jobs 2 --out clips",
+                   "r2s simulate clips --frames data/argoverse2-log-excerpt/frames.parquet --lanes --jobs 2 "
+                   "--out simulated-clips"),
 }
 
 EXIT_CODES = (f"{ExitCode.OK} done; {ExitCode.BAD_INPUT} bad input or usage (one line on stderr, nothing written); "
@@ -82,7 +86,8 @@ MORE_EXIT_CODES: dict[str, str] = {
               "within the budget (one line naming the colliding entities; nothing written)",
     "render": f"{ExitCode.SAMPLING_FAILED} with --samples: no variant found (as r2s sample)",
     "simulate": f"{ExitCode.SAMPLING_FAILED} no variant written: each rejected by Scenic, past --time-limit or refused "
-                "by the checker (nothing written)",
+                f"by the checker (nothing written); {ExitCode.INTERRUPTED} / {ExitCode.TERMINATED} RUN_OUTPUT: stopped "
+                "by Ctrl-C / SIGTERM (finished clips kept: the same command resumes)",
     "run": f"{ExitCode.INTERRUPTED} / {ExitCode.TERMINATED} stopped by Ctrl-C / SIGTERM (finished frames kept: the "
            "same command resumes)",
 }

@@ -70,7 +70,7 @@ def test_every_help_example_runs(tmp_path):
     # What the examples say they make is there.
     for made in ("scene.json", "result.json", "scene.dsl", "frames", "programs", "matches.parquet",
                  "report/report.html", "scene.png", "variants/sample_004.json", "eval/metrics.json",
-                 "simulated/summary.json"):
+                 "simulated/summary.json", "simulated-clips/_simulations"):
         assert (tmp_path / made).exists(), made
     assert json.loads((tmp_path / "result.json").read_text())["status"] == "optimal"
 
