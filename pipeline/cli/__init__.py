@@ -15,7 +15,9 @@ import argparse
 import importlib
 import os
 import sys
+import threading
 import warnings
+from collections.abc import Callable
 
 from synth.errors import ExitCode, exit_code
 from synth.version import __version__
@@ -138,6 +140,22 @@ def build_parser(verb: str) -> argparse.ArgumentParser:
     return parser
 
 
+def thread_failed_hook(verb: str) -> Callable[[threading.ExceptHookArgs], None]:
+    """threading.excepthook for a verb: a library's background thread that fails (loky's executor manager, seen
+    once with a KeyError while a stopped run shut its pool down) is one line, never a traceback; nothing while the
+    interpreter is finalizing (the process is already on its way out with its own last line); R2S_DEBUG=1: the
+    traceback."""
+    def hook(args: threading.ExceptHookArgs) -> None:
+        if os.environ.get("R2S_DEBUG"):
+            threading.__excepthook__(args)
+        elif args.exc_type is not SystemExit and not sys.is_finalizing():
+            name = args.thread.name if args.thread is not None else "a thread"
+            message = " ".join(str(args.exc_value).splitlines())
+            sys.stderr.write(f"r2s {verb}: internal error in background thread {name}: {args.exc_type.__name__}: "
+                             f"{message} (R2S_DEBUG=1 shows the traceback)\n")
+    return hook
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
@@ -155,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     # A verb's messages are its own lines: numpy's floating-point warnings (overflow in an extreme input, ...)
     # would print before them, and the input is checked and refused on its own terms.
     warnings.filterwarnings("ignore", category=RuntimeWarning)
+    threading.excepthook = thread_failed_hook(verb)
     try:
         return int(module.run(args) or ExitCode.OK)
     except KeyboardInterrupt:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
 import subprocess
 import sys
@@ -115,3 +116,31 @@ def test_help_does_not_load_pandas(verb):
             "print('pandas' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "False", verb
+
+
+# ------------------------------------------------------------------------------------ a failing background thread
+
+_THREAD = """
+import sys, threading
+from pipeline.cli import thread_failed_hook
+threading.excepthook = thread_failed_hook("run")
+t = threading.Thread(target=lambda: {}["work item 7"], name="ExecutorManagerThread")
+t.start(); t.join()
+print("main went on")
+"""
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_a_failing_background_thread_is_one_line_not_a_traceback(debug):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop("R2S_DEBUG", None)
+    if debug:
+        env["R2S_DEBUG"] = "1"
+    proc = subprocess.run([sys.executable, "-c", _THREAD], capture_output=True, text=True, cwd=ROOT, env=env,
+                          timeout=60)
+    assert proc.returncode == 0 and proc.stdout == "main went on\n"
+    if debug:
+        assert "Traceback" in proc.stderr and "KeyError" in proc.stderr
+    else:
+        assert proc.stderr == ("r2s run: internal error in background thread ExecutorManagerThread: KeyError: "
+                               "'work item 7' (R2S_DEBUG=1 shows the traceback)\n")
