@@ -29,6 +29,8 @@ behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
     done = 0  # the path's length at the segment's start
     dt = simulation().timestep
     for j, (duration, v0, v1, turn) in enumerate(segments):
+        if duration <= 0:
+            continue  # a track of one sample: its segment lasts no time (and has length 0)
         steps = max(1, round(duration / dt))
         start = heading
         linear = (v0 + v1) / 2 * duration

@@ -118,3 +118,23 @@ def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
     assert tight != text
     with pytest.raises(RejectionException):
         scenic.scenarioFromString(tight, mode2D=True).generate(maxIterations=5)
+
+
+def test_a_track_seen_in_the_first_frame_only_simulates(excerpt_frames, tmp_path):
+    """nuScenes scene-0796's car9 is in its first keyframe only: its one segment lasts 0 s (`for Range(0, 0) s`).
+    The replay divided by that duration (ZeroDivisionError inside Scenic); the segment covers no time, so the car
+    has nothing to replay and stops."""
+    scenic = pytest.importorskip("scenic")
+    clip = scene_files(excerpt_frames, [f"scene-0796/{k}" for k in range(3)], tmp_path)
+    export = tmp_path / "export"
+    assert run_r2s("export", clip[0], "--to", "openscenario", "--out", str(export)).returncode == 0
+    (road,) = export.glob("*.xodr")
+    out = tmp_path / "clip.scenic"
+    proc = run_r2s("synth", *clip, "--behaviours", "--motion", "--lanes", "--format", "scenic", "--road", str(road),
+                   "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    assert re.search(r"^car9 = new Car .*R2sSegments\(\[\(0\.0, ", text, re.M)  # a moving car, one 0 s segment
+    scenario = scenic.scenarioFromFile(str(out), mode2D=True)
+    scene, _ = scenario.generate(maxIterations=20)
+    assert scenario.getSimulator().simulate(scene, maxSteps=10, maxIterations=1) is not None
