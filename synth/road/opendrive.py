@@ -231,34 +231,40 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
     # measured against where it ends), so that the lane's end is across from the neighbour's; with nothing
     # linked there, the piece is a road of its own
     moved: dict[str, float] = defaultdict(float)  # recorded lane -> metres put before its line
-    touched: set[str] = set()
+    # the lane ends whose line a trim changed, at its start and at its end: each end takes one trim (a lane that
+    # got its predecessor's piece before it may still give its own end's piece to its successors)
+    touched: tuple[set[str], set[str]] = (set(), set())
     lane_of = {v: k for k, v in rest.items()}
     for k, (head, tail) in sorted(trim.items()):
         key = rest[k]
         length = _length(shape[key][0])
-        if key in touched or length - head - tail < MIN_PIECE:
+        if length - head - tail < MIN_PIECE:
             continue
-        if head > 0 and not pred[key]:  # nothing linked there: the piece is a road of its own
+        if head > 0 and key in touched[0]:
+            pass
+        elif head > 0 and not pred[key]:  # nothing linked there: the piece is a road of its own
             cut_at.setdefault(k, []).insert(0, head)
-        elif head > 0 and all(p in junction and succ[p] == [key] and p not in touched for p in pred[key]):
+        elif head > 0 and all(p in junction and succ[p] == [key] and p not in touched[1] for p in pred[key]):
             first, shape[key] = _halves(*shape[key], head)
             for p in pred[key]:
                 shape[p] = _joined(shape[p], first)
-                recorded[p] = recorded[p] + recorded[key]
+                recorded[p] = recorded[p] + (k,)  # the piece is lane k's, whatever key holds before it
             moved[k] -= head
-            touched.update(pred[key])
-            touched.add(key)
+            touched[1].update(pred[key])
+            touched[0].add(key)
             length -= head
-        if tail > 0 and not succ[key]:
+        if tail > 0 and key in touched[1]:
+            pass
+        elif tail > 0 and not succ[key]:
             cut_at.setdefault(k, []).append(length - tail - moved[k])
-        elif tail > 0 and succ[key] and all(pred[s] == [key] and s not in touched for s in succ[key]):
+        elif tail > 0 and succ[key] and all(pred[s] == [key] and s not in touched[0] for s in succ[key]):
             shape[key], second = _halves(*shape[key], length - tail)
             for s in succ[key]:
                 shape[s] = _joined(second, shape[s])
-                recorded[s] = recorded[key] + recorded[s]
+                recorded[s] = (k,) + recorded[s]
                 moved[lane_of.get(s, s)] += tail
-            touched.update(succ[key])
-            touched.add(key)
+            touched[0].update(succ[key])
+            touched[1].add(key)
     for k, at in cut_at.items():
         at = [s + moved[k] for s in at]
         end = _length(shape[rest[k]][0])
