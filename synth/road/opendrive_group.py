@@ -4,7 +4,7 @@ lane is cut so that pieces side by side begin and end across from each other), g
 lanes as left / right neighbours that run side by side from end to end. Pure.
 
 A group is a chain of single-lane ordinary roads, each the recorded right neighbour of the one before (a map
-records it on either side), in the same direction, whose ends are across from each other (each end within ALIGN
+records it on either side; or a lane continuing one, or a right neighbour of a lane it continues: continued_rights), in the same direction, whose ends are across from each other (each end within ALIGN
 of the perpendicular through the first road's end as the cuts measure it, within END_ALIGN of the normal through
 the reference line's end as fitted). The first (leftmost) road's reference line, with a point at
 least every STEP, is the group's; lane -1 keeps its widths; lane -k's centre is where the normal (the bisector at
@@ -118,6 +118,29 @@ def right_neighbours(lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
     return rights
 
 
+def continued_rights(lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
+    """Each lane's recorded right neighbours (right_neighbours) and the lanes that continue them (their
+    predecessors and successors), and the right neighbours of the lanes it continues: where a neighbour ends a
+    metre or two before (after) a lane, the lane's piece beyond it runs beside the neighbour's successor's
+    (predecessor's) piece, which the map records as no neighbour of it."""
+    rights = right_neighbours(lanes)
+    links: dict[str, set[str]] = {k: set() for k in lanes}
+    for k, f in lanes.items():
+        for x in (*f.successors, *f.predecessors):
+            if x in lanes:
+                links[k].add(x)
+                links[x].add(k)
+    out: dict[str, set[str]] = {}
+    for k in lanes:
+        near = set(rights.get(k, ()))
+        near |= {c for n in rights.get(k, ()) for c in links[n]}
+        near |= {n for x in links[k] for n in rights.get(x, ())}
+        near.discard(k)
+        if near:
+            out[k] = near
+    return out
+
+
 def neighbours(lines: dict[str, list], lanes: dict[str, MapFeature]) -> dict[str, set[str]]:
     """Each lane of `lines` -> its recorded neighbours (either side) among them that run its way (lines: each
     lane's centre line)."""
@@ -195,7 +218,7 @@ def pairs(roads, lanes: dict[str, MapFeature]) -> dict[int, int]:
         if r.junction == -1 and len(r.points) >= 2 and not r.side:
             for lane in r.lanes:
                 by_lane.setdefault(lane, []).append(r)
-    rights = right_neighbours(lanes)
+    rights = continued_rights(lanes)
     out: dict[int, int] = {}
     taken: set[int] = set()
     for k in sorted(rights):

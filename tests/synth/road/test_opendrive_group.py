@@ -12,8 +12,8 @@ import math
 import xml.etree.ElementTree as ET
 
 import numpy as np
-import shapely
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -70,6 +70,12 @@ def side_by_side_map(n: int, widths, curvature: float, lengths, step: float = 0.
                 "m", fid, LANE, polygon=poly, line=line, left=f"P{part}L{i - 1}" if i else None,
                 right=f"P{part}L{i + 1}" if i < n - 1 else None, successors=(f"P1L{i}",) if part == 0 else ()))
     return RoadMap.of("m", feats)
+
+
+@st.composite
+def _parts_and(draw, extra):
+    """_parts and one more value drawn from `extra`."""
+    return _parts(draw), draw(extra)
 
 
 @st.composite
@@ -251,3 +257,18 @@ def test_lanes_whose_ends_are_off_the_end_normal_by_less_than_END_ALIGN_are_one_
     _written_lanes_follow_the_recording(road, net, tmp_path / "m.xodr", n)
     monkeypatch.setattr(opendrive_group, "END_ALIGN", ALIGN)
     assert sum(1 + len(r.side) for r in network(road).roads if r.side) < 2 * n
+
+
+@settings(max_examples=6, deadline=None)
+@given(case=_parts_and(st.floats(1.1, 3.0)))
+def test_a_lane_running_metres_on_beside_its_neighbours_successors_is_a_lane_of_their_road(case, tmp_path_factory):
+    """Where the parts meet, the last lane runs 1.1-3 m on beside the second part's first lanes, which the map
+    records as no neighbour of it (it names its own part's lanes): its piece there is a lane of one road with
+    their pieces (the successors of its recorded neighbours), so the roads before and after are groups too:
+    three roads of n lanes and no lane apart. Checked from the written file as the staggered ends are."""
+    (n, widths, curvature, lengths), stagger = case
+    road = staggered_map(n, widths, curvature, lengths, stagger, "between")
+    net = network(road)
+    assert [1 + len(r.side) for r in net.roads if r.side] == [n] * 3
+    assert [r for r in net.roads if not r.side] == [] and net.notes == ()
+    _written_lanes_follow_the_recording(road, net, tmp_path_factory.mktemp("continued") / "m.xodr", n)
