@@ -6,7 +6,8 @@ lanes as left / right neighbours that run side by side from end to end. Pure.
 A group is a chain of single-lane ordinary roads, each the recorded right neighbour of the one before (a map
 records it on either side; or a lane continuing one, or a right neighbour of a lane it continues: continued_rights), in the same direction, whose ends are across from each other (each end within ALIGN
 of the perpendicular through the first road's end as the cuts measure it, within END_ALIGN of the normal through
-the reference line's end as fitted). The first (leftmost) road's reference line, with a point at
+the reference line's end as fitted, or within REACH where the road linked there takes the difference and
+names the lane). The first (leftmost) road's reference line, with a point at
 least every STEP, is the group's; lane -1 keeps its widths; lane -k's centre is where the normal (the bisector at
 a vertex) through each point of the reference line meets its centre line, and its width is what puts its centre
 there (twice the distance from lane -(k-1)'s right edge). A lane whose width would leave [MIN_WIDTH, MAX_WIDTH],
@@ -37,6 +38,11 @@ ALIGN = 0.05  # metres: the ends of lanes side by side are this near the perpend
 # recorded end, the roads linked to it moved onto it, within the issue's 0.10 m). More than ALIGN: the straight
 # 0.05 m end piece in its node's mean heading turns the normal by a degree or two, 0.05-0.07 m across 3.5 m.
 END_ALIGN = 0.08
+# metres: farther from it (AV2's lanes end on slanted stop lines, a neighbour 0.1-0.3 m on), a grouped lane's end
+# is drawn where the normal meets its line (extended straight beyond its end) if the road linked there takes the
+# difference: the lane short of its recorded end, the road after (before) it moved onto it and naming both
+# recorded lanes; the lane beyond its recorded end, into the one road linked there, and naming both
+REACH = 0.5
 STEP = 1.0  # metres: a group's reference line has a point at least this often (its lanes' centres are fitted there)
 TOLERANCE = 0.05  # metres: a grouped lane's centre from its recorded centre line at most (issue 37 allows 0.10)
 NECK = 1.0  # metres: a road's piece that becomes a connecting road where a group's lanes lead to different roads
@@ -44,6 +50,7 @@ MIN_NECK = 0.5  # metres: a shorter road's piece (a quarter of it: the rest stay
 POSE_TOLERANCE = 0.005  # metres: two grouped lane ends that meet are this near (ASAM allows 0.01)
 MIN_WIDTH, MAX_WIDTH = 1.0, 10.0  # metres: a grouped lane's fitted width
 SAME_DIRECTION = math.cos(math.radians(30))  # lanes side by side run at most 30 degrees apart
+MIN_STEP = 1e-3  # metres: a road's point this near (or behind) its end piece's inner point is dropped when repinned
 MIN_PIECE = 1.0  # metres: a lane is cut no nearer its ends or its other cuts (where a neighbour starts or ends)
 ROUNDS = 3  # times cuts are passed on to neighbours
 
@@ -72,10 +79,19 @@ def normals(a: np.ndarray) -> np.ndarray:
     return np.stack([-t[:, 1], t[:, 0]], axis=1)
 
 
-def centre_offsets(ref: np.ndarray, line) -> np.ndarray | None:
+def extended(line) -> np.ndarray:
+    """A line with REACH metres more at each end, straight on in its end segments' directions."""
+    a = np.asarray(line, dtype=float)
+    u0, u1 = _unit(a[1] - a[0]), _unit(a[-1] - a[-2])
+    return np.concatenate([[a[0] - REACH * u0], a, [a[-1] + REACH * u1]])
+
+
+def centre_offsets(ref: np.ndarray, line) -> tuple[np.ndarray, tuple[float, float]] | None:
     """The signed offset (left positive) along each point's normal of where it meets `line` (nearest the
-    point); at the ends, of `line`'s end point's projection on the normal. None where a normal misses it or an end
-    is not across (END_ALIGN)."""
+    point); at the ends, of `line`'s end point's projection on the normal where that end is within END_ALIGN of
+    the normal, else (within REACH) of where the normal meets the line extended (`extended`); and how far the
+    line runs on beyond each end of the normal (negative: the normal is beyond the line's end). None where a
+    normal misses it or an end is farther than REACH."""
     n = normals(ref)
     other = shapely.LineString(line)
     reach = 3 * MAX_WIDTH
@@ -88,12 +104,21 @@ def centre_offsets(ref: np.ndarray, line) -> np.ndarray | None:
         pts = shapely.get_coordinates(cuts[i])
         rel = pts - ref[i]
         out[i] = (rel @ n[i])[np.argmin(np.hypot(rel[:, 0], rel[:, 1]))]
-    for i, p in ((0, line[0]), (len(ref) - 1, line[-1])):
+    beyond = []
+    longer = shapely.LineString(extended(line))
+    for i, p, sign in ((0, line[0], -1.0), (len(ref) - 1, line[-1], 1.0)):
         rel = np.asarray(p, dtype=float) - ref[i]
-        if abs(rel @ np.array([n[i][1], -n[i][0]])) > END_ALIGN:
+        d = sign * float(rel @ np.array([n[i][1], -n[i][0]]))
+        beyond.append(d)
+        if abs(d) <= END_ALIGN:
+            out[i] = rel @ n[i]
+            continue
+        meets = shapely.get_coordinates(shapely.intersection(rays[i], longer))
+        if abs(d) > REACH or not len(meets):
             return None
-        out[i] = rel @ n[i]
-    return out
+        rel = meets - ref[i]
+        out[i] = (rel @ n[i])[np.argmin(np.abs(rel @ np.array([n[i][1], -n[i][0]])))]
+    return out, (beyond[0], beyond[1])
 
 
 def lane_centres(ref: np.ndarray, offsets: np.ndarray, samples: int = 4) -> np.ndarray:
@@ -256,27 +281,31 @@ def chains(roads, lanes: dict[str, MapFeature]) -> list[list[int]]:
     return out
 
 
-def fit(chain: list, by_id: dict) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+def fit(chain: list, by_id: dict) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[tuple]]:
     """A chain's reference line (its first road's, densified), and each lane's centre offsets and widths at its
-    points, for the longest prefix of the chain whose lanes keep the rules (module docstring)."""
+    points and how far its line runs on beyond each end of the road (centre_offsets), for the longest prefix of
+    the chain whose lanes keep the rules (module docstring)."""
     ref, w1 = densified(by_id[chain[0]].points, by_id[chain[0]].widths)
-    offsets, widths = [np.zeros(len(ref))], [w1]
+    offsets, widths, beyond = [np.zeros(len(ref))], [w1], [(0.0, 0.0)]
     edge = -w1 / 2  # lane -1's right edge
     for rid in chain[1:]:
         line = np.asarray(by_id[rid].points, dtype=float)
-        c = centre_offsets(ref, line)
-        if c is None:
+        fitted = centre_offsets(ref, line)
+        if fitted is None:
             break
+        c, ends = fitted
         w = 2 * (edge - c)
         if w.min() < MIN_WIDTH or w.max() > MAX_WIDTH:
             break
         drawn = shapely.points(lane_centres(ref, c))
-        if float(shapely.distance(drawn, shapely.LineString(line)).max()) > TOLERANCE:
+        along = shapely.LineString(extended(line) if max(map(abs, ends)) > END_ALIGN else line)
+        if float(shapely.distance(drawn, along).max()) > TOLERANCE:
             break
         offsets.append(c)
         widths.append(w)
+        beyond.append(ends)
         edge = edge - w
-    return ref, offsets, widths
+    return ref, offsets, widths, beyond
 
 
 def end_pose(ref: np.ndarray, offset: np.ndarray, width: np.ndarray, end: int) -> tuple:
@@ -289,21 +318,26 @@ def end_pose(ref: np.ndarray, offset: np.ndarray, width: np.ndarray, end: int) -
 
 def repinned(points, widths, end: int, pose) -> tuple[tuple, tuple]:
     """A road's line and widths with the start (0) or end (1) moved onto a pose: its point there, the next one
-    the ENDING piece's length on in its heading."""
+    the ENDING piece's length on in its heading (the road's points not beyond that one dropped: a pose moved
+    along the road)."""
     p = [tuple(x) for x in points]
     w = list(widths)
-    if len(p) < 3:
-        return tuple(p), tuple(w)
+    if len(p) == 2:  # one segment: a point a quarter of it from the moved end keeps the rest's heading
+        f = 0.75 if end else 0.25
+        p.insert(1, tuple((np.asarray(p[0]) + f * (np.asarray(p[1]) - np.asarray(p[0]))).tolist()))
+        w.insert(1, w[0] + f * (w[1] - w[0]))
     (q, h, width) = pose
     d = np.array([math.cos(h), math.sin(h)])
     if end:
         e = math.dist(p[-1], p[-2])
-        p[-1], p[-2] = tuple(q), tuple((np.asarray(q) - e * d).tolist())
-        w[-1] = w[-2] = width
+        keep = [i for i in range(len(p) - 2) if i == 0 or float((np.asarray(q) - p[i]) @ d) > e + MIN_STEP]
+        p = [p[i] for i in keep] + [tuple((np.asarray(q) - e * d).tolist()), tuple(q)]
+        w = [w[i] for i in keep] + [width, width]
     else:
         e = math.dist(p[0], p[1])
-        p[0], p[1] = tuple(q), tuple((np.asarray(q) + e * d).tolist())
-        w[0] = w[1] = width
+        keep = [i for i in range(2, len(p)) if i == len(p) - 1 or float((np.asarray(p[i]) - q) @ d) > e + MIN_STEP]
+        p = [tuple(q), tuple((np.asarray(q) + e * d).tolist())] + [p[i] for i in keep]
+        w = [width, width] + [w[i] for i in keep]
     return tuple(p), tuple(w)
 
 
@@ -320,10 +354,10 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
     by_lanes = {r.id: r.lanes for r in roads}
     chained, fitted = set(), set()  # the recorded lanes of chains, and of chains fitted (why lanes stay apart)
     for chain in chains(roads, lanes):
-        ref, offsets, widths = fit(chain, by_id)
+        ref, offsets, widths, beyond = fit(chain, by_id)
         chained.update(lane for rid in chain for lane in by_lanes[rid])
         if len(offsets) >= 2:
-            fits[chain[0]] = (chain[:len(offsets)], ref, offsets, widths)
+            fits[chain[0]] = (chain[:len(offsets)], ref, offsets, widths, beyond)
             fitted.update(lane for rid in chain[:len(offsets)] for lane in by_lanes[rid])
     while True:  # undo groups whose ends cannot be linked until none is left
         owner = {rid: (g, -k - 1) for g, (chain, *_) in fits.items() for k, rid in enumerate(chain)}
@@ -393,10 +427,13 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
                      if b in junction_of and junction_of[b] == j.id else j for j in junctions]
     roads = [by_id[k] for k in sorted(by_id)]
     poses = {}  # (road id, end) of a grouped lane right of lane -1 -> its pose in the group
-    for chain, ref, offsets, widths in fits.values():
+    runs_on = set()  # (road id, end) of a grouped lane whose recorded line runs on beyond its road's end (REACH)
+    for chain, ref, offsets, widths, beyond in fits.values():
         for k, rid in enumerate(chain[1:], start=1):
             for end in (0, 1):
                 poses[(rid, end)] = end_pose(ref, offsets[k], widths[k], end)
+                if beyond[k][end] > END_ALIGN:
+                    runs_on.add((rid, end))
     out = []
     for r in roads:
         if r.id in owner and owner[r.id][0] != r.id:
@@ -404,13 +441,17 @@ def grouped(roads: list[Road], junctions: list[Junction], lanes: dict[str, MapFe
         if r.id in fits:
             out.append(_group_road(fits[r.id], by_id, owner, root))
             continue
-        points, widths_ = r.points, r.widths
+        points, widths_, names = r.points, r.widths, r.lanes
         for end, link in ((0, r.predecessor), (1, r.successor)):
-            if link is not None and link.kind == "road" and (link.id, 0 if link.contact == "start" else 1) in poses:
-                points, widths_ = repinned(points, widths_, end, poses[(link.id, 0 if link.contact == "start" else 1)])
+            there = None if link is None or link.kind != "road" else (link.id, 0 if link.contact == "start" else 1)
+            if there in poses:
+                points, widths_ = repinned(points, widths_, end, poses[there])
+            if there in runs_on:  # the grouped lane's piece beyond its road's end is this road's: it names it
+                lane = _end_lane(by_id[link.id], there[1])
+                names = names + (lane,) if end else (lane,) + names
         pre, pre_lane = _moved(r.predecessor, owner, root)
         suc, suc_lane = _moved(r.successor, owner, root)
-        out.append(replace(r, points=points, widths=widths_, predecessor=pre, successor=suc,
+        out.append(replace(r, lanes=names, points=points, widths=widths_, predecessor=pre, successor=suc,
                            junction=root.get(r.junction, r.junction), lane_links=((pre_lane, suc_lane),)))
     connections: dict[int, list] = {}
     for j in junctions + [Junction(j, tuple(c)) for j, c in extra.items()]:
@@ -516,6 +557,11 @@ def _both_ends(roads, fits, by_id, owner, root) -> list[int]:
     return sorted(set(out))
 
 
+def _end_lane(road: Road, end: int) -> str:
+    """The recorded lane a road follows at its start (0) or end (1)."""
+    return road.lanes[-1] if end else road.lanes[0]
+
+
 def _link(road: Road, end: int) -> Link | None:
     return road.successor if end else road.predecessor
 
@@ -598,13 +644,19 @@ def _targets(chain, by_id, owner, root, end: int) -> list:
 def _linkable(g, fits, by_id, owner, root) -> bool:
     """Whether a group's ends link as one road's can (one target for all its lanes at each end, each lane to a
     lane of its own) and meet the grouped lanes they link to (POSE_TOLERANCE)."""
-    chain, ref, offsets, widths = fits[g]
+    chain, ref, offsets, widths, beyond = fits[g]
     for end in (0, 1):
         targets = [t for t in _targets(chain, by_id, owner, root, end) if t is not None]
         into = [lane for _, lane in targets if lane is not None]
-        if (len({t for t, _ in targets}) > 1 or len(into) != len(set(into))) \
-                and _necks(g, end, fits, by_id, owner, root) is None:
+        necks = _necks(g, end, fits, by_id, owner, root)
+        if (len({t for t, _ in targets}) > 1 or len(into) != len(set(into))) and necks is None:
             return False
+        for k, rid in enumerate(chain):
+            link = _link(by_id[rid], end)
+            d = beyond[k][end]
+            if abs(d) > END_ALIGN and (link is None or d < 0 and (
+                    link.kind != "road" or necks or _length(by_id[link.id].points) < -d + MIN_PIECE)):
+                return False  # no road there takes the lane's piece beyond (short of) the road's end
         for k, rid in enumerate(chain):
             link = by_id[rid].successor if end else by_id[rid].predecessor
             if link is None or link.kind != "road" or link.id not in owner or owner[link.id][0] == g:
@@ -620,7 +672,7 @@ def _linkable(g, fits, by_id, owner, root) -> bool:
 
 def _group_road(fitted, by_id, owner, root) -> Road:
     """A group's road: its first road's id, marks and links, its fitted reference line and lanes."""
-    chain, ref, offsets, widths = fitted
+    chain, ref, offsets, widths, beyond = fitted
     first = by_id[chain[0]]
     ends = [_targets(chain, by_id, owner, root, end) for end in (0, 1)]
     link = []
@@ -633,7 +685,12 @@ def _group_road(fitted, by_id, owner, root) -> Road:
     for k, rid in enumerate(chain[1:], start=1):
         r = by_id[rid]
         mark = r.marks[1]
-        side.append(Side(r.lanes, tuple(widths[k].tolist()), mark))
+        names = r.lanes
+        for end, linked in ((0, r.predecessor), (1, r.successor)):
+            if beyond[k][end] < -END_ALIGN:  # drawn on beyond its recorded end, over the road linked there
+                there = _end_lane(by_id[linked.id], 0 if linked.contact == "start" else 1)
+                names = names + (there,) if end else (there,) + names
+        side.append(Side(names, tuple(widths[k].tolist()), mark))
     between = first.marks[1] if first.marks[1] != NO_MARK else by_id[chain[1]].marks[0]
     return Road(first.id, first.lanes, tuple(map(tuple, ref.tolist())), tuple(widths[0].tolist()), -1, link[0],
                 link[1], (first.marks[0], between), tuple(side), lane_links)

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from pipeline.export.opendrive import opendrive, write_xml
 from synth.road import opendrive_group
 from synth.road.opendrive import network
-from synth.road.opendrive_group import ALIGN, END_ALIGN
+from synth.road.opendrive_group import ALIGN, END_ALIGN, REACH
 from synth.road.roadmap import LANE, MapFeature, RoadMap
 from tests.support.opendrive import (
     adjacent_pairs,
@@ -208,10 +208,12 @@ def test_lanes_whose_ends_are_less_than_a_metre_apart_are_one_road_that_scenic_s
     _written_lanes_follow_the_recording(road, net, tmp_path_factory.mktemp("staggered") / "m.xodr", n)
 
 
-def _written_lanes_follow_the_recording(road: RoadMap, net, xodr, n: int) -> None:
+def _written_lanes_follow_the_recording(road: RoadMap, net, xodr, n: int, parts: int = 2, links: int | None = None
+                                        ) -> None:
     """Checked from the written file: ASAM's checker passes, each lane's centre by OpenDRIVE's lane rule within
-    0.10 m of the recorded lines it names; in Scenic's network every recorded neighbour pair of the two parts
-    adjacent, every lane within 0.10 m of its recorded lines, every recorded link kept."""
+    0.10 m of the recorded lines it names; in Scenic's network every recorded neighbour pair of the parts (n
+    lanes each) adjacent, every lane within 0.10 m of its recorded lines, every recorded link (n unless `links`)
+    kept."""
     write_xml(opendrive(net, "m"), xodr)
     assert asam_issues(xodr) == []
     root = ET.parse(xodr).getroot()
@@ -223,10 +225,10 @@ def _written_lanes_follow_the_recording(road: RoadMap, net, xodr, n: int) -> Non
             assert float(shapely.distance(shapely.points(centres), recorded).max()) < TOLERANCE, (names, k)
     scenic = scenic_network(xodr)
     seen, apart = adjacent_pairs(scenic, road)
-    assert apart == [] and len(seen) == 2 * (n - 1)
+    assert apart == [] and len(seen) == parts * (n - 1)
     assert max(centre_line_gaps(scenic, road, tuple(shift)).values()) < TOLERANCE
     kept, lost = kept_links(scenic, road)
-    assert lost == [] and len(kept) == n
+    assert lost == [] and len(kept) == (n if links is None else links)
 
 
 def _end_off_normal(road: RoadMap, n: int) -> float:
@@ -272,3 +274,47 @@ def test_a_lane_running_metres_on_beside_its_neighbours_successors_is_a_lane_of_
     assert [1 + len(r.side) for r in net.roads if r.side] == [n] * 3
     assert [r for r in net.roads if not r.side] == [] and net.notes == ()
     _written_lanes_follow_the_recording(road, net, tmp_path_factory.mktemp("continued") / "m.xodr", n)
+
+
+def merging_map(n: int, width: float, length: float, on: float) -> RoadMap:
+    """n straight lanes side by side, the last running `on` metres beyond the others' ends into a merge: its
+    successor M (10 m) is also the successor of a ramp lane Y joining from the right, so the last lane's piece
+    beyond the others' ends cannot be put before its successor (M has two predecessors)."""
+    feats = []
+    for i in range(n):
+        y = -i * width
+        end = length + (on if i == n - 1 else 0.0)
+        line = tuple((float(x), y) for x in np.linspace(0.0, end, max(3, int(end) + 1)))
+        poly = tuple(shapely.LineString(line).buffer(width / 2, cap_style="flat").exterior.coords)[:-1]
+        feats.append(MapFeature("m", f"L{i}", LANE, polygon=poly, line=line, left=f"L{i - 1}" if i else None,
+                                right=f"L{i + 1}" if i < n - 1 else None,
+                                successors=("M",) if i == n - 1 else ()))
+    x0, y0 = length + on, -(n - 1) * width
+    for fid, line in (("M", tuple((x0 + float(x), y0) for x in np.linspace(0.0, 10.0, 11))),
+                      ("Y", ((x0 - 20, y0 - 5.0), (x0 - 10, y0 - 2.0), (x0 - 5, y0 - 0.6), (x0, y0)))):
+        poly = tuple(shapely.LineString(line).buffer(width / 2, cap_style="flat").exterior.coords)[:-1]
+        feats.append(MapFeature("m", fid, LANE, polygon=poly, line=line, successors=("M",) if fid == "Y" else ()))
+    return RoadMap.of("m", feats)
+
+
+@settings(max_examples=6, deadline=None)
+@given(n=st.integers(2, 3), width=st.floats(3.0, 4.0), on=st.floats(0.1, REACH - 0.05))
+def test_a_lane_running_on_into_a_merge_is_drawn_to_its_neighbours_end_and_its_piece_is_the_merges(
+        n, width, on, tmp_path_factory):
+    """The last lane runs 0.1-0.45 m beyond its neighbours' ends into a merge (no trim: its successor has two
+    predecessors): the lanes are one road, the last drawn to end across from the others (REACH), and the merge's
+    connecting road from it moved onto that end and named by both recorded lanes (`L{n-1} > M`), so its piece
+    beyond is on a road that names it. Checked from the written file as the staggered ends are (one part; the
+    two recorded links into the merge)."""
+    road = merging_map(n, width, 20.0, on)
+    net = network(road)
+    assert [r.lane_names for r in net.roads if r.side] == [tuple((f"L{i}",) for i in range(n))]
+    assert not any("are a lane of no road" in note for note in net.notes)
+    assert {r.lanes for r in net.roads if r.junction != -1} == {(f"L{n - 1}", "M"), ("M",)}  # from L{n-1}, from Y
+    _written_lanes_follow_the_recording(road, net, tmp_path_factory.mktemp("merge") / "m.xodr", n, parts=1, links=2)
+    monkeypatch = pytest.MonkeyPatch()
+    monkeypatch.setattr(opendrive_group, "REACH", END_ALIGN)  # without it, the last lane is a road of its own
+    try:
+        assert (f"L{n - 1}",) in [r.lanes for r in network(road).roads if not r.side]
+    finally:
+        monkeypatch.undo()
