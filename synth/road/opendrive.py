@@ -281,7 +281,7 @@ def network(road: RoadMap, recentre: bool = True, max_geometries: int | None = N
     for k in sorted(junction):
         if not succ[k] or any(s in junction for s in succ[k]):
             split(k, TAIL)
-            halved.update(recorded[k])
+            halved.update(x for x in recorded[k] if x in junction)  # not a lane whose piece was put before it
     ordinary = [k for k in sorted(recorded) if k not in junction]
     paths = _paths(ordinary, junction, succ)
     # an ordinary road with both ends at one junction (Scenic's parser refuses it) is cut in two, linked

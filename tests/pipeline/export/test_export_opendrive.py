@@ -15,6 +15,8 @@ import pytest
 
 from frames.maps import read_maps
 from pipeline.export.opendrive import export_road
+from synth.road import opendrive_group
+from synth.road.opendrive import network
 from tests.support import SHARED, assert_one_line_error, run_r2s
 from tests.support.extract import EXCERPT
 
@@ -192,3 +194,25 @@ def test_a_road_exported_again_in_one_process_is_the_same_file(av2, tmp_path):
     export_road(str(AV2_MAPS), None, str(again))
     assert b"crosswalk" in av2.read_bytes()
     assert first.read_bytes() == av2.read_bytes() and again.read_bytes() == av2.read_bytes()
+
+
+def test_the_lanes_the_note_calls_a_junctions_lane_are_an_intersections_a_forks_or_a_merges(monkeypatch):
+    """The export's note on the AV2 map: each lane it counts as `a junction's lane` is one by the map alone (an
+    intersection lane, one of several successors of a lane, or a lane with several predecessors, a link either
+    lane records being a link), not an ordinary lane whose last metres were put before a junction lane."""
+    if not AV2_MAPS.exists():
+        pytest.skip("no shipped Argoverse 2 map")
+    road = next(iter(read_maps(AV2_MAPS)))
+    seen = {}
+    reasons = opendrive_group.apart_reasons
+    monkeypatch.setattr(opendrive_group, "apart_reasons", lambda *a: seen.setdefault("why", reasons(*a)))
+    network(road)
+    lanes = {f.feature_id: f for f in road.lanes}
+    nexts = {k: set(f.successors) for k, f in lanes.items()}
+    for k, f in lanes.items():
+        for p in f.predecessors:
+            nexts.setdefault(p, set()).add(k)
+    befores = {k: {p for p, ss in nexts.items() if k in ss} for k in lanes}
+    forked = {s for ss in nexts.values() if len(ss) > 1 for s in ss}
+    called = [k for k, why in seen["why"].items() if why == opendrive_group.APART[0]]
+    assert called and all(lanes[k].is_intersection or k in forked or len(befores[k]) > 1 for k in called)
