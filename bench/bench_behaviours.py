@@ -24,6 +24,8 @@ of the same pattern with the same binding (target: >= 90%).
 
     .venv/bin/python bench/bench_behaviours.py
     .venv/bin/python bench/bench_behaviours.py --only av2 "waymo 2b3e" ...   # those clips only: behaviours-subset.*
+    .venv/bin/python bench/bench_behaviours.py --replay-only   # synthesis, checker and replay, no variants:
+                                                               # behaviours-replay.* (with --only: -replay-subset)
 """
 
 from __future__ import annotations
@@ -187,7 +189,7 @@ def retention(frames: Path, scenes, done, out: Path) -> list[dict]:
     return rows
 
 
-def measure(name: str, frames: Path, ids: list[str], work: Path) -> dict:
+def measure(name: str, frames: Path, ids: list[str], work: Path, replay_only: bool = False) -> dict:
     scenes = [frame_scene(str(frames), fid) for fid in ids]
     clip = read_clip(scenes)
     cpu = time.process_time()
@@ -200,7 +202,8 @@ def measure(name: str, frames: Path, ids: list[str], work: Path) -> dict:
            "behaviours_wall_s": result.behaviours_s,
            "checker_accepts": ok, "parked": segments.count(0), "max_segments": max(segments)}
     row.update(replay(result, scenes, work))
-    row.update(variants(result, scenes, frames, work))
+    if not replay_only:
+        row.update(variants(result, scenes, frames, work))
     print(f"{name}: {row['tracks']} tracks, {row['frames']} frames, synthesis {cpu:.2f} CPU s, "
           f"checker {'ok' if ok else 'REFUSES'}", flush=True)
     return row
@@ -296,14 +299,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description="Behaviour programs of clips (module docstring).")
     parser.add_argument("--only", nargs="+", metavar="NAME",
                         help="only the clips whose name contains one of these (results in behaviours-subset.*)")
-    only = parser.parse_args().only
+    parser.add_argument("--replay-only", action="store_true",
+                        help="synthesis, checker and replay only, no variants (results in behaviours-replay*.*)")
+    args = parser.parse_args()
+    only = args.only
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         for name, frames, ids in clips(work):
             if only is None or any(o in name for o in only):
-                rows.append(measure(name, frames, ids, work))
-        crowded = cost_row(work) if only is None else None
+                rows.append(measure(name, frames, ids, work, args.replay_only))
+        crowded = cost_row(work) if only is None and not args.replay_only else None
     actors = [a for r in rows for a in r["actors"] if r["seconds"] >= CLIP_S - 0.5]
     summary = {"actors_8s": len(actors),
                "median_mean_m": statistics.median(a["mean_m"] for a in actors) if actors else None,
@@ -329,12 +335,14 @@ def main() -> None:
               f"{summary['p90_max_m'] or 0:.2f} m (target <= 3.0). The checker accepts every recording: "
               f"{summary['checker_accepts_all']}. Scenic accepts {summary['scenic_accepts']} of {summary['clips']} "
               "simulations.", ""]
-    lines += variant_lines(rows)
+    if not args.replay_only:
+        lines += variant_lines(rows)
     if crowded is not None:
         lines += [f"Cost: {crowded['clip']}, {crowded['tracks']} tracks over {crowded['frames']} frames "
                   f"({crowded['seconds']} s): synthesis {crowded['synth_cpu_s']:.2f} CPU s (target: under 5 s for "
                   f"100 tracks over 9 s); the checker accepts the recording: {crowded['checker_accepts']}.", ""]
-    write_results("behaviours" if only is None else "behaviours-subset", {"machine": machine(), "summary": summary, "clips": rows, "crowded": crowded},
+    name = "behaviours" + ("-replay" if args.replay_only else "") + ("" if only is None else "-subset")
+    write_results(name, {"machine": machine(), "summary": summary, "clips": rows, "crowded": crowded},
                   "\n".join(lines))
 
 
