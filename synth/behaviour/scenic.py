@@ -11,16 +11,18 @@ import math
 
 from synth.behaviour.kinds import Cruising, SlowingToAStop, Stopped
 from synth.behaviour.program import Behaviour
-from synth.behaviour.scenic_common import ALONG, STEER, num, placed, track_points
+from synth.behaviour.replay_path import replay_path
+from synth.behaviour.scenic_common import ALONG, STEER, num, placed
 from synth.behaviour.segmentation import Segmented
 from synth.behaviour.synthesize import ClipResult
 from synth.behaviour.track import Track
 from synth.patterns.temporal import turn_of
 from synth.syntax import fmt_number
 
-# A car with a recorded path (`path`, its polyline; `lengths`, each segment's recorded length along it) follows
-# the path by arc length: the segment's speed goes linearly between its recorded boundary speeds, scaled so the
-# segment covers its recorded length in its recorded duration, and the car steers at the path's point one step
+# A car with a replay path (`path`, its polyline: synth.behaviour.replay_path, the centre lines of the lanes its
+# program names; `lengths`, each segment's length along it) follows the path by arc length: the segment's speed
+# goes linearly between its recorded boundary speeds, scaled so the segment covers its length in its recorded
+# duration, and the car steers at the path's point one step
 # past where that profile has it at the step's end (pure pursuit one step ahead). Without a path (walkers) the
 # heading turns at the segment's steady rate, as before.
 PRELUDE = STEER + ALONG + '''
@@ -43,7 +45,7 @@ behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
             heading = start + turn * f
             if path is not None and not walks:
                 t = f * duration
-                covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale
+                covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale if duration > 0 else 0
                 ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
                 tx, ty = r2s__along(path, done + covered + speed * dt)
                 if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
@@ -117,11 +119,9 @@ def clip_scenic(result: ClipResult, xodr: str, v_stop: float = 0.5,
             path = "None"
             lengths = "None"
             if cls != "Pedestrian":
-                points = track_points(track, clip, offset)
-                piece = [math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(points, points[1:])]
-                path = "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in points) + "]"
-                lengths = "[" + ", ".join(num(sum(piece[a:b])) for a, b in
-                                          zip(segmented.boundaries, segmented.boundaries[1:])) + "]"
+                drive = replay_path(segmented, track, clip, offset)
+                path = "[" + ", ".join(f"({num(x)}, {num(y)})" for x, y in drive.points) + "]"
+                lengths = "[" + ", ".join(num(v) for v in drive.lengths) + "]"
             where += (f", with speed {num(track.samples[0].speed)}, "
                       f"with behavior R2sSegments([{segments}], {walks}, {path}, {lengths}, "
                       f"{num(speed_bound(behaviour, track, v_stop))})")

@@ -88,6 +88,10 @@ class LaneGraph:
         end, chord = self.end_direction(a), fb.direction
         return end is not None and chord is not None and _angle(end, chord) <= CHAIN_ANGLE
 
+    def successors(self, lane_id: str) -> list[str]:
+        """The lanes linked after a lane by either side's links, sorted (a replay's route through the lanes)."""
+        return self._linked(lane_id, forward=True) if self.lane(lane_id) is not None else []
+
     def _linked(self, lane_id: str, forward: bool) -> list[str]:
         """The lanes linked after (forward) or before a lane, by either side's links (a source may give a link
         one way only), sorted."""
