@@ -99,7 +99,7 @@ def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
     assert len(cars) >= 2 and not off, off
     result = scenario.getSimulator().simulate(scene, maxSteps=11, maxIterations=1)
     assert result is not None  # Scenic's requirements held over the simulation
-    # Every moving actor after 1.1 s of its behaviour (its recorded path by arc length, its segments' timing) is
+    # Every moving actor after 1.1 s of its behaviour (its replay path by arc length, its segments' timing) is
     # within the 3 m target of where the recording has it.
     moving = set(re.findall(r"^(\S+) = new Car .*R2sSegments", text, re.M))
     last = scene_from_json(open(av2_clip[-1]).read())
