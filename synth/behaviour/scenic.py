@@ -23,9 +23,12 @@ from synth.syntax import fmt_number
 # program names; `lengths`, each segment's length along it) follows the path by arc length: the segment's speed
 # goes linearly between its recorded boundary speeds, scaled so the segment covers its length in its recorded
 # duration, and the car steers at the path's point one step
-# past where that profile has it at the step's end (pure pursuit one step ahead). Without a path (walkers) the
-# heading turns at the segment's steady rate, as before.
+# past where that profile has it at the step's end, or LOOKAHEAD_M past it where that is farther (pure pursuit:
+# a lane path has corners where its pieces join, and aiming at 0.1-0.5 m ahead turned them into overshoots of up to
+# 9 m; bench/results/behaviours-replay.md). Without a path (walkers) the heading turns at the segment's steady rate.
 PRELUDE = STEER + ALONG + '''
+LOOKAHEAD_M = 2.0
+
 behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
     heading = self.heading
     done = 0  # the path's length at the segment's start
@@ -47,7 +50,7 @@ behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
                 t = f * duration
                 covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale if duration > 0 else 0
                 ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
-                tx, ty = r2s__along(path, done + covered + speed * dt)
+                tx, ty = r2s__along(path, done + covered + max(speed * dt, LOOKAHEAD_M))
                 if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
                     heading = math.atan2(-(tx - ahead.x), ty - ahead.y)
             if walks:
