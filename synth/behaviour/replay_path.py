@@ -9,9 +9,10 @@ names on the clip's road, not the recording's places. Values in, values out.
   point of the first where that would go backward). Samples in no lane (a turn's, in an intersection) are
   skipped.
 - `changing lanes left/right`: the lanes before the segment's first lane move (source) and after its last one
-  (target), each a route as above, blended linearly from the source's to the target's over the segment: at share u of
-  it, (1 - u) times the source's point at share u of its run plus u times the target's, each run extended
-  straight past its ends so both span the segment's first and last samples' projections.
+  (target), each a route as above, blended linearly from the source's to the target's over the segment: the
+  target's centre line between the segment's first and last samples' projections, its point at share u moved
+  to (1 - u) times its nearest point of the source's plus u times itself (both extended straight past their
+  ends).
 - `heading Range`, a segment whose samples name no lane of the clip's road, and a car with none:
   the recorded places, as before.
 
@@ -158,14 +159,16 @@ def _projection(line: LineString, p: XY) -> float:
 
 def _blend(source: LineString, target: LineString, first: XY, last: XY) -> list[XY]:
     """From the source lane's centre line to the target's, linearly over the span of first .. last (module
-    docstring), a point every BLEND_STEP_M or so."""
-    s0, s1 = _projection(source, first), _projection(source, last)
+    docstring): the target's centre line from first's projection to last's, a point every BLEND_STEP_M or so,
+    each at share u of it moved to (1 - u) times its nearest point of the source's line plus u times itself
+    (nearest points, not equal shares: on a curve the inner lane is the shorter)."""
     t0, t1 = _projection(target, first), _projection(target, last)
-    n = max(2, math.ceil(max(s1 - s0, t1 - t0, 0.0) / BLEND_STEP_M) + 1)
+    n = max(2, math.ceil(max(t1 - t0, 0.0) / BLEND_STEP_M) + 1)
     out = []
     for k in range(n):
         u = k / (n - 1)
-        p = (1 - u) * _extended_at(source, s0 + (s1 - s0) * u) + u * _extended_at(target, t0 + (t1 - t0) * u)
+        q = _extended_at(target, t0 + (t1 - t0) * u)
+        p = (1 - u) * _extended_at(source, _projection(source, (float(q[0]), float(q[1])))) + u * q
         out.append((float(p[0]), float(p[1])))
     return out
 
