@@ -48,7 +48,7 @@ behavior R2sSegments(segments, walks, path=None, lengths=None, top=None):
             heading = start + turn * f
             if path is not None and not walks:
                 t = f * duration
-                covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale if duration > 0 else 0
+                covered = (v0 * t + (v1 - v0) * t * t / (2 * duration)) * scale
                 ahead = self.position + Vector(0, speed).rotatedBy(self.heading) * dt
                 tx, ty = r2s__along(path, done + covered + max(speed * dt, LOOKAHEAD_M))
                 if math.hypot(tx - ahead.x, ty - ahead.y) > 1e-6:
