@@ -36,7 +36,7 @@ from synth.behaviour.segmentation import Segmented
 from synth.behaviour.track import Clip, Track
 
 XY = tuple[float, float]
-BLEND_STEP_M = 1.0  # metres between the points of a lane change's blend: the steering looks one step ahead
+BLEND_STEP_M = 1.0  # metres between the points of a lane change's blend (the steering aims 2 m ahead)
 
 
 @dataclass(frozen=True)
