@@ -73,17 +73,24 @@ def test_nuscenes_keyframes_get_a_behaviour_program(excerpt_frames, tmp_path):
     assert run_r2s("check", *clip, str(program), "--config", str(_motion_lanes(tmp_path))).returncode == 0
 
 
-def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
-    scenic = pytest.importorskip("scenic")
-    from scenic.core.distributions import RejectionException
+def _clip_scenic(clip: list[str], tmp_path):
+    """The clip's road (r2s export of its first frame) and its dynamic Scenic scenario on it (r2s synth
+    --behaviours --format scenic --road), as a user makes them."""
     export = tmp_path / "export"
-    proc = run_r2s("export", av2_clip[0], "--to", "openscenario", "--out", str(export))
+    proc = run_r2s("export", clip[0], "--to", "openscenario", "--out", str(export))
     assert proc.returncode == 0, proc.stderr
     (road,) = export.glob("*.xodr")
     out = tmp_path / "clip.scenic"
-    proc = run_r2s("synth", *av2_clip, "--behaviours", "--motion", "--lanes", "--format", "scenic", "--road", str(road),
+    proc = run_r2s("synth", *clip, "--behaviours", "--motion", "--lanes", "--format", "scenic", "--road", str(road),
                    "--out", str(out))
     assert proc.returncode == 0, proc.stderr
+    return road, out
+
+
+def test_the_clip_simulates_headless_near_its_recording(av2_clip, tmp_path):
+    scenic = pytest.importorskip("scenic")
+    from scenic.core.distributions import RejectionException
+    road, out = _clip_scenic(av2_clip, tmp_path)
     text = out.read_text()
     assert "terminate after" in text and "require always ego.speed" in text and "R2sSegments" in text
     scenario = scenic.scenarioFromFile(str(out), mode2D=True)
@@ -126,13 +133,7 @@ def test_a_track_seen_in_the_first_frame_only_simulates(excerpt_frames, tmp_path
     has nothing to replay and stops."""
     scenic = pytest.importorskip("scenic")
     clip = scene_files(excerpt_frames, [f"scene-0796/{k}" for k in range(3)], tmp_path)
-    export = tmp_path / "export"
-    assert run_r2s("export", clip[0], "--to", "openscenario", "--out", str(export)).returncode == 0
-    (road,) = export.glob("*.xodr")
-    out = tmp_path / "clip.scenic"
-    proc = run_r2s("synth", *clip, "--behaviours", "--motion", "--lanes", "--format", "scenic", "--road", str(road),
-                   "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
+    _, out = _clip_scenic(clip, tmp_path)
     text = out.read_text()
     assert re.search(r"^car9 = new Car .*R2sSegments\(\[\(0\.0, ", text, re.M)  # a moving car, one 0 s segment
     scenario = scenic.scenarioFromFile(str(out), mode2D=True)
